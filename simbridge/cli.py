@@ -1,0 +1,223 @@
+"""The ``simbridge`` command.
+
+``simbridge [options]`` runs the server; ``simbridge COMMAND ...`` runs a sub-command
+(``check-config``, ``healthcheck``; see ``simbridge --help``). Every option can also be set by
+an environment variable ``SIMBRIDGE_<OPTION>`` (e.g. ``SIMBRIDGE_PORT=9091``); the command line
+wins.
+"""
+
+from __future__ import annotations
+
+import argparse
+import asyncio
+import errno
+import os
+import signal
+import sys
+import urllib.error
+import urllib.request
+from collections.abc import Callable, Sequence
+
+from simbridge import __version__
+from simbridge.config import (
+    ServerSettings,
+    default_params_path,
+    default_world_path,
+    load_params,
+    load_world,
+)
+from simbridge.errors import ConfigError
+from simbridge.logs import setup_logging
+
+
+__all__ = ["COMMANDS", "main"]
+
+
+def _env(name: str, default: str | None) -> str | None:
+    return os.environ.get(f"SIMBRIDGE_{name}", default)
+
+
+def _port(text: str) -> int:
+    try:
+        value = int(text)
+    except ValueError:
+        msg = f"'{text}' is not a port number"
+        raise argparse.ArgumentTypeError(msg) from None
+    if not 0 <= value <= 65535:
+        msg = f"port {value} is out of range 0-65535 (0 picks a free port)"
+        raise argparse.ArgumentTypeError(msg)
+    return value
+
+
+def _add_config_options(parser: argparse.ArgumentParser) -> None:
+    parser.add_argument(
+        "--world",
+        metavar="FILE",
+        default=_env("WORLD", None),
+        help=f"world file (YAML: walls, obstacles, robot start pose); "
+        f"default: the bundled {default_world_path().name} [SIMBRIDGE_WORLD]",
+    )
+    parser.add_argument(
+        "--params",
+        metavar="FILE",
+        default=_env("PARAMS", None),
+        help=f"robot and LiDAR parameter file (YAML); default: the bundled "
+        f"{default_params_path().name}, the course's Raspberry Pi 4B platform [SIMBRIDGE_PARAMS]",
+    )
+
+
+def _run_parser() -> argparse.ArgumentParser:
+    commands = "\n".join(f"  {name:<14} {text}" for name, (text, _) in COMMANDS.items())
+    parser = argparse.ArgumentParser(
+        prog="simbridge",
+        description=(
+            "A rosbridge v2 server with a built-in 2D differential-drive robot (LiDAR, /odom, "
+            "/tf, /cmd_vel). Point roslibjs, roslibpy or Foxglove at ws://HOST:PORT/ and open "
+            "http://HOST:HTTP-PORT/ to drive the robot from a browser."
+        ),
+        epilog=f"sub-commands (simbridge COMMAND --help):\n{commands}",
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    parser.add_argument("--version", action="version", version=f"simbridge {__version__}")
+    parser.add_argument(
+        "--host",
+        default=_env("HOST", "0.0.0.0"),
+        help="address to listen on; 127.0.0.1 keeps it on this machine "
+        "(default: 0.0.0.0, every interface) [SIMBRIDGE_HOST]",
+    )
+    parser.add_argument(
+        "--port",
+        type=_port,
+        default=_port(_env("PORT", "9090") or "9090"),
+        help="rosbridge WebSocket port, ws://HOST:PORT/ (default: 9090; 0 picks a free port) "
+        "[SIMBRIDGE_PORT]",
+    )
+    parser.add_argument(
+        "--http-port",
+        type=_port,
+        default=_port(_env("HTTP_PORT", "8080") or "8080"),
+        help="HTTP port of the browser page and /healthz (default: 8080) [SIMBRIDGE_HTTP_PORT]",
+    )
+    parser.add_argument(
+        "--no-http",
+        action="store_true",
+        help="do not serve HTTP on a port of its own (the WebSocket port still answers "
+        "/healthz and the page)",
+    )
+    _add_config_options(parser)
+    parser.add_argument(
+        "--log-level",
+        default=_env("LOG_LEVEL", "info"),
+        choices=["debug", "info", "warning", "error"],
+        help="log verbosity (default: info) [SIMBRIDGE_LOG_LEVEL]",
+    )
+    return parser
+
+
+async def _serve(settings: ServerSettings, world: str | None, params: str | None) -> int:
+    from simbridge.runner import App  # imported late: `simbridge --help` stays fast
+
+    app = App(settings, world=world, params=params)
+    try:
+        await app.start()
+    except OSError as err:
+        await app.stop()
+        if err.errno == errno.EADDRINUSE:
+            print(
+                f"simbridge: a port is already in use ({err}); stop the other server or choose "
+                "another with --port / --http-port",
+                file=sys.stderr,
+            )
+        else:
+            print(f"simbridge: cannot listen: {err}", file=sys.stderr)
+        return 2
+    stop = asyncio.Event()
+    loop = asyncio.get_running_loop()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        loop.add_signal_handler(sig, stop.set)
+    shown = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
+    page = f"  page http://{shown}:{app.http_port}/" if app.http_port is not None else ""
+    print(f"simbridge: rosbridge ws://{shown}:{app.ws_port}/{page}", flush=True)
+    await stop.wait()
+    print("simbridge: stopping", flush=True)
+    await app.stop()
+    return 0
+
+
+def _cmd_run(argv: Sequence[str]) -> int:
+    args = _run_parser().parse_args(argv)
+    setup_logging(args.log_level)
+    settings = ServerSettings(
+        host=args.host,
+        port=args.port,
+        http_port=None if args.no_http else args.http_port,
+    )
+    try:
+        # validate before binding anything, so a bad file fails fast and clearly
+        load_world(args.world)
+        load_params(args.params)
+        return asyncio.run(_serve(settings, args.world, args.params))
+    except ConfigError as err:
+        print(f"simbridge: {err}", file=sys.stderr)
+        return 2
+
+
+def _cmd_check_config(argv: Sequence[str]) -> int:
+    parser = argparse.ArgumentParser(
+        prog="simbridge check-config",
+        description="Validate a world and a parameter file, as the server does at startup.",
+    )
+    _add_config_options(parser)
+    args = parser.parse_args(argv)
+    try:
+        world = load_world(args.world)
+        params = load_params(args.params)
+    except ConfigError as err:
+        print(f"simbridge: {err}", file=sys.stderr)
+        return 2
+    print(
+        f"ok: world '{world.name}' ({len(world.segments())} wall segments), robot "
+        f"max {params.robot.max_linear_velocity} m/s, LiDAR {params.lidar.rays} rays"
+    )
+    return 0
+
+
+def _cmd_healthcheck(argv: Sequence[str]) -> int:
+    parser = argparse.ArgumentParser(
+        prog="simbridge healthcheck",
+        description="Exit 0 if a simbridge server answers /healthz, else 1 (Docker HEALTHCHECK).",
+    )
+    parser.add_argument(
+        "--url",
+        default=_env("HEALTHCHECK_URL", None),
+        help="URL to probe (default: http://127.0.0.1:$SIMBRIDGE_PORT/healthz, port 9090)",
+    )
+    parser.add_argument("--timeout", type=float, default=3.0, help="seconds (default: 3)")
+    args = parser.parse_args(argv)
+    url = args.url or f"http://127.0.0.1:{_env('PORT', '9090')}/healthz"
+    try:
+        with urllib.request.urlopen(url, timeout=args.timeout) as response:
+            body = response.read()
+            ok = response.status == 200 and b'"status":"ok"' in body
+    except (urllib.error.URLError, OSError, ValueError) as err:
+        print(f"unhealthy: {url}: {err}", file=sys.stderr)
+        return 1
+    print("healthy" if ok else f"unhealthy: {url} answered {body[:200]!r}")
+    return 0 if ok else 1
+
+
+#: Sub-commands: name -> (one-line help, function(argv) -> exit code).
+COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
+    "check-config": ("validate a world and a parameter file, then exit", _cmd_check_config),
+    "healthcheck": ("probe a running server's /healthz; exit 0 or 1", _cmd_healthcheck),
+}
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    """Run the command line; return the exit code."""
+    args = list(sys.argv[1:] if argv is None else argv)
+    if args and args[0] in COMMANDS:
+        return COMMANDS[args[0]][1](args[1:])
+    if args and args[0] == "run":
+        args = args[1:]
+    return _cmd_run(args)

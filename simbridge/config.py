@@ -1,0 +1,372 @@
+"""Settings of simbridge: robot and LiDAR parameters, world files, server options.
+
+Everything is validated once, at startup, by pydantic models. A bad file fails fast with a
+:class:`~simbridge.errors.ConfigError` whose text names the file, the key and the fix, e.g.
+``params file 'pi.yaml': robot.mass: must be greater than 0 (got -1.0)``.
+
+Files are read with ``yaml.safe_load`` (YAML 1.1: quote ``"off"``/``"no"`` in shipped files).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import yaml
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+
+from simbridge.errors import ConfigError
+
+
+__all__ = [
+    "LidarParams",
+    "Params",
+    "RobotParams",
+    "RobotSpec",
+    "ServerSettings",
+    "SimParams",
+    "WorldSpec",
+    "default_params_path",
+    "default_world_path",
+    "load_params",
+    "load_world",
+    "resource_dir",
+]
+
+
+def resource_dir(name: str) -> Path:
+    """Return the directory of a bundled resource folder (``static`` or ``config``).
+
+    An installed wheel carries them inside the package (``simbridge/static``); a source
+    checkout keeps them at the repository root, next to the package.
+    """
+    packaged = Path(str(resources.files("simbridge"))) / name
+    if packaged.is_dir():
+        return packaged
+    return Path(__file__).resolve().parent.parent / name
+
+
+def default_params_path() -> Path:
+    """Return the path of the bundled ``pi4b_params.yaml``."""
+    return resource_dir("config") / "pi4b_params.yaml"
+
+
+def default_world_path() -> Path:
+    """Return the path of the bundled default world."""
+    return resource_dir("config") / "worlds" / "default.yaml"
+
+
+class _Strict(BaseModel):
+    """Base of every settings model: unknown keys are errors, values are checked on assignment."""
+
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
+
+
+class RobotParams(_Strict):
+    """Differential-drive robot: the course's Raspberry Pi 4B platform defaults."""
+
+    mass: float = Field(1.5, gt=0, le=1000, description="chassis mass, kg")
+    wheel_radius: float = Field(
+        0.033, gt=0, le=1, description="wheel radius, m (not the 0.066 m diameter)"
+    )
+    wheelbase: float = Field(0.160, gt=0, le=5, description="distance between drive wheels, m")
+    inertia: float = Field(
+        0.0075, gt=0, le=1000, description="moment of inertia about the vertical axis, kg m^2"
+    )
+    max_linear_velocity: float = Field(
+        0.5, gt=0, le=20, description="linear-velocity limit on /cmd_vel, m/s"
+    )
+    max_angular_velocity: float = Field(
+        2.5, gt=0, le=50, description="angular-velocity limit on /cmd_vel, rad/s"
+    )
+    radius: float = Field(0.105, gt=0, le=5, description="footprint radius for drawing, m")
+
+
+class LidarParams(_Strict):
+    """A 2D LiDAR like the RPLIDAR A1 (REP-117 ranges)."""
+
+    rays: int = Field(360, ge=1, le=8192, description="rays per revolution")
+    range_min: float = Field(0.12, ge=0, description="minimum range, m")
+    range_max: float = Field(3.5, gt=0, le=1000, description="maximum range, m")
+    rate: float = Field(10.0, gt=0, le=100, description="scans per second, Hz")
+    mount: tuple[float, float, float] = Field(
+        (0.0, 0.0, 0.0), description="x, y, yaw of frame 'laser' in 'base_link'"
+    )
+    noise_stddev: float = Field(
+        0.0, ge=0, le=1, description="Gaussian range noise, m (0 = exact ranges)"
+    )
+
+    @field_validator("mount")
+    @classmethod
+    def _finite_mount(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if not all(math.isfinite(x) for x in v):
+            msg = "must be three finite numbers [x, y, yaw]"
+            raise ValueError(msg)
+        return v
+
+    def model_post_init(self, context: Any, /) -> None:
+        """Check relations between fields."""
+        if self.range_min >= self.range_max:
+            msg = f"range_min ({self.range_min}) must be below range_max ({self.range_max})"
+            raise ValueError(msg)
+
+
+class SimParams(_Strict):
+    """Simulation loop settings."""
+
+    rate: float = Field(20.0, gt=0, le=1000, description="kinematics and /odom rate, Hz")
+
+
+class Params(_Strict):
+    """The whole parameter file (``config/pi4b_params.yaml``)."""
+
+    robot: RobotParams = Field(default_factory=RobotParams)
+    lidar: LidarParams = Field(default_factory=LidarParams)
+    sim: SimParams = Field(default_factory=SimParams)
+
+    def flat(self) -> dict[str, Any]:
+        """Return every setting under its dotted name (``robot.mass``): ROS 2 parameters."""
+        out: dict[str, Any] = {}
+        for section in ("robot", "lidar", "sim"):
+            for key, value in getattr(self, section).model_dump().items():
+                out[f"{section}.{key}"] = list(value) if isinstance(value, tuple) else value
+        return out
+
+    @classmethod
+    def from_flat(cls, flat: dict[str, Any]) -> Params:
+        """Build and validate settings from dotted names (the inverse of :meth:`flat`).
+
+        Raises:
+            ValueError: a value is out of range or the combination is invalid.
+        """
+        nested: dict[str, dict[str, Any]] = {}
+        for name, value in flat.items():
+            section, _, key = name.partition(".")
+            nested.setdefault(section, {})[key] = value
+        try:
+            return cls.model_validate(nested)
+        except ValidationError as err:
+            raise ValueError(_format_errors(err)) from None
+
+    @classmethod
+    def describe(cls) -> dict[str, str]:
+        """Return a one-line description of every dotted setting."""
+        out: dict[str, str] = {}
+        for section, info in cls.model_fields.items():
+            model = info.annotation
+            assert isinstance(model, type) and issubclass(model, BaseModel)
+            for key, finfo in model.model_fields.items():
+                out[f"{section}.{key}"] = finfo.description or ""
+        return out
+
+
+class RobotSpec(_Strict):
+    """A robot of a world file: its start pose (x, y, theta), used at start and by /reset."""
+
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+
+    @field_validator("pose")
+    @classmethod
+    def _finite_pose(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
+        if not all(math.isfinite(x) for x in v):
+            msg = "must be three finite numbers [x, y, theta]"
+            raise ValueError(msg)
+        return v
+
+
+def _check_numbers(value: Any, count: int, what: str) -> list[float]:
+    if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != count:
+        got = len(value) if isinstance(value, Sequence) and not isinstance(value, str) else value
+        msg = f"has {got!r} numbers, expected {what}"
+        raise ValueError(msg)
+    out = []
+    for x in value:
+        if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+            msg = f"{x!r} is not a finite number; expected {what}"
+            raise ValueError(msg)
+        out.append(float(x))
+    return out
+
+
+class Box(_Strict):
+    """An axis-aligned (or rotated) rectangular obstacle."""
+
+    center: tuple[float, float]
+    size: tuple[float, float]
+    yaw: float = 0.0
+
+
+class Circle(_Strict):
+    """A round obstacle (a pillar), approximated by a regular polygon for raycasting."""
+
+    center: tuple[float, float]
+    radius: float = Field(gt=0)
+    segments: int = Field(24, ge=6, le=256)
+
+
+class WorldSpec(_Strict):
+    """A world file: walls and obstacles as line segments, and the robot's start pose.
+
+    The minimal form is ``walls: [[x1, y1, x2, y2], ...]`` plus ``robot: {pose: [x, y, th]}``.
+    ``boxes``, ``circles`` and ``polygons`` are conveniences turned into segments.
+    """
+
+    name: str = "world"
+    walls: list[tuple[float, float, float, float]] = Field(default_factory=list)
+    boxes: list[Box] = Field(default_factory=list)
+    circles: list[Circle] = Field(default_factory=list)
+    polygons: list[list[tuple[float, float]]] = Field(default_factory=list)
+    robot: RobotSpec = Field(default_factory=RobotSpec)
+
+    @field_validator("walls", mode="before")
+    @classmethod
+    def _walls(cls, v: Any) -> Any:
+        if not isinstance(v, list):
+            msg = "must be a list of segments [x1, y1, x2, y2]"
+            raise ValueError(msg)
+        for i, seg in enumerate(v):
+            try:
+                _check_numbers(seg, 4, "[x1, y1, x2, y2]")
+            except ValueError as err:
+                msg = f"walls[{i}] {err}"
+                raise ValueError(msg) from None
+        return v
+
+    @field_validator("polygons", mode="before")
+    @classmethod
+    def _polygons(cls, v: Any) -> Any:
+        if not isinstance(v, list):
+            msg = "must be a list of polygons, each a list of [x, y] points"
+            raise ValueError(msg)
+        for i, poly in enumerate(v):
+            if not isinstance(poly, list) or len(poly) < 2:
+                msg = f"polygons[{i}] needs at least 2 points [x, y]"
+                raise ValueError(msg)
+            for j, pt in enumerate(poly):
+                try:
+                    _check_numbers(pt, 2, "[x, y]")
+                except ValueError as err:
+                    msg = f"polygons[{i}][{j}] {err}"
+                    raise ValueError(msg) from None
+        return v
+
+    def segments(self) -> list[tuple[float, float, float, float]]:
+        """Return every wall and obstacle edge as a segment ``(x1, y1, x2, y2)``."""
+        segs = [(w[0], w[1], w[2], w[3]) for w in self.walls]
+        for box in self.boxes:
+            hw, hh = box.size[0] / 2, box.size[1] / 2
+            c, s = math.cos(box.yaw), math.sin(box.yaw)
+            corners = [
+                (box.center[0] + c * dx - s * dy, box.center[1] + s * dx + c * dy)
+                for dx, dy in ((-hw, -hh), (hw, -hh), (hw, hh), (-hw, hh))
+            ]
+            segs.extend(_ring(corners))
+        for circle in self.circles:
+            n = circle.segments
+            pts = [
+                (
+                    circle.center[0] + circle.radius * math.cos(2 * math.pi * k / n),
+                    circle.center[1] + circle.radius * math.sin(2 * math.pi * k / n),
+                )
+                for k in range(n)
+            ]
+            segs.extend(_ring(pts))
+        for poly in self.polygons:
+            pts = [(float(p[0]), float(p[1])) for p in poly]
+            segs.extend(_ring(pts) if len(pts) > 2 else [(*pts[0], *pts[1])])
+        return segs
+
+
+def _ring(points: list[tuple[float, float]]) -> list[tuple[float, float, float, float]]:
+    return [(*points[k], *points[(k + 1) % len(points)]) for k in range(len(points))]
+
+
+@dataclass(frozen=True, kw_only=True)
+class ServerSettings:
+    """Network and limit settings of one simbridge process (command-line options)."""
+
+    host: str = "0.0.0.0"
+    port: int = 9090
+    http_port: int | None = 8080
+    #: Largest incoming WebSocket message, bytes (rosbridge's max_message_size is 10 MB).
+    max_message_size: int = 10_000_000
+    #: Pending outgoing bytes per client before the oldest queued messages are dropped.
+    max_queue_bytes: int = 8_000_000
+    #: Pending messages per subscription when the client asked for queue_length 0.
+    default_queue_length: int = 100
+    #: Seconds a service call may wait for a client provider when the call gives no timeout.
+    service_timeout: float = 5.0
+    #: WebSocket keepalive ping interval and timeout, seconds (None disables).
+    ping_interval: float | None = 20.0
+    ping_timeout: float | None = 20.0
+    extra: dict[str, Any] = field(default_factory=dict)
+
+
+def _format_errors(err: ValidationError) -> str:
+    parts = []
+    for e in err.errors():
+        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        text = e["msg"]
+        if e["type"] == "extra_forbidden":
+            text = "unknown key (check its spelling and nesting)"
+        elif "input" in e and e["type"] not in ("missing", "value_error"):
+            text = f"{text} (got {e['input']!r})"
+        text = text.removeprefix("Value error, ")
+        parts.append(f"{loc}: {text}")
+    return "; ".join(parts)
+
+
+def _read_yaml(path: Path, kind: str) -> dict[str, Any]:
+    try:
+        text = path.read_text(encoding="utf-8")
+    except OSError as err:
+        msg = f"{kind} file '{path}': cannot be read ({err.strerror}); check the path"
+        raise ConfigError(msg) from None
+    try:
+        data = yaml.safe_load(text)
+    except yaml.YAMLError as err:
+        msg = f"{kind} file '{path}': is not valid YAML: {err}"
+        raise ConfigError(msg) from None
+    if data is None:
+        return {}
+    if not isinstance(data, dict):
+        msg = (
+            f"{kind} file '{path}': top level must be a mapping of keys, got {type(data).__name__}"
+        )
+        raise ConfigError(msg)
+    return data
+
+
+def load_params(path: Path | str | None = None) -> Params:
+    """Load and validate a parameter file; ``None`` loads the bundled Pi 4B defaults.
+
+    Raises:
+        ConfigError: the file is missing, not YAML, or a key or value is invalid.
+    """
+    p = Path(path) if path is not None else default_params_path()
+    data = _read_yaml(p, "params")
+    try:
+        return Params.model_validate(data)
+    except ValidationError as err:
+        msg = f"params file '{p}': {_format_errors(err)}"
+        raise ConfigError(msg) from None
+
+
+def load_world(path: Path | str | None = None) -> WorldSpec:
+    """Load and validate a world file; ``None`` loads the bundled default world.
+
+    Raises:
+        ConfigError: the file is missing, not YAML, or a key or value is invalid.
+    """
+    p = Path(path) if path is not None else default_world_path()
+    data = _read_yaml(p, "world")
+    data.setdefault("name", p.stem)
+    try:
+        return WorldSpec.model_validate(data)
+    except ValidationError as err:
+        msg = f"world file '{p}': {_format_errors(err)}"
+        raise ConfigError(msg) from None

@@ -1,0 +1,205 @@
+"""The virtual robot's ROS interface: simulation state in, ROS messages out.
+
+Node ``/virtual_robot`` publishes, per robot (REP-105 frames, wall-clock header stamps):
+
+* ``/odom`` (nav_msgs/Odometry) every step: frame ``odom``, child ``base_link``, the pose with
+  quaternion ``z = sin(theta/2), w = cos(theta/2)``, and the applied (clamped) velocity;
+* ``/tf`` (tf2_msgs/TFMessage) every step: ``odom -> base_link``, the same pose;
+* ``/tf_static``, latched: ``base_link -> laser`` from the LiDAR mount;
+* ``/scan`` (sensor_msgs/LaserScan) at ``lidar.rate``: frame ``laser``, ``angle_min = 0``,
+  ``angle_increment = 2 pi / rays``, ``angle_max = angle_min + (rays - 1) * increment``;
+
+and subscribes ``/cmd_vel`` (geometry_msgs/Twist). It serves ``/reset`` (std_srvs/Empty).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from simbridge.config import Params
+from simbridge.errors import ProtocolError
+from simbridge.graph.graph import Graph
+from simbridge.graph.params import ParamNode
+from simbridge.graph.rosapi import request_fields
+from simbridge.graph.topics import Peer, Topic
+from simbridge.sim import Robot, World
+
+
+__all__ = ["ROBOT_NODE", "RobotBridge"]
+
+ROBOT_NODE = "/virtual_robot"
+_ZERO36 = np.zeros(36, dtype=np.float64)
+_EMPTY32 = np.zeros(0, dtype=np.float32)
+
+
+def _stamp(sec: int, nanosec: int) -> dict[str, int]:
+    return {"sec": sec, "nanosec": nanosec}
+
+
+def _quaternion(yaw: float) -> dict[str, float]:
+    return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
+
+
+@dataclass(eq=False, slots=True)
+class _RobotTopics:
+    robot: Robot
+    odom: Topic
+    scan: Topic
+    cmd_vel: Topic
+
+
+class RobotBridge:
+    """Publishes the world's robots as ROS topics and feeds ``/cmd_vel`` into the world."""
+
+    def __init__(self, graph: Graph, world: World) -> None:
+        #: Where the topics live.
+        self.graph = graph
+        #: What is simulated.
+        self.world = world
+        graph.nodes[ROBOT_NODE] = "the simulated robot"
+        self.tf = graph.advertise("/tf", "tf2_msgs/msg/TFMessage", ROBOT_NODE)
+        self.tf_static = graph.advertise(
+            "/tf_static", "tf2_msgs/msg/TFMessage", ROBOT_NODE, latch=True
+        )
+        self.robots: dict[str, _RobotTopics] = {}
+        for robot in world.robots.values():
+            self.add_robot(robot)
+        graph.add_service("/reset", "std_srvs/srv/Empty", ROBOT_NODE, self._reset)
+        #: Fraction of a scan period accumulated since the last scan.
+        self._scan_phase = 1.0
+        self.params = ParamNode(
+            ROBOT_NODE,
+            read=lambda: self.world.params.flat(),
+            write=self._write_params,
+            descriptions=Params.describe(),
+        )
+        self.params.on_change.append(self._params_changed)
+        graph.params.add(self.params)
+
+    def _write_params(self, flat: dict[str, Any]) -> None:
+        self.world.params = Params.from_flat(flat)
+
+    def _params_changed(self, names: list[str]) -> None:
+        self.graph.log("info", f"{ROBOT_NODE} parameters changed: {', '.join(names)}")
+        if "lidar.mount" in names:
+            self.publish_static(0.0)
+
+    def add_robot(self, robot: Robot) -> None:
+        """Create the topics of one robot."""
+        g = self.graph
+
+        def on_cmd_vel(msg: Any, source: Peer | None, name: str = robot.name) -> None:
+            self._on_cmd_vel(name, msg)
+
+        self.robots[robot.name] = _RobotTopics(
+            robot,
+            g.advertise(robot.topic("odom"), "nav_msgs/msg/Odometry", ROBOT_NODE),
+            g.advertise(robot.topic("scan"), "sensor_msgs/msg/LaserScan", ROBOT_NODE),
+            g.subscribe(robot.topic("cmd_vel"), "geometry_msgs/msg/Twist", ROBOT_NODE, on_cmd_vel),
+        )
+
+    def _on_cmd_vel(self, name: str, msg: Any) -> None:
+        v = msg["linear"]["x"]
+        omega = msg["angular"]["z"]
+        try:
+            self.world.command(name, v, omega)
+        except ValueError as err:
+            topic = self.robots[name].robot.topic("cmd_vel")
+            text = f"{topic} refused: {err}; the robot keeps its previous command"
+            raise ProtocolError(text) from None
+
+    def _reset(self, args: Any) -> dict[str, Any]:
+        request_fields(args, (), "/reset")
+        self.world.reset()
+        self._scan_phase = 1.0
+        self.graph.log("info", "world reset: every robot back at its start pose, stopped")
+        return {}
+
+    # -- publishing ------------------------------------------------------------------------
+
+    def publish_static(self, now: float) -> None:
+        """Publish (latch) ``/tf_static``: each robot's ``base_link -> laser``."""
+        sec, nanosec = self.graph.stamp()
+        mx, my, myaw = self.world.params.lidar.mount
+        transforms = [
+            {
+                "header": {"stamp": _stamp(sec, nanosec), "frame_id": rt.robot.frame("base_link")},
+                "child_frame_id": rt.robot.frame("laser"),
+                "transform": {
+                    "translation": {"x": mx, "y": my, "z": 0.0},
+                    "rotation": _quaternion(myaw),
+                },
+            }
+            for rt in self.robots.values()
+        ]
+        self.graph.publish(self.tf_static, {"transforms": transforms}, now)
+
+    def publish(self, now: float) -> None:
+        """Publish one step's messages: /odom and /tf always, /scan when one is due."""
+        g = self.graph
+        sec, nanosec = g.stamp()
+        stamp = _stamp(sec, nanosec)
+        transforms = []
+        for rt in self.robots.values():
+            robot = rt.robot
+            s = robot.state
+            q = _quaternion(s.theta)
+            position = {"x": s.x, "y": s.y, "z": 0.0}
+            odom_frame = robot.frame("odom")
+            base = robot.frame("base_link")
+            if rt.odom.subscriptions or rt.odom.internal:
+                odom = {
+                    "header": {"stamp": stamp, "frame_id": odom_frame},
+                    "child_frame_id": base,
+                    "pose": {
+                        "pose": {"position": position, "orientation": q},
+                        "covariance": _ZERO36,
+                    },
+                    "twist": {
+                        "twist": {
+                            "linear": {"x": s.v, "y": 0.0, "z": 0.0},
+                            "angular": {"x": 0.0, "y": 0.0, "z": s.omega},
+                        },
+                        "covariance": _ZERO36,
+                    },
+                }
+                g.publish(rt.odom, odom, now)
+            transforms.append(
+                {
+                    "header": {"stamp": stamp, "frame_id": odom_frame},
+                    "child_frame_id": base,
+                    "transform": {"translation": position, "rotation": q},
+                }
+            )
+        if self.tf.subscriptions or self.tf.internal:
+            g.publish(self.tf, {"transforms": transforms}, now)
+        lidar = self.world.params.lidar
+        self._scan_phase += lidar.rate / self.world.params.sim.rate
+        if self._scan_phase >= 1.0:
+            self._scan_phase = min(self._scan_phase - 1.0, 1.0)
+            self.publish_scans(now, stamp)
+
+    def publish_scans(self, now: float, stamp: dict[str, int]) -> None:
+        """Raycast and publish every robot's /scan (skipped for robots nobody listens to)."""
+        lidar = self.world.params.lidar
+        increment = 2.0 * math.pi / lidar.rays
+        for rt in self.robots.values():
+            if not (rt.scan.subscriptions or rt.scan.internal):
+                continue
+            scan = {
+                "header": {"stamp": stamp, "frame_id": rt.robot.frame("laser")},
+                "angle_min": 0.0,
+                "angle_max": (lidar.rays - 1) * increment,
+                "angle_increment": increment,
+                "time_increment": 0.0,
+                "scan_time": 1.0 / lidar.rate,
+                "range_min": lidar.range_min,
+                "range_max": lidar.range_max,
+                "ranges": self.world.scan(rt.robot.name),
+                "intensities": _EMPTY32,
+            }
+            self.graph.publish(rt.scan, scan, now)

@@ -1,0 +1,198 @@
+"""Services of the ROS graph: in-process handlers and services provided by clients.
+
+Every ``call_service`` is answered with a ``service_response``, whatever happens: an unknown
+service, a handler error, a timeout, a provider that unadvertised or disconnected all give
+``result: false`` with the reason as ``values`` (rosbridge instead leaves some of these hanging:
+#905, #1027). Calls never block the caller's other ops.
+
+Replies from client providers (``service_response``) are routed back by the server-chosen id
+``service_request:<service>:<n>``. Clients disagree on the reply shape (protocol reference
+section 8, item 14), so simbridge reads it as follows:
+
+* ``result: false``: failure; ``values`` (a string, or anything else shown as JSON) is the reason;
+* ``result: true``: success; ``values`` must be an object (missing or null means ``{}``);
+* ``result`` missing or ``null`` (roslibjs when the callback returns nothing, roslibpy when it
+  returns ``None``): success when ``values`` is an object, else failure.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from simbridge.errors import ServiceError
+from simbridge.graph.topics import BRIDGE_NODE, Peer
+from simbridge.protocol import Frame, OpId, json_frame
+from simbridge.protocol.ops import CallService, ServiceResponse
+
+
+__all__ = ["Handler", "PendingCall", "Service", "ServiceTable", "service_response"]
+
+logger = logging.getLogger(__name__)
+
+#: An in-process service: request (``args`` as sent: object, list or None) -> response object.
+#: Raise :class:`ServiceError` to answer ``result: false`` with the error text.
+Handler = Callable[[Any], dict[str, Any]]
+
+
+def service_response(service: str, values: Any, *, result: bool, op_id: OpId | None) -> Frame:
+    """Return a ``service_response`` frame (``id`` only when the request had one)."""
+    body: dict[str, Any] = {
+        "op": "service_response",
+        "service": service,
+        "values": values,
+        "result": result,
+    }
+    if op_id is not None:
+        body["id"] = op_id
+    return json_frame(body)
+
+
+@dataclass(eq=False, slots=True)
+class Service:
+    """One service: answered in process (``handler``) or by a client (``provider``)."""
+
+    name: str
+    type: str
+    node: str
+    handler: Handler | None = None
+    provider: Peer | None = None
+
+
+@dataclass(eq=False, slots=True)
+class PendingCall:
+    """A call forwarded to a client provider, waiting for its ``service_response``."""
+
+    server_id: str
+    service: Service
+    caller: Peer
+    caller_id: OpId | None
+    #: The service name as the caller wrote it (echoed in the reply).
+    written: str
+    deadline: float
+
+
+class ServiceTable:
+    """Every service, and the calls waiting for client providers."""
+
+    def __init__(self, *, default_timeout: float = 5.0) -> None:
+        #: Seconds to wait for a client provider when the call gives no ``timeout``.
+        self.default_timeout = default_timeout
+        #: Services by absolute name.
+        self.services: dict[str, Service] = {}
+        #: Calls forwarded to providers, by server id.
+        self.pending: dict[str, PendingCall] = {}
+        self._counter = itertools.count(1)
+
+    def add(self, name: str, type_name: str, node: str, handler: Handler) -> Service:
+        """Register an in-process service (replacing any previous one of that name)."""
+        service = Service(name, type_name, node, handler=handler)
+        self.services[name] = service
+        return service
+
+    def advertise(self, peer: Peer, name: str, type_name: str) -> Service:
+        """Make ``peer`` the provider of ``name``; a previous provider's pending calls fail."""
+        old = self.services.get(name)
+        if old is not None:
+            self._fail_pending(old, f"service {name} was re-advertised by another provider")
+            if old.provider is not None:
+                old.provider.session.services.pop(name, None)
+        service = Service(name, type_name, BRIDGE_NODE, provider=peer)
+        self.services[name] = service
+        peer.session.services[name] = type_name
+        return service
+
+    def unadvertise(self, peer: Peer, name: str) -> bool:
+        """Remove ``peer``'s service ``name``; return whether it was its provider."""
+        service = self.services.get(name)
+        if service is None or service.provider is not peer:
+            return False
+        del self.services[name]
+        peer.session.services.pop(name, None)
+        self._fail_pending(service, f"service {name} was unadvertised by its provider")
+        return True
+
+    def call(self, peer: Peer, op: CallService, name: str, now: float) -> None:
+        """Answer a ``call_service`` (at once, or once the provider replies or time runs out)."""
+        service = self.services.get(name)
+        if service is None:
+            peer.send(
+                service_response(
+                    op.service, f"Service {name} does not exist", result=False, op_id=op.id
+                )
+            )
+            return
+        if service.handler is not None:
+            try:
+                values: Any = service.handler(op.args)
+                ok = True
+            except ServiceError as err:
+                values, ok = str(err), False
+            except Exception as err:  # a handler bug must not break the connection
+                logger.exception("service %s failed", name)
+                values, ok = f"service {name} failed: {err}", False
+            peer.send(service_response(op.service, values, result=ok, op_id=op.id))
+            return
+        provider = service.provider
+        assert provider is not None
+        timeout = self.default_timeout if op.timeout is None else op.timeout
+        deadline = now + timeout if timeout > 0 else math.inf
+        server_id = f"service_request:{name}:{next(self._counter)}"
+        self.pending[server_id] = PendingCall(server_id, service, peer, op.id, op.service, deadline)
+        args = op.args if isinstance(op.args, dict) else {}
+        provider.send(
+            json_frame({"op": "call_service", "id": server_id, "service": name, "args": args})
+        )
+
+    def respond(self, peer: Peer, op: ServiceResponse) -> str | None:
+        """Route a provider's ``service_response`` to its caller; return an error text or None."""
+        if op.id is None or not isinstance(op.id, str) or op.id not in self.pending:
+            return f"service_response for unknown or expired id {op.id!r} on {op.service}"
+        call = self.pending[op.id]
+        if call.service.provider is not peer:
+            return f"service_response for {op.id!r} from a client that does not provide it"
+        del self.pending[op.id]
+        values = op.values
+        if op.result is False:
+            ok = False
+            if not isinstance(values, str):
+                values = "service provider reported failure" if values is None else str(values)
+        elif isinstance(values, dict) or (op.result is True and values is None):
+            ok, values = True, values if isinstance(values, dict) else {}
+        else:
+            ok = False
+            values = f"service provider sent no result object (values: {values!r})"
+        call.caller.send(service_response(call.written, values, result=ok, op_id=call.caller_id))
+        return None
+
+    def expire(self, now: float) -> None:
+        """Answer every call whose deadline has passed with a timeout failure."""
+        late = [c for c in self.pending.values() if c.deadline <= now]
+        for call in late:
+            del self.pending[call.server_id]
+            call.caller.send(
+                service_response(
+                    call.written,
+                    f"service {call.service.name} timed out waiting for its provider",
+                    result=False,
+                    op_id=call.caller_id,
+                )
+            )
+
+    def drop_peer(self, peer: Peer) -> None:
+        """Remove the services of a client that left and fail the calls waiting on them."""
+        for name in list(peer.session.services):
+            self.unadvertise(peer, name)
+        for call in [c for c in self.pending.values() if c.caller is peer]:
+            del self.pending[call.server_id]
+
+    def _fail_pending(self, service: Service, reason: str) -> None:
+        for call in [c for c in self.pending.values() if c.service is service]:
+            del self.pending[call.server_id]
+            call.caller.send(
+                service_response(call.written, reason, result=False, op_id=call.caller_id)
+            )

@@ -1,0 +1,279 @@
+"""Topics of the ROS graph: publishers, subscribers, latched messages and delivery.
+
+A topic's type is fixed by its first publisher or typed subscriber; a later advertise or
+subscribe with another type is refused (rosbridge's TypeConflictException), comparing the
+canonical ``pkg/msg/Type`` spelling. A subscription to a topic that does not exist yet waits for
+it, with or without a type (rosbridge instead drops an untyped one, #1142).
+
+A message is encoded at most once per encoding (see :class:`~simbridge.protocol.Outgoing`) and
+each client receives it once per topic spelling it subscribed with.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from typing import Any, Protocol
+
+from simbridge.errors import ProtocolError, TypeNotFoundError
+from simbridge.msgs import Converter, TypeRegistry, normalize_type
+from simbridge.protocol import (
+    Frame,
+    OpId,
+    Outgoing,
+    Session,
+    Subscription,
+    split_frame,
+    status_frame,
+)
+from simbridge.protocol.ops import Subscribe
+
+
+__all__ = ["BRIDGE_NODE", "InternalCallback", "Peer", "Topic", "TopicTable"]
+
+logger = logging.getLogger(__name__)
+
+#: The node that client-owned publishers, subscribers and services belong to (as in rosbridge).
+BRIDGE_NODE = "/rosbridge_websocket"
+
+
+class Peer(Protocol):
+    """A connected client, as the graph sees it."""
+
+    #: The client's protocol state.
+    session: Session
+    #: A short label for logs ("client 3 127.0.0.1:50412").
+    label: str
+
+    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
+        """Queue one frame for the client (``key``/``limit``: drop-oldest per subscription)."""
+
+
+#: An in-process subscriber: ``(message, sending peer or None) -> None``; may raise
+#: :class:`ProtocolError` to refuse a message, which is reported to the sending client.
+InternalCallback = Callable[[Any, "Peer | None"], None]
+
+
+@dataclass(eq=False, slots=True)
+class Topic:
+    """One topic of the graph."""
+
+    name: str
+    #: Canonical type, or ``None`` while only untyped subscribers wait for the topic.
+    type: str | None = None
+    #: The type is known to the registry (payloads are validated and defaults filled).
+    known: bool = False
+    #: Publishers: owner (a node name or a Peer) -> advertise ids.
+    publishers: dict[object, set[OpId | None]] = field(default_factory=dict)
+    #: Client subscriptions by (peer, topic spelling).
+    subscriptions: dict[tuple[Peer, str], Subscription] = field(default_factory=dict)
+    #: In-process subscribers: (node name, callback).
+    internal: list[tuple[str, InternalCallback]] = field(default_factory=list)
+    #: Keep the last message for late subscribers (``latch: true``, /tf_static).
+    latch: bool = False
+    #: The last message, when latched.
+    latched: Outgoing | None = None
+
+    def unused(self) -> bool:
+        """Return whether nothing refers to the topic any more."""
+        return not (self.publishers or self.subscriptions or self.internal)
+
+
+class TopicTable:
+    """Every topic, with the rules for advertising, subscribing and publishing."""
+
+    def __init__(
+        self, registry: TypeRegistry, converter: Converter, *, default_queue_length: int = 100
+    ) -> None:
+        #: Interface definitions.
+        self.registry = registry
+        #: JSON payload validation.
+        self.converter = converter
+        #: Per-subscription bound of pending frames when a client asked for queue_length 0.
+        self.default_queue_length = default_queue_length
+        #: Topics by absolute name.
+        self.topics: dict[str, Topic] = {}
+        #: Makes the CDR-bytes function of a message for ``cbor-raw`` (set by extensions).
+        self.cdr_factory: Callable[[str, Any], Callable[[], bytes]] | None = None
+
+    # -- declaration ----------------------------------------------------------------------------
+
+    def _typed(self, topic: Topic, type_name: str) -> None:
+        """Fix or check the type of ``topic``."""
+        try:
+            canonical = normalize_type(type_name)
+        except TypeNotFoundError as err:
+            raise ProtocolError(str(err)) from None
+        if topic.type is None:
+            topic.type = canonical
+            topic.known = self.registry.known(canonical)
+        elif topic.type != canonical:
+            msg = (
+                f"Tried to register topic {topic.name} with type {canonical} "
+                f"but it is already established with type {topic.type}"
+            )
+            raise ProtocolError(msg)
+
+    def advertise(
+        self,
+        name: str,
+        type_name: str,
+        owner: object,
+        op_id: OpId | None = None,
+        *,
+        latch: bool = False,
+    ) -> Topic:
+        """Register ``owner`` (a node name or a Peer) as a publisher of ``name``.
+
+        Raises:
+            ProtocolError: the type string is malformed or conflicts with the topic's type.
+        """
+        topic = self.topics.get(name) or Topic(name)
+        self._typed(topic, type_name)  # raises before anything is registered
+        self.topics[name] = topic
+        topic.publishers.setdefault(owner, set()).add(op_id)
+        topic.latch = topic.latch or latch
+        return topic
+
+    def unadvertise(self, name: str, owner: object, op_id: OpId | None = None) -> None:
+        """Remove one advertise id of ``owner`` (``None``: all of them)."""
+        topic = self.topics.get(name)
+        if topic is None or owner not in topic.publishers:
+            return
+        ids = topic.publishers[owner]
+        if op_id is None:
+            ids.clear()
+        else:
+            ids.discard(op_id)
+        if not ids:
+            del topic.publishers[owner]
+            if not topic.publishers:
+                topic.latched = None
+        self._forget_if_unused(topic)
+
+    def subscribe(self, peer: Peer, op: Subscribe, resolved: str) -> tuple[Topic, Subscription]:
+        """Add a subscribe id of ``peer``; return the topic and the merged subscription.
+
+        Raises:
+            ProtocolError: the type conflicts with the topic's type or is malformed.
+        """
+        topic = self.topics.get(resolved) or Topic(resolved)
+        if op.type:
+            self._typed(topic, op.type)  # raises before anything is registered
+        self.topics[resolved] = topic
+        key = (peer, op.topic)
+        sub = topic.subscriptions.get(key)
+        if sub is None:
+            sub = Subscription(op.topic, resolved)
+            topic.subscriptions[key] = sub
+            peer.session.subscriptions[op.topic] = sub
+        sub.add(op)
+        return topic, sub
+
+    def unsubscribe(self, peer: Peer, written: str, op_id: OpId | None) -> None:
+        """Remove one subscribe id (``None``: all) of ``peer`` on a topic spelling."""
+        sub = peer.session.subscriptions.get(written)
+        if sub is None:
+            return
+        if sub.remove(op_id):
+            del peer.session.subscriptions[written]
+            topic = self.topics.get(sub.resolved)
+            if topic is not None:
+                topic.subscriptions.pop((peer, written), None)
+                self._forget_if_unused(topic)
+
+    def subscribe_internal(
+        self, name: str, type_name: str, node: str, callback: InternalCallback
+    ) -> Topic:
+        """Add an in-process subscriber (a simulated node) of ``name``."""
+        topic = self.topics.get(name) or Topic(name)
+        self._typed(topic, type_name)
+        self.topics[name] = topic
+        topic.internal.append((node, callback))
+        return topic
+
+    def drop_peer(self, peer: Peer) -> None:
+        """Remove every subscription and advertisement of a client that left."""
+        for written in list(peer.session.subscriptions):
+            self.unsubscribe(peer, written, None)
+        for name in list(peer.session.advertisements):
+            self.unadvertise(name, peer, None)
+        peer.session.advertisements.clear()
+
+    def _forget_if_unused(self, topic: Topic) -> None:
+        if topic.unused() and self.topics.get(topic.name) is topic:
+            del self.topics[topic.name]
+
+    # -- publishing -------------------------------------------------------------------------------
+
+    def outgoing(self, topic: Topic, msg: Any, stamp: tuple[int, int]) -> Outgoing:
+        """Wrap a canonical message of ``topic`` for delivery."""
+        cdr = None
+        if topic.known and topic.type is not None and self.cdr_factory is not None:
+            cdr = self.cdr_factory(topic.type, msg)
+        return Outgoing(topic.name, topic.type if topic.known else None, msg, stamp, cdr)
+
+    def convert(self, topic: Topic, payload: Any) -> Any:
+        """Validate a client payload for ``topic`` (pass it through when the type is unknown).
+
+        Raises:
+            ConversionError: the payload does not fit the topic's type.
+        """
+        if topic.known and topic.type is not None:
+            return self.converter.from_json(topic.type, payload)
+        if not isinstance(payload, dict):
+            msg = f"publish: msg must be a JSON object, got {type(payload).__name__}"
+            raise ProtocolError(msg)
+        return payload
+
+    def deliver(self, topic: Topic, out: Outgoing, now: float, source: Peer | None) -> None:
+        """Send ``out`` to every subscriber of ``topic`` and run the in-process callbacks.
+
+        Raises:
+            ProtocolError: an in-process subscriber refused the message (after every client
+                subscriber got it); the caller reports it to ``source``.
+        """
+        if topic.latch:
+            topic.latched = out
+        if topic.subscriptions:
+            default_limit = self.default_queue_length
+            for (peer, _written), sub in topic.subscriptions.items():
+                if sub.throttle_rate and not sub.admit(now):
+                    continue
+                self.send_to(peer, sub, out, default_limit)
+        refusal: ProtocolError | None = None
+        for _node, callback in topic.internal:
+            try:
+                callback(out.msg, source)
+            except ProtocolError as err:
+                refusal = err
+        if refusal is not None:
+            raise refusal
+
+    def send_to(self, peer: Peer, sub: Subscription, out: Outgoing, default_limit: int) -> None:
+        """Encode ``out`` as ``sub`` wants it (cached) and queue it for ``peer``."""
+        try:
+            frame = out.frame(sub.compression, sub.topic)
+        except ProtocolError as err:
+            if not sub.warned and peer.session.wants_status("error"):
+                sub.warned = True  # once per subscription, not once per message
+                peer.send(status_frame("error", f"subscribe {sub.topic}: {err}"))
+            return
+        size = sub.fragment_size or peer.session.fragment_size
+        limit = sub.queue_length or default_limit
+        if size is not None and frame.text and len(frame.data) > size:
+            frag_id = f"{sub.topic}:{out.stamp[0]}.{out.stamp[1]:09d}"
+            for piece in split_frame(frame, size, frag_id):
+                peer.send(piece, sub, 0)
+            return
+        peer.send(frame, sub, limit)
+
+    def replay_latched(self, peer: Peer, topic: Topic, sub: Subscription) -> None:
+        """Send the latched message of ``topic`` to a new subscription."""
+        if topic.latched is not None:
+            self.send_to(peer, sub, topic.latched, self.default_queue_length)
+
+    def listed(self) -> list[Topic]:
+        """Return the topics that exist in the graph (typed), sorted by name."""
+        return sorted((t for t in self.topics.values() if t.type is not None), key=lambda t: t.name)

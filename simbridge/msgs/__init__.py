@@ -1,0 +1,27 @@
+"""ROS 2 interface types for simbridge: the registry, validation and conversion of payloads.
+
+Built on rosbags, which carries the definition of every standard ROS 2 message; type names are
+accepted as ``pkg/Type`` and ``pkg/msg/Type``.
+"""
+
+from __future__ import annotations
+
+from simbridge.msgs.convert import Converter, Stamp
+from simbridge.msgs.registry import (
+    FieldSpec,
+    MessageSpec,
+    TypeRegistry,
+    normalize_type,
+    short_type,
+)
+
+
+__all__ = [
+    "Converter",
+    "FieldSpec",
+    "MessageSpec",
+    "Stamp",
+    "TypeRegistry",
+    "normalize_type",
+    "short_type",
+]

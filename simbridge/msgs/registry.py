@@ -1,0 +1,211 @@
+"""The ROS 2 interface-type registry, built on the rosbags type store.
+
+Type names are accepted as ``pkg/Type`` and ``pkg/msg/Type`` (rosbridge accepts both; rosapi
+answers with ``pkg/msg/Type``). Definitions come from rosbags (every standard ROS 2 message);
+nothing here hand-writes a message definition. Further interface definitions (services, actions,
+simbridge's own) are registered from ``.msg``/``.srv`` text with :meth:`TypeRegistry.register_msg`.
+"""
+
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.msg import get_types_from_msg
+
+from simbridge.errors import TypeNotFoundError
+
+
+__all__ = [
+    "PRIMITIVES",
+    "FieldSpec",
+    "MessageSpec",
+    "TypeRegistry",
+    "normalize_type",
+    "short_type",
+]
+
+#: Primitive .msg base types and how they travel in JSON (rosbridge conventions).
+PRIMITIVES: frozenset[str] = frozenset(
+    {
+        "bool",
+        "byte",
+        "char",
+        "int8",
+        "uint8",
+        "int16",
+        "uint16",
+        "int32",
+        "uint32",
+        "int64",
+        "uint64",
+        "float32",
+        "float64",
+        "string",
+        "wstring",
+    }
+)
+
+_PKG = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+InterfaceKind = Literal["msg", "srv", "action"]
+
+
+def normalize_type(name: object, kind: InterfaceKind = "msg") -> str:
+    """Return the canonical ``pkg/kind/Type`` spelling of an interface type name.
+
+    ``geometry_msgs/Twist`` and ``geometry_msgs/msg/Twist`` both give
+    ``geometry_msgs/msg/Twist``; empty path segments are ignored, as rosbridge does.
+
+    Raises:
+        TypeNotFoundError: the name is not of the form ``pkg/Type`` or ``pkg/sub/Type``.
+    """
+    if not isinstance(name, str):
+        msg = f"type must be a string such as 'std_msgs/msg/String', got {name!r}"
+        raise TypeNotFoundError(msg)
+    parts = [p for p in name.strip().split("/") if p]
+    if len(parts) == 2:
+        parts.insert(1, kind)
+    if (
+        len(parts) != 3
+        or parts[1] not in ("msg", "srv", "action")
+        or not _PKG.match(parts[0])
+        or not _NAME.match(parts[2])
+    ):
+        msg = f"'{name}' is not a valid type string; expected 'pkg/Type' or 'pkg/{kind}/Type'"
+        raise TypeNotFoundError(msg)
+    return "/".join(parts)
+
+
+def short_type(name: str) -> str:
+    """Return ``pkg/Type`` for ``pkg/msg/Type`` (the ROS 1 style used in rosapi TypeDefs)."""
+    parts = name.split("/")
+    return f"{parts[0]}/{parts[-1]}" if len(parts) == 3 else name
+
+
+@dataclass(frozen=True, slots=True)
+class FieldSpec:
+    """One field of a message type.
+
+    Attributes:
+        name: field name exactly as ROS spells it.
+        base: primitive name (``float64``, ``string``...) or nested type ``pkg/msg/Type``.
+        nested: ``base`` is a message type.
+        arraylen: -1 scalar, 0 unbounded or bounded sequence, N fixed-size array (rosapi's
+            ``fieldarraylen`` convention).
+        bound: upper bound of a bounded sequence or string (0 = unbounded).
+        string_bound: bound of bounded string elements (0 = unbounded).
+    """
+
+    name: str
+    base: str
+    nested: bool
+    arraylen: int
+    bound: int
+    string_bound: int
+
+
+@dataclass(frozen=True, slots=True)
+class MessageSpec:
+    """A message type: its canonical name, fields and constants."""
+
+    name: str
+    fields: tuple[FieldSpec, ...]
+    constants: tuple[tuple[str, str, Any], ...]
+
+
+class TypeRegistry:
+    """Every interface type simbridge knows, looked up by any accepted spelling."""
+
+    def __init__(self, store: Stores = Stores.LATEST) -> None:
+        #: The rosbags type store: definitions, CDR serializers, message classes.
+        self.store = get_typestore(store)
+        #: Compiled specs by canonical name, filled lazily.
+        self._specs: dict[str, MessageSpec] = {}
+
+    # -- lookup -----------------------------------------------------------------------------
+
+    def known(self, name: str) -> bool:
+        """Return whether the message type (any accepted spelling) is known."""
+        try:
+            return normalize_type(name) in self.store.fielddefs
+        except TypeNotFoundError:
+            return False
+
+    def spec(self, name: str) -> MessageSpec:
+        """Return the compiled spec of a message type.
+
+        Raises:
+            TypeNotFoundError: the name is malformed or the type is unknown.
+        """
+        canonical = normalize_type(name)
+        cached = self._specs.get(canonical)
+        if cached is not None:
+            return cached
+        try:
+            consts, fields = self.store.fielddefs[canonical]
+        except KeyError:
+            msg = f"unknown message type '{name}'"
+            raise TypeNotFoundError(msg) from None
+        spec = MessageSpec(
+            canonical,
+            tuple(_field_spec(fname, desc) for fname, desc in fields),
+            tuple((c[0], c[1], c[2]) for c in consts),
+        )
+        self._specs[canonical] = spec
+        return spec
+
+    def types(self) -> list[str]:
+        """Return every known message type name, sorted."""
+        return sorted(self.store.fielddefs)
+
+    def definition_text(self, name: str) -> str:
+        """Return the full ``.msg`` text with each dependency in a ``MSG: pkg/Type`` section.
+
+        This is the layout of rosapi's ``typedefs_full_text`` (and ROS 1 ``gendeps --cat``)
+        that Foxglove and Lichtblick parse.
+        """
+        canonical = self.spec(name).name
+        text, _digest = self.store.generate_msgdef(canonical, ros_version=2)
+        return str(text)
+
+    # -- registration -------------------------------------------------------------------------
+
+    def register_msg(self, name: str, text: str) -> str:
+        """Register a message type from ``.msg`` text; return its canonical name.
+
+        Service and action parts are registered as messages named ``pkg/srv/Foo_Request`` etc.
+        """
+        parts = name.split("/")
+        if len(parts) != 3:
+            msg = f"register_msg needs 'pkg/kind/Type', got '{name}'"
+            raise TypeNotFoundError(msg)
+        types = get_types_from_msg(text, f"{parts[0]}/msg/{parts[2]}")
+        renamed = {}
+        for key, value in types.items():
+            renamed[name if key == f"{parts[0]}/msg/{parts[2]}" else key] = value
+        self.store.register(renamed)
+        self._specs.pop(name, None)
+        return name
+
+
+def _field_spec(fname: str, desc: tuple[Any, Any]) -> FieldSpec:
+    nodetype, detail = desc
+    kind = int(nodetype)
+    if kind in (3, 4):  # ARRAY (fixed) or SEQUENCE
+        (inner_type, inner_detail), count = detail
+        arraylen = int(count) if kind == 3 else 0
+        bound = 0 if kind == 3 else int(count)
+        base, nested, string_bound = _element(int(inner_type), inner_detail)
+        return FieldSpec(fname, base, nested, arraylen, bound, string_bound)
+    base, nested, string_bound = _element(kind, detail)
+    return FieldSpec(fname, base, nested, -1, 0, string_bound)
+
+
+def _element(kind: int, detail: Any) -> tuple[str, bool, int]:
+    if kind == 1:  # BASE: (name, string bound)
+        return str(detail[0]), False, int(detail[1])
+    return normalize_type(str(detail)), True, 0  # NAME: nested message

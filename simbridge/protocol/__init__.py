@@ -1,0 +1,45 @@
+"""The rosbridge v2 protocol, sans-I/O: typed ops, per-client sessions, encodings, fragments.
+
+Nothing here imports asyncio or websockets: bytes and decoded objects go in, frames come out.
+"""
+
+from __future__ import annotations
+
+from simbridge.protocol.encoding import (
+    Frame,
+    Outgoing,
+    decode_frame,
+    encode_json,
+    json_frame,
+    status_frame,
+)
+from simbridge.protocol.fragments import Defragmenter, split_frame
+from simbridge.protocol.ops import (
+    ClientId,
+    Op,
+    OpId,
+    parse_op,
+)
+from simbridge.protocol.queue import SendQueue
+from simbridge.protocol.session import STATUS_LEVELS, Session, Subscription, resolve_name
+
+
+__all__ = [
+    "STATUS_LEVELS",
+    "ClientId",
+    "Defragmenter",
+    "Frame",
+    "Op",
+    "OpId",
+    "Outgoing",
+    "SendQueue",
+    "Session",
+    "Subscription",
+    "decode_frame",
+    "encode_json",
+    "json_frame",
+    "parse_op",
+    "resolve_name",
+    "split_frame",
+    "status_frame",
+]

@@ -1,0 +1,182 @@
+"""Wire encodings of rosbridge messages: JSON in, and JSON (plus extensions) out.
+
+Outgoing JSON is produced by orjson, which writes NaN and infinities as ``null`` (never the bare
+``NaN`` tokens that ``JSON.parse`` rejects, rosbridge issue #916), numpy arrays natively, and
+``bytes`` as base64 text (rosbridge's ``uint8[]`` convention). JSON goes out in text frames;
+binary encodings (CBOR) in binary frames (protocol reference section 1.1).
+
+A message published on a topic is wrapped in an :class:`Outgoing`, which encodes it at most once
+per encoding and topic spelling, however many clients receive it.
+"""
+
+from __future__ import annotations
+
+import base64
+import json
+from collections.abc import Callable
+from typing import Any, NamedTuple
+
+import numpy as np
+import orjson
+
+from simbridge.errors import ProtocolError
+
+
+__all__ = [
+    "Encoder",
+    "Frame",
+    "Outgoing",
+    "decode_frame",
+    "encode_json",
+    "json_frame",
+    "status_frame",
+]
+
+_OPTS = orjson.OPT_SERIALIZE_NUMPY
+
+
+class Frame(NamedTuple):
+    """One WebSocket message to send: its bytes and whether it is a text frame."""
+
+    data: bytes
+    text: bool
+
+
+def _default(value: Any) -> Any:
+    if isinstance(value, bytes | bytearray | memoryview):
+        return base64.b64encode(value).decode("ascii")
+    if isinstance(value, np.ndarray):
+        return value.tolist()  # non-contiguous or exotic dtype: orjson asks us
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(type(value).__name__)
+
+
+def encode_json(obj: Any) -> bytes:
+    """Return the UTF-8 JSON of a canonical message or envelope (NaN and inf as null)."""
+    return orjson.dumps(obj, default=_default, option=_OPTS)
+
+
+def json_frame(obj: Any) -> Frame:
+    """Return a text frame holding the JSON of ``obj``."""
+    return Frame(encode_json(obj), True)
+
+
+def status_frame(level: str, text: str, op_id: object = None) -> Frame:
+    """Return a rosbridge ``status`` message (protocol section 3.2 of ROSBRIDGE_PROTOCOL.md)."""
+    body: dict[str, Any] = {"op": "status", "level": level, "msg": text}
+    if op_id is not None:
+        body["id"] = op_id
+    return json_frame(body)
+
+
+def _decode_lenient(text: str) -> list[Any]:
+    """Decode one or more concatenated JSON values, tolerating NaN/Infinity tokens.
+
+    roslibpy serializes with Python's ``json.dumps``, which writes a float NaN as ``NaN``; and
+    rosbridge accepts several objects in one frame. Both cases land here, off the fast path.
+    """
+    decoder = json.JSONDecoder()
+    out: list[Any] = []
+    pos = 0
+    end = len(text)
+    while True:
+        while pos < end and text[pos] in " \t\r\n":
+            pos += 1
+        if pos >= end:
+            return out
+        value, pos = decoder.raw_decode(text, pos)
+        out.append(value)
+
+
+def decode_frame(data: str | bytes) -> list[Any]:
+    """Return the JSON values of one incoming WebSocket message.
+
+    Binary frames are read as UTF-8 JSON, as ROS 2 rosbridge does.
+
+    Raises:
+        ProtocolError: the frame is not valid UTF-8 JSON.
+    """
+    try:
+        return [orjson.loads(data)]
+    except orjson.JSONDecodeError:
+        pass
+    try:
+        text = data if isinstance(data, str) else bytes(data).decode("utf-8")
+        values = _decode_lenient(text)
+    except (UnicodeDecodeError, ValueError, RecursionError) as err:
+        kind = "text" if isinstance(data, str) else "binary"
+        reason = str(err).split(":")[0] if isinstance(err, ValueError) else type(err).__name__
+        msg = f"could not decode the {kind} frame as JSON ({reason}); send one JSON object"
+        raise ProtocolError(msg) from None
+    if not values:
+        msg = "received an empty frame; send one JSON object per message"
+        raise ProtocolError(msg)
+    return values
+
+
+#: Builds the frame of a published message for one compression: ``(outgoing, topic) -> Frame``.
+Encoder = Callable[["Outgoing", str], Frame]
+
+
+def _encode_none(out: Outgoing, topic: str) -> Frame:
+    body = out.json_body()
+    head = b'{"op":"publish","topic":' + orjson.dumps(topic) + b',"msg":'
+    return Frame(head + body + b"}", True)
+
+
+class Outgoing:
+    """A message published on a topic, encoded lazily and at most once per encoding.
+
+    Attributes:
+        topic: the resolved topic name it was published on.
+        msgtype: its canonical type, or ``None`` when the type is not known (passed through).
+        msg: the canonical message (see :mod:`simbridge.msgs.convert`).
+        stamp: (sec, nanosec) when it was published (cbor-raw's ``secs``/``nsecs``).
+        cdr: a function returning its CDR bytes, or ``None`` if the type is unknown.
+    """
+
+    #: Encoders by compression name; ``none`` is JSON, others are registered by extensions.
+    encoders: dict[str, Encoder] = {"none": _encode_none}
+
+    __slots__ = ("_body", "_frames", "cdr", "msg", "msgtype", "stamp", "topic")
+
+    def __init__(
+        self,
+        topic: str,
+        msgtype: str | None,
+        msg: Any,
+        stamp: tuple[int, int] = (0, 0),
+        cdr: Callable[[], bytes] | None = None,
+    ) -> None:
+        self.topic = topic
+        self.msgtype = msgtype
+        self.msg = msg
+        self.stamp = stamp
+        self.cdr = cdr
+        self._body: bytes | None = None
+        self._frames: dict[tuple[str, str], Frame] = {}
+
+    def json_body(self) -> bytes:
+        """Return the JSON of the message itself, computed once."""
+        if self._body is None:
+            self._body = encode_json(self.msg)
+        return self._body
+
+    def frame(self, compression: str, topic: str) -> Frame:
+        """Return the publish frame for one compression and one topic spelling (cached).
+
+        Raises:
+            ProtocolError: the compression cannot encode this message (e.g. ``cbor-raw`` of an
+                unknown type), or is not available.
+        """
+        key = (compression, topic)
+        frame = self._frames.get(key)
+        if frame is None:
+            encoder = self.encoders.get(compression)
+            if encoder is None:
+                msg = f"compression '{compression}' is not available in this server"
+                raise ProtocolError(msg)
+            frame = encoder(self, topic)
+            self._frames[key] = frame
+        return frame

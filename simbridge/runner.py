@@ -1,0 +1,207 @@
+"""The simbridge process: the fixed-rate simulation loop, the servers, start and stop.
+
+The loop runs on absolute deadlines ``start + k * dt`` of the monotonic clock, so it does not
+drift however long it runs: a late tick does not push the later ones back. If the process falls
+more than :data:`MAX_CATCH_UP` ticks behind (a suspended laptop, a stalled Pi), it skips ahead
+instead of bursting, and counts the skipped ticks.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import logging
+import time
+from collections import deque
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from simbridge import __version__
+from simbridge.config import (
+    Params,
+    ServerSettings,
+    WorldSpec,
+    load_params,
+    load_world,
+    resource_dir,
+)
+from simbridge.graph import Graph, RobotBridge, install_rosapi
+from simbridge.server import BridgeServer
+from simbridge.sim import World
+from simbridge.web import WebApp, serve_http
+
+
+__all__ = ["MAX_CATCH_UP", "App", "LoopStats"]
+
+logger = logging.getLogger(__name__)
+
+#: Ticks the loop may run back to back to catch up before it skips ahead.
+MAX_CATCH_UP = 5
+
+
+def _percentile(values: list[float], q: float) -> float:
+    if not values:
+        return 0.0
+    ordered = sorted(values)
+    return ordered[min(len(ordered) - 1, int(q * len(ordered)))]
+
+
+@dataclass(slots=True)
+class LoopStats:
+    """Timing of the simulation loop (the last minute of ticks kept for percentiles)."""
+
+    ticks: int = 0
+    late_ticks: int = 0
+    skipped_ticks: int = 0
+    #: Seconds past its deadline at which each tick started.
+    lateness: deque[float] = field(default_factory=lambda: deque(maxlen=1200))
+    #: Seconds each tick's work took (step, publish, encode, write).
+    work: deque[float] = field(default_factory=lambda: deque(maxlen=1200))
+
+    def summary(self) -> dict[str, Any]:
+        """Return the figures for ``/healthz`` (milliseconds)."""
+        late = list(self.lateness)
+        work = list(self.work)
+        return {
+            "ticks": self.ticks,
+            "late_ticks": self.late_ticks,
+            "skipped_ticks": self.skipped_ticks,
+            "lateness_ms_p50": round(_percentile(late, 0.5) * 1000, 3),
+            "lateness_ms_p99": round(_percentile(late, 0.99) * 1000, 3),
+            "lateness_ms_max": round(max(late, default=0.0) * 1000, 3),
+            "work_ms_p50": round(_percentile(work, 0.5) * 1000, 3),
+            "work_ms_p99": round(_percentile(work, 0.99) * 1000, 3),
+            "work_ms_max": round(max(work, default=0.0) * 1000, 3),
+        }
+
+
+class App:
+    """One simbridge process: world, graph, servers and the loop."""
+
+    def __init__(
+        self,
+        settings: ServerSettings | None = None,
+        *,
+        world: WorldSpec | Path | str | None = None,
+        params: Params | Path | str | None = None,
+        static_dir: Path | None = None,
+        seed: int = 0,
+    ) -> None:
+        #: Network settings.
+        self.settings = settings or ServerSettings()
+        spec = world if isinstance(world, WorldSpec) else load_world(world)
+        prm = params if isinstance(params, Params) else load_params(params)
+        #: The simulation.
+        self.world = World(spec, prm, seed=seed)
+        #: The ROS graph.
+        self.graph = Graph(settings=self.settings)
+        install_rosapi(self.graph)
+        #: The virtual robot's ROS interface.
+        self.bridge = RobotBridge(self.graph, self.world)
+        #: HTTP answers (page, /healthz).
+        self.web = WebApp(static_dir or resource_dir("static"), self.health)
+        #: The WebSocket server.
+        self.server = BridgeServer(self.graph, self.settings, self.web)
+        #: Loop timing.
+        self.stats = LoopStats()
+        #: Hooks run after each tick's publishing, with ``now`` (extensions).
+        self.tick_hooks: list[Callable[[float], None]] = []
+        self._http: asyncio.Server | None = None
+        self._loop_task: asyncio.Task[None] | None = None
+        self._started = time.monotonic()
+        #: Set once the servers listen and the loop runs.
+        self.ready = asyncio.Event()
+
+    # -- facts ----------------------------------------------------------------------------
+
+    @property
+    def ws_port(self) -> int:
+        """Bound WebSocket port."""
+        return self.server.port
+
+    @property
+    def http_port(self) -> int | None:
+        """Bound HTTP port, or None when HTTP is off."""
+        if self._http is None:
+            return None
+        return int(self._http.sockets[0].getsockname()[1])
+
+    def health(self) -> dict[str, Any]:
+        """Return the ``/healthz`` document."""
+        return {
+            "status": "ok",
+            "version": __version__,
+            "uptime_s": round(time.monotonic() - self._started, 3),
+            "world": self.world.spec.name,
+            "sim_time_s": round(self.world.time, 3),
+            "loop_rate_hz": self.world.params.sim.rate,
+            **self.server.stats(),
+            "loop": self.stats.summary(),
+        }
+
+    # -- lifecycle --------------------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Start the servers and the simulation loop."""
+        await self.server.start()
+        if self.settings.http_port is not None:
+            self._http = await serve_http(self.web, self.settings.host, self.settings.http_port)
+        loop = asyncio.get_running_loop()
+        self.bridge.publish_static(loop.time())
+        self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
+        self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
+        self.ready.set()
+
+    async def stop(self) -> None:
+        """Stop the loop, close every connection and the servers."""
+        if self._loop_task is not None:
+            self._loop_task.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._loop_task
+        if self._http is not None:
+            self._http.close()
+            await self._http.wait_closed()
+        await self.server.close()
+
+    async def _run_loop(self) -> None:
+        loop = asyncio.get_running_loop()
+        clock = loop.time
+        start = clock()
+        k = 0
+        while True:
+            k += 1
+            dt = self.world.dt
+            deadline = start + k * dt
+            delay = deadline - clock()
+            if delay > 0:
+                await asyncio.sleep(delay)
+            now = clock()
+            late = now - deadline
+            if late > MAX_CATCH_UP * dt:
+                skipped = int(late / dt)
+                self.stats.skipped_ticks += skipped
+                start += skipped * dt  # skip ahead: no burst of catch-up ticks
+                logger.warning(
+                    "simulation loop %.0f ms late: skipping %d ticks", late * 1e3, skipped
+                )
+            elif late > dt:
+                self.stats.late_ticks += 1
+            try:
+                self.tick(now)
+            except Exception:
+                logger.exception("simulation tick failed")
+            self.stats.ticks += 1
+            self.stats.lateness.append(max(late, 0.0))
+            self.stats.work.append(clock() - now)
+            if delay <= 0:
+                await asyncio.sleep(0)  # let clients run even when the loop is behind
+
+    def tick(self, now: float) -> None:
+        """Run one step: simulate, publish, expire timeouts, run hooks."""
+        self.world.step()
+        self.bridge.publish(now)
+        self.graph.tick(now)
+        for hook in self.tick_hooks:
+            hook(now)

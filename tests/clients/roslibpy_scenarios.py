@@ -1,0 +1,366 @@
+"""roslibpy 2.1.0 client scenarios, mirroring tests/js/scenarios/*.mjs.
+
+Every scenario is ``fn(roslibpy, ros, args) -> JSON-serialisable result`` and is
+run by ``roslibpy_run.py`` in the main thread while Twisted's reactor runs in
+roslibpy's own thread. roslibpy calls subscription/service callbacks on the
+reactor thread, so the helpers here hand results over with ``threading``
+primitives and always wait with a timeout (seconds, like roslibpy itself).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+import time
+from collections.abc import Callable
+from typing import Any
+
+
+JSON = Any
+
+
+def now_ms() -> float:
+    """Monotonic clock in milliseconds (the receive timestamps we report)."""
+    return time.perf_counter() * 1000.0
+
+
+class ServiceFailure(Exception):
+    """The service's errback fired (``result: false``); ``values`` is what it got."""
+
+    def __init__(self, service: str, values: JSON) -> None:
+        super().__init__(f"service {service} failed: {values!r}")
+        self.values = values
+
+
+def wait_for(predicate: Callable[[], Any], timeout_s: float, what: str = "condition") -> Any:
+    """Poll ``predicate`` until it returns something truthy; return that value."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        value = predicate()
+        if value:
+            return value
+        if time.monotonic() >= deadline:
+            raise TimeoutError(f"timeout: {what} not met within {timeout_s} s")
+        time.sleep(0.005)
+
+
+def collect(
+    roslibpy: Any,
+    ros: Any,
+    name: str,
+    message_type: str,
+    n: int,
+    timeout_s: float,
+    keep: bool = False,
+) -> tuple[list[JSON], list[float]]:
+    """Subscribe to ``name`` and return ``(messages, receive_times_ms)`` once n arrived.
+
+    Unsubscribes afterwards unless ``keep``. Note that roslibpy's
+    ``Topic.unsubscribe`` removes *every* callback registered for that topic
+    name on the Ros object, not just this Topic's.
+    """
+    topic = roslibpy.Topic(ros, name, message_type)
+    messages: list[JSON] = []
+    times: list[float] = []
+    done = threading.Event()
+    lock = threading.Lock()
+
+    def on_message(msg: JSON) -> None:
+        t = now_ms()
+        with lock:
+            if len(messages) >= n:
+                return
+            messages.append(msg)
+            times.append(t)
+            if len(messages) >= n:
+                done.set()
+
+    topic.subscribe(on_message)
+    try:
+        if not done.wait(timeout_s):
+            raise TimeoutError(
+                f"timeout: got {len(messages)} of {n} message(s) on {name} within {timeout_s} s"
+            )
+    finally:
+        if not keep:
+            topic.unsubscribe()
+    with lock:
+        return list(messages), list(times)
+
+
+def first_message(roslibpy: Any, ros: Any, name: str, message_type: str, timeout_s: float) -> JSON:
+    messages, _ = collect(roslibpy, ros, name, message_type, 1, timeout_s)
+    return messages[0]
+
+
+def call_service(
+    roslibpy: Any,
+    ros: Any,
+    name: str,
+    service_type: str,
+    request: dict[str, Any] | None = None,
+    timeout_s: float = 5.0,
+) -> JSON:
+    """Call a service through ``Service.call(request, callback, errback)``.
+
+    Returns the response values (a plain dict), raises ServiceFailure when the
+    errback fires, TimeoutError when neither fires in time. (roslibpy's
+    errback only fires if the failed response carries ``values``; without it
+    roslibpy raises KeyError on the reactor thread and neither callback runs.)
+    """
+    service = roslibpy.Service(ros, name, service_type)
+    done = threading.Event()
+    outcome: dict[str, Any] = {}
+
+    def callback(response: Any) -> None:
+        outcome["response"] = dict(response)
+        done.set()
+
+    def errback(values: Any) -> None:
+        outcome["failure"] = values
+        done.set()
+
+    service.call(roslibpy.ServiceRequest(request or {}), callback, errback)
+    if not done.wait(timeout_s):
+        raise TimeoutError(f"timeout: call of service {name} did not finish within {timeout_s} s")
+    if "failure" in outcome:
+        raise ServiceFailure(name, outcome["failure"])
+    return outcome["response"]
+
+
+def yaw_from_quaternion(q: dict[str, float]) -> float:
+    x, y, z, w = q.get("x", 0.0), q.get("y", 0.0), q.get("z", 0.0), q.get("w", 1.0)
+    return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+
+def pose_of(odom: JSON) -> dict[str, float]:
+    p = odom["pose"]["pose"]
+    return {
+        "x": p["position"]["x"],
+        "y": p["position"]["y"],
+        "yaw": yaw_from_quaternion(p["orientation"]),
+        "qz": p["orientation"]["z"],
+        "qw": p["orientation"]["w"],
+    }
+
+
+def same_pose(a: JSON, b: JSON) -> bool:
+    pa, pb = a["pose"]["pose"], b["pose"]["pose"]
+    return bool(pa["position"] == pb["position"] and pa["orientation"] == pb["orientation"])
+
+
+# --------------------------------------------------------------------------- scenarios
+
+
+def topics(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """``{topics, types}``; optional ``topic_types`` via ``Ros.get_topic_type``.
+
+    roslibpy's ``Ros.get_topics()`` returns only the ``topics`` list, so the
+    ``types`` come from calling ``/rosapi/topics`` directly (the same request
+    get_topics sends).
+    """
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    names = ros.get_topics()
+    full = call_service(roslibpy, ros, "/rosapi/topics", "rosapi/Topics", {}, timeout_s)
+    out: dict[str, Any] = {"topics": names, "types": full.get("types")}
+    if args.get("with_topic_type"):
+        out["topic_types"] = {name: ros.get_topic_type(name) for name in names}
+    return out
+
+
+def odom_rate(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    count = args.get("count", 41)
+    timeout_s = args.get("timeout_ms", 5000 + count * 150) / 1000
+    messages, times = collect(roslibpy, ros, "/odom", "nav_msgs/msg/Odometry", count, timeout_s)
+    return {"count": len(messages), "times": times, "first": messages[0], "last": messages[-1]}
+
+
+def scan(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    return first_message(roslibpy, ros, "/scan", "sensor_msgs/msg/LaserScan", timeout_s)
+
+
+def tf(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """First message on /tf and on /tf_static, both subscribed at once."""
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    results: dict[str, Any] = {}
+    errors: list[BaseException] = []
+
+    def grab(key: str, name: str) -> None:
+        try:
+            results[key] = first_message(roslibpy, ros, name, "tf2_msgs/msg/TFMessage", timeout_s)
+        except BaseException as exc:
+            errors.append(exc)
+
+    threads = [
+        threading.Thread(target=grab, args=("tf", "/tf")),
+        threading.Thread(target=grab, args=("tf_static", "/tf_static")),
+    ]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout_s + 1)
+    if errors:
+        raise errors[0]
+    return {"tf": results["tf"], "tf_static": results["tf_static"]}
+
+
+def drive(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """Same protocol and result shape as tests/js/scenarios/drive.mjs."""
+    v = args.get("v", 0.5)
+    w = args.get("w", 0.0)
+    seconds = args.get("seconds", 1.0)
+    full = bool(args.get("full_twist"))
+    first_timeout_s = args.get("timeout_ms", 5000) / 1000
+    stop_timeout_s = args.get("stop_timeout_ms", 3000) / 1000
+
+    def twist(lin: float, ang: float) -> dict[str, Any]:
+        if full:
+            return {
+                "linear": {"x": lin, "y": 0.0, "z": 0.0},
+                "angular": {"x": 0.0, "y": 0.0, "z": ang},
+            }
+        return {"linear": {"x": lin}, "angular": {"z": ang}}
+
+    odom_topic = roslibpy.Topic(ros, "/odom", "nav_msgs/msg/Odometry")
+    cmd_topic = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/msg/Twist")
+    st: dict[str, Any] = {"phase": "wait", "first": None, "last": None, "stopped": None}
+    motion = {"count": 0, "lin": [], "ang": []}
+    lock = threading.Lock()
+
+    def on_odom(msg: JSON) -> None:
+        with lock:
+            if st["first"] is None:
+                st["first"] = msg
+            if st["phase"] == "moving":
+                t = msg["twist"]["twist"]
+                motion["count"] += 1
+                motion["lin"].append(t["linear"]["x"])
+                motion["ang"].append(t["angular"]["z"])
+            elif (
+                st["phase"] == "stopping"
+                and st["stopped"] is None
+                and st["last"] is not None
+                and same_pose(st["last"], msg)
+            ):
+                st["stopped"] = msg
+            st["last"] = msg
+
+    odom_topic.subscribe(on_odom)
+    wait_for(lambda: st["first"], first_timeout_s, "first /odom message")
+    cmd_topic.advertise()
+    with lock:
+        st["phase"] = "moving"
+
+    # 10 Hz, first tick immediately, scheduled against a monotonic clock.
+    cmd = roslibpy.Message(twist(v, w))
+    t0 = time.monotonic()
+    ticks = 0
+    while time.monotonic() - t0 < seconds:
+        cmd_topic.publish(cmd)
+        ticks += 1
+        next_tick = t0 + ticks * 0.1
+        time.sleep(max(0.0, min(next_tick, t0 + seconds) - time.monotonic()))
+
+    cmd_topic.publish(roslibpy.Message(twist(0.0, 0.0)))
+    with lock:
+        st["phase"] = "stopping"
+    stop_start = now_ms()
+    wait_for(
+        lambda: st["stopped"], stop_timeout_s, "two consecutive /odom messages with identical pose"
+    )
+    stop_ms = now_ms() - stop_start
+
+    odom_topic.unsubscribe()
+    cmd_topic.unadvertise()
+    lin, ang = motion["lin"], motion["ang"]
+    return {
+        "start": pose_of(st["first"]),
+        "final": pose_of(st["stopped"]),
+        "ticks": ticks,
+        "twist_during_motion": {
+            "max_linear_x": max(lin) if lin else None,
+            "min_linear_x": min(lin) if lin else None,
+            "max_angular_z": max(ang) if ang else None,
+            "min_angular_z": min(ang) if ang else None,
+        },
+        "odom_during_motion": motion["count"],
+        "stop_ms": stop_ms,
+    }
+
+
+def chatter(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """Publish once on /chatter with one Topic, receive with another, check no duplicates.
+
+    The wait of ``dup_window_ms`` after the first echo is an absence check.
+    """
+    text = args.get("text", "hello from roslibpy")
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    dup_window_s = args.get("dup_window_ms", 500) / 1000
+    msg_type = "std_msgs/msg/String"
+
+    pub = roslibpy.Topic(ros, "/chatter", msg_type)
+    sub = roslibpy.Topic(ros, "/chatter", msg_type)
+    messages: list[JSON] = []
+    times: list[float] = []
+
+    def on_message(msg: JSON) -> None:
+        times.append(now_ms())
+        messages.append(msg)
+
+    sub.subscribe(on_message)
+    pub.advertise()
+    sent_at = now_ms()
+    pub.publish(roslibpy.Message({"data": text}))
+    wait_for(lambda: messages, timeout_s, f"echo of {text!r} on /chatter")
+    time.sleep(dup_window_s)
+
+    sub.unsubscribe()
+    pub.unadvertise()
+    return {
+        "sent": text,
+        "messages": list(messages),
+        "times": list(times),
+        "latency_ms": times[0] - sent_at,
+    }
+
+
+def reset(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    name = args.get("name", "/reset")
+    return {"response": call_service(roslibpy, ros, name, "std_srvs/srv/Empty", {}, timeout_s)}
+
+
+def unknown_service(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """Same result shape as tests/js/scenarios/unknown_service.mjs."""
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    name = args.get("name", "/no_such_service")
+    service_type = args.get("type", "std_srvs/srv/Empty")
+    out: dict[str, Any] = {
+        "fail_called": False,
+        "fail_value": None,
+        "success_called": False,
+        "response": None,
+        "timed_out": False,
+    }
+    try:
+        out["response"] = call_service(roslibpy, ros, name, service_type, {}, timeout_s)
+        out["success_called"] = True
+    except ServiceFailure as exc:
+        out["fail_called"] = True
+        out["fail_value"] = exc.values
+    except TimeoutError:
+        out["timed_out"] = True
+    return out
+
+
+SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
+    "topics": topics,
+    "odom_rate": odom_rate,
+    "drive": drive,
+    "scan": scan,
+    "tf": tf,
+    "chatter": chatter,
+    "reset": reset,
+    "unknown_service": unknown_service,
+}
