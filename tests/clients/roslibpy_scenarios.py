@@ -354,6 +354,16 @@ def unknown_service(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return out
 
 
+def param(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """roslibpy.Param get, set, get (same result shape as tests/js/scenarios/param.mjs)."""
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    p = roslibpy.Param(ros, args["name"])
+    before = p.get(timeout=timeout_s)
+    p.set(args["value"], timeout=timeout_s)
+    after = p.get(timeout=timeout_s)
+    return {"before": before, "setResult": None, "after": after}
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "topics": topics,
     "odom_rate": odom_rate,
@@ -363,4 +373,5 @@ SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "chatter": chatter,
     "reset": reset,
     "unknown_service": unknown_service,
+    "param": param,
 }

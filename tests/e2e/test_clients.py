@@ -149,3 +149,14 @@ async def test_unknown_service_fails_at_once_with_a_reason(app: App, client: Any
     assert result["fail_called"] is True
     assert result["timed_out"] is False
     assert "does not exist" in result["fail_value"]
+
+
+@parametrize_clients
+async def test_param_reads_and_sets_a_robot_limit_live(app: App, client: Any) -> None:
+    """ROSLIB.Param / roslibpy.Param read and change /virtual_robot's speed limit at once."""
+    name = "/virtual_robot:robot.max_linear_velocity"
+    result = await client(ws_url(app), "param", {"name": name, "value": 0.25})
+    assert result["before"] == pytest.approx(0.5)
+    assert result["after"] == pytest.approx(0.25)
+    assert app.world.params.robot.max_linear_velocity == pytest.approx(0.25)
+    assert app.world.command("", 1.0, 0.0) == (0.25, 0.0)
