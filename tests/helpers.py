@@ -69,3 +69,26 @@ async def wait_for(predicate: Callable[[], bool], timeout: float = 3.0, step: fl
             msg = "condition not met before the timeout"
             raise TimeoutError(msg)
         await asyncio.sleep(step)
+
+
+class RecordingPeer:
+    """A graph peer that records what it is sent (the seam where a socket would be)."""
+
+    def __init__(self, graph: Any, label: str = "peer") -> None:
+        self.session = graph.new_session()
+        self.label = label
+        self.frames: list[Any] = []
+        graph.add_peer(self)
+
+    def send(self, frame: Any, key: Any = None, limit: int = 0) -> None:
+        self.frames.append(frame)
+
+    def messages(self) -> list[Any]:
+        """Every JSON message received so far, decoded."""
+        return [json.loads(f.data) for f in self.frames if f.text]
+
+    def take(self) -> list[Any]:
+        """Return and forget the messages received so far."""
+        out = self.messages()
+        self.frames.clear()
+        return out

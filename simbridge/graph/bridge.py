@@ -69,8 +69,8 @@ class RobotBridge:
         for robot in world.robots.values():
             self.add_robot(robot)
         graph.add_service("/reset", "std_srvs/srv/Empty", ROBOT_NODE, self._reset)
-        #: Fraction of a scan period accumulated since the last scan.
-        self._scan_phase = 1.0
+        #: Fraction of a scan period accumulated since the last scan (the first step scans).
+        self._scan_phase: float | None = None
         self.params = ParamNode(
             ROBOT_NODE,
             read=lambda: self.world.params.flat(),
@@ -115,7 +115,6 @@ class RobotBridge:
     def _reset(self, args: Any) -> dict[str, Any]:
         request_fields(args, (), "/reset")
         self.world.reset()
-        self._scan_phase = 1.0
         self.graph.log("info", "world reset: every robot back at its start pose, stopped")
         return {}
 
@@ -177,11 +176,20 @@ class RobotBridge:
             )
         if self.tf.subscriptions or self.tf.internal:
             g.publish(self.tf, {"transforms": transforms}, now)
-        lidar = self.world.params.lidar
-        self._scan_phase += lidar.rate / self.world.params.sim.rate
-        if self._scan_phase >= 1.0:
-            self._scan_phase = min(self._scan_phase - 1.0, 1.0)
+        if self._scan_due():
             self.publish_scans(now, stamp)
+
+    def _scan_due(self) -> bool:
+        """Return whether this step carries a scan (lidar.rate out of sim.rate steps)."""
+        if self._scan_phase is None:
+            self._scan_phase = 0.0
+            return True
+        ratio = min(self.world.params.lidar.rate / self.world.params.sim.rate, 1.0)
+        self._scan_phase += ratio
+        if self._scan_phase < 1.0 - 1e-9:
+            return False
+        self._scan_phase = max(self._scan_phase - 1.0, 0.0)
+        return True
 
     def publish_scans(self, now: float, stamp: dict[str, int]) -> None:
         """Raycast and publish every robot's /scan (skipped for robots nobody listens to)."""

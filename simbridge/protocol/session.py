@@ -52,7 +52,7 @@ def resolve_name(name: str, what: str = "topic") -> str:
     return name if name.startswith("/") else "/" + name
 
 
-@dataclass(slots=True)
+@dataclass(slots=True, eq=False)
 class Subscription:
     """One client's subscription to one topic spelling, with every subscribe id merged."""
 

@@ -55,18 +55,19 @@ export default async function drive(ROSLIB, ros, args, lib) {
   const cmd = makeMessage(ROSLIB, lib, twist(v, w, full));
   const t0 = now();
   let ticks = 0;
+  // The stop is scheduled on its own timer (not on the 100 ms interval, whose drift would
+  // add a whole period to the motion).
   await new Promise((resolve) => {
     const tick = () => {
-      if (now() - t0 >= seconds * 1000) {
-        clearInterval(interval);
-        resolve();
-        return;
-      }
       cmdTopic.publish(cmd);
       ticks += 1;
     };
     const interval = setInterval(tick, 100);
     tick();
+    setTimeout(() => {
+      clearInterval(interval);
+      resolve();
+    }, Math.max(0, seconds * 1000 - (now() - t0)));
   });
 
   cmdTopic.publish(makeMessage(ROSLIB, lib, twist(0, 0, full)));

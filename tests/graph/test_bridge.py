@@ -1,0 +1,128 @@
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import pytest
+
+from simbridge.config import Params, load_world
+from simbridge.graph import Graph, RobotBridge
+from simbridge.sim import World
+from tests.helpers import RecordingPeer
+
+
+@pytest.fixture
+def setup() -> tuple[Graph, World, RobotBridge]:
+    graph = Graph(wall_clock_ns=lambda: 42_000_000_007)
+    world = World(load_world(None), Params())
+    return graph, world, RobotBridge(graph, world)
+
+
+def sub(peer: RecordingPeer, graph: Graph, topic: str) -> None:
+    graph.receive(peer, json.dumps({"op": "subscribe", "topic": topic}), 0.0)
+
+
+def pub(peer: RecordingPeer, graph: Graph, topic: str, msg: Any) -> None:
+    graph.receive(peer, json.dumps({"op": "publish", "topic": topic, "msg": msg}), 0.0)
+
+
+def test_odom_carries_pose_quaternion_and_applied_twist(setup: Any) -> None:
+    """/odom: frames odom/base_link, w = cos(theta/2), z = sin(theta/2), clamped twist."""
+    graph, world, bridge = setup
+    peer = RecordingPeer(graph)
+    sub(peer, graph, "/odom")
+    world.command("", 0.9, 1.0)
+    world.step()
+    bridge.publish(0.0)
+    odom = next(m["msg"] for m in peer.take() if m["topic"] == "/odom")
+    assert odom["header"] == {"stamp": {"sec": 42, "nanosec": 7}, "frame_id": "odom"}
+    assert odom["child_frame_id"] == "base_link"
+    theta = world.robots[""].state.theta
+    q = odom["pose"]["pose"]["orientation"]
+    assert (q["z"], q["w"]) == pytest.approx((math.sin(theta / 2), math.cos(theta / 2)))
+    assert odom["twist"]["twist"]["linear"]["x"] == 0.5
+    assert odom["twist"]["twist"]["angular"]["z"] == 1.0
+    assert odom["pose"]["pose"]["position"]["x"] == pytest.approx(0.5 * 0.05)
+
+
+def test_tf_matches_odom_and_tf_static_holds_the_laser_mount(setup: Any) -> None:
+    """/tf odom -> base_link equals the odom pose; /tf_static base_link -> laser is latched."""
+    graph, world, bridge = setup
+    world.params = Params.from_flat({**world.params.flat(), "lidar.mount": [0.05, 0.0, math.pi]})
+    bridge.publish_static(0.0)
+    peer = RecordingPeer(graph)
+    sub(peer, graph, "/tf_static")
+    sub(peer, graph, "/tf")
+    world.command("", 0.2, 0.0)
+    world.step()
+    bridge.publish(0.0)
+    msgs = {m["topic"]: m["msg"] for m in peer.take()}
+    static = msgs["/tf_static"]["transforms"][0]
+    assert (static["header"]["frame_id"], static["child_frame_id"]) == ("base_link", "laser")
+    assert static["transform"]["translation"]["x"] == 0.05
+    assert static["transform"]["rotation"]["z"] == pytest.approx(1.0)
+    tf = msgs["/tf"]["transforms"][0]
+    assert tf["transform"]["translation"]["x"] == pytest.approx(0.01)
+
+
+def test_scan_is_published_at_the_lidar_rate(setup: Any) -> None:
+    """At 20 Hz steps and a 10 Hz LiDAR, every other step carries a scan."""
+    graph, world, bridge = setup
+    peer = RecordingPeer(graph)
+    sub(peer, graph, "/scan")
+    for _ in range(10):
+        world.step()
+        bridge.publish(0.0)
+    scans = [m["msg"] for m in peer.take() if m["topic"] == "/scan"]
+    assert len(scans) == 5
+    assert scans[0]["header"]["frame_id"] == "laser"
+    assert len(scans[0]["ranges"]) == 360
+    assert scans[0]["intensities"] == []
+
+
+def test_cmd_vel_commands_the_robot(setup: Any) -> None:
+    """A Twist on /cmd_vel sets the robot's command (clamped at step)."""
+    graph, world, _ = setup
+    peer = RecordingPeer(graph)
+    pub(peer, graph, "/cmd_vel", {"linear": {"x": 0.2}, "angular": {"z": -0.4}})
+    assert (world.robots[""].cmd_v, world.robots[""].cmd_omega) == (0.2, -0.4)
+    assert peer.take() == []
+
+
+def test_non_finite_cmd_vel_is_refused_to_its_sender(setup: Any) -> None:
+    """Null (NaN) velocity: status error to the sender, the robot keeps its command."""
+    graph, world, _ = setup
+    peer, other = RecordingPeer(graph, "a"), RecordingPeer(graph, "b")
+    pub(peer, graph, "/cmd_vel", {"linear": {"x": 0.2}})
+    pub(peer, graph, "/cmd_vel", {"linear": {"x": None}})
+    (status,) = peer.take()
+    assert status["op"] == "status" and "finite" in status["msg"]
+    assert world.robots[""].cmd_v == 0.2
+    assert other.take() == []
+
+
+def test_nothing_is_built_for_topics_nobody_listens_to(setup: Any) -> None:
+    """No subscriber: no /odom or /scan encoding work."""
+    _graph, world, bridge = setup
+    calls = []
+    original = world.scan
+    world.scan = lambda name: calls.append(name) or original(name)  # type: ignore[method-assign]
+    for _ in range(4):
+        world.step()
+        bridge.publish(0.0)
+    assert calls == []
+
+
+def test_parameters_of_the_robot_are_live(setup: Any) -> None:
+    """Setting lidar.mount re-publishes /tf_static; invalid values change nothing."""
+    graph, world, _ = setup
+    peer = RecordingPeer(graph)
+    sub(peer, graph, "/tf_static")
+    peer.take()
+    graph.params.set("/virtual_robot", {"lidar.mount": [0.1, 0.0, 0.0]})
+    (msg,) = peer.take()
+    assert msg["msg"]["transforms"][0]["transform"]["translation"]["x"] == 0.1
+    with pytest.raises(Exception, match="greater than 0"):
+        graph.params.set("/virtual_robot", {"robot.mass": 0.0, "robot.inertia": 1.0})
+    assert world.params.robot.inertia == 0.0075

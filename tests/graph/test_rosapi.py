@@ -1,0 +1,95 @@
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+
+from simbridge.config import Params, load_world
+from simbridge.graph import Graph, RobotBridge, install_rosapi
+from simbridge.sim import World
+from tests.helpers import RecordingPeer
+
+
+@pytest.fixture
+def graph() -> Graph:
+    g = Graph()
+    install_rosapi(g)
+    RobotBridge(g, World(load_world(None), Params()))
+    return g
+
+
+def call(graph: Graph, service: str, args: Any = None) -> dict[str, Any]:
+    peer = RecordingPeer(graph)
+    body: dict[str, Any] = {"op": "call_service", "service": service, "id": 1}
+    if args is not None:
+        body["args"] = args
+    graph.receive(peer, json.dumps(body), 0.0)
+    (reply,) = peer.take()
+    return reply
+
+
+def test_topics_lists_names_and_types_in_parallel_arrays(graph: Graph) -> None:
+    """rosapi/topics: /rosout always listed; relative name accepted."""
+    reply = call(graph, "rosapi/topics", {})
+    listed = dict(zip(reply["values"]["topics"], reply["values"]["types"], strict=True))
+    assert listed["/rosout"] == "rcl_interfaces/msg/Log"
+    assert listed["/odom"] == "nav_msgs/msg/Odometry"
+    assert reply["service"] == "rosapi/topics"
+
+
+@pytest.mark.parametrize("args", [{"topic": "/scan"}, ["/scan"], {"topic": "scan"}])
+def test_topic_type_accepts_object_or_list_args(graph: Graph, args: Any) -> None:
+    """Object args, list args zipped onto the fields, relative topic names."""
+    assert call(graph, "/rosapi/topic_type", args)["values"] == {
+        "type": "sensor_msgs/msg/LaserScan"
+    }
+
+
+def test_topic_type_of_unknown_topic_is_empty(graph: Graph) -> None:
+    """Unknown topic: type ''."""
+    assert call(graph, "/rosapi/topic_type", {"topic": "/nope"})["values"] == {"type": ""}
+
+
+def test_unknown_request_field_fails_with_the_expected_fields(graph: Graph) -> None:
+    """A misspelled request field is refused with a reason."""
+    reply = call(graph, "/rosapi/topic_type", {"topik": "/scan"})
+    assert reply["result"] is False and "expected topic" in reply["values"]
+
+
+def test_get_param_returns_json_text_and_unknown_names_the_default(graph: Graph) -> None:
+    """get_param value is JSON text; unknown parameters give '""' and successful false."""
+    ok = call(graph, "/rosapi/get_param", {"name": "/virtual_robot:robot.mass"})["values"]
+    assert (json.loads(ok["value"]), ok["successful"]) == (1.5, True)
+    bad = call(graph, "/rosapi/get_param", {"name": "/virtual_robot:nope"})["values"]
+    assert bad["value"] == '""' and bad["successful"] is False
+    malformed = call(graph, "/rosapi/get_param", {"name": "mass"})["values"]
+    assert "must be '<node>:<parameter>'" in malformed["reason"]
+
+
+def test_set_param_changes_the_robot_or_says_why_not(graph: Graph) -> None:
+    """set_param with JSON text; an invalid value is refused and nothing changes."""
+    ok = call(graph, "/rosapi/set_param", {"name": "/virtual_robot:robot.mass", "value": "2.5"})
+    assert ok["values"] == {"successful": True, "reason": ""}
+    bad = call(graph, "/rosapi/set_param", {"name": "/virtual_robot:robot.mass", "value": "-1"})
+    assert bad["values"]["successful"] is False and "greater than 0" in bad["values"]["reason"]
+    now = call(graph, "/rosapi/get_param", {"name": "/virtual_robot:robot.mass"})
+    assert json.loads(now["values"]["value"]) == 2.5
+
+
+def test_param_names_has_param_and_delete_param(graph: Graph) -> None:
+    """get_param_names lists node:param names; has_param; delete is refused politely."""
+    names = call(graph, "/rosapi/get_param_names")["values"]["names"]
+    assert "/virtual_robot:robot.max_linear_velocity" in names
+    assert call(graph, "/rosapi/has_param", {"name": "/virtual_robot:lidar.rays"})["values"] == {
+        "exists": True
+    }
+    assert call(graph, "/rosapi/has_param", {"name": "/x:y"})["values"] == {"exists": False}
+    deleted = call(graph, "/rosapi/delete_param", {"name": "/virtual_robot:lidar.rays"})
+    assert deleted["values"]["successful"] is False
+
+
+def test_services_lists_reset_and_rosapi(graph: Graph) -> None:
+    """rosapi/services includes the simulator's /reset."""
+    services = call(graph, "/rosapi/services")["values"]["services"]
+    assert "/reset" in services and "/rosapi/topics" in services

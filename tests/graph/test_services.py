@@ -1,0 +1,146 @@
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import pytest
+
+from simbridge.errors import ServiceError
+from simbridge.graph import Graph
+from tests.helpers import RecordingPeer
+
+
+@pytest.fixture
+def graph() -> Graph:
+    return Graph()
+
+
+def op(peer: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> None:
+    graph.receive(peer, json.dumps(fields), now)
+
+
+def test_in_process_service_answers_with_values_and_the_request_id(graph: Graph) -> None:
+    """Result true, values the handler's object, id and service echoed as sent."""
+    graph.add_service("/add", "example_interfaces/srv/AddTwoInts", "/n", lambda a: {"sum": 3})
+    c = RecordingPeer(graph)
+    op(c, graph, op="call_service", service="add", id="call:1", args={"a": 1, "b": 2})
+    assert c.take() == [
+        {
+            "op": "service_response",
+            "service": "add",
+            "values": {"sum": 3},
+            "result": True,
+            "id": "call:1",
+        }
+    ]
+
+
+def test_service_error_becomes_result_false_with_the_reason(graph: Graph) -> None:
+    """A handler raising ServiceError answers result false with its text."""
+
+    def fail(args: Any) -> dict[str, Any]:
+        raise ServiceError("no can do")
+
+    graph.add_service("/fail", "std_srvs/srv/Trigger", "/n", fail)
+    c = RecordingPeer(graph)
+    op(c, graph, op="call_service", service="/fail")
+    (reply,) = c.take()
+    assert (reply["result"], reply["values"]) == (False, "no can do")
+    assert "id" not in reply
+
+
+def test_handler_bug_is_answered_not_crashed(graph: Graph) -> None:
+    """An unexpected exception in a handler still answers the call."""
+    graph.add_service("/bug", "std_srvs/srv/Empty", "/n", lambda a: 1 / 0)  # type: ignore[arg-type,return-value]
+    c = RecordingPeer(graph)
+    op(c, graph, op="call_service", service="/bug", id=7)
+    (reply,) = c.take()
+    assert reply["result"] is False and reply["id"] == 7
+
+
+def test_client_provided_service_round_trip(graph: Graph) -> None:
+    """Calls are forwarded to the provider and its reply routed back by id."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(
+        provider,
+        graph,
+        op="advertise_service",
+        service="/sum",
+        type="example_interfaces/AddTwoInts",
+    )
+    op(caller, graph, op="call_service", service="/sum", id="x", args={"a": 1, "b": 2})
+    (request,) = provider.take()
+    assert request["op"] == "call_service" and request["args"] == {"a": 1, "b": 2}
+    op(
+        provider,
+        graph,
+        op="service_response",
+        service="/sum",
+        id=request["id"],
+        values={"sum": 3},
+        result=True,
+    )
+    assert caller.take() == [
+        {
+            "op": "service_response",
+            "service": "/sum",
+            "values": {"sum": 3},
+            "result": True,
+            "id": "x",
+        }
+    ]
+
+
+@pytest.mark.parametrize(
+    ("reply", "ok", "values"),
+    [
+        ({"values": {"sum": 3}}, True, {"sum": 3}),  # roslibjs: callback returned nothing
+        ({"values": {"sum": 3}, "result": None}, True, {"sum": 3}),  # roslibpy: returned None
+        ({"result": True}, True, {}),
+        ({"result": False}, False, "service provider reported failure"),  # roslibjs 2.1 throw
+        ({"result": False, "values": "boom"}, False, "boom"),  # roslibjs 2.1 advertiseAsync
+        ({}, False, "service provider sent no result object (values: None)"),
+    ],
+)
+def test_every_client_reply_shape_is_answered(
+    graph: Graph, reply: dict[str, Any], ok: bool, values: Any
+) -> None:
+    """Replies without result, with result null or without object values never hang."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(provider, graph, op="advertise_service", service="/s", type="std_srvs/Trigger")
+    op(caller, graph, op="call_service", service="/s", id="x")
+    (request,) = provider.take()
+    op(provider, graph, op="service_response", service="/s", id=request["id"], **reply)
+    (answer,) = caller.take()
+    assert (answer["result"], answer["values"]) == (ok, values)
+
+
+def test_call_times_out_when_the_provider_never_answers(graph: Graph) -> None:
+    """Timeout 0.5 s: tick past the deadline answers result false."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(provider, graph, op="advertise_service", service="/slow", type="std_srvs/Trigger")
+    op(caller, graph, 10.0, op="call_service", service="/slow", id="x", timeout=0.5)
+    graph.tick(10.4)
+    assert caller.take() == []
+    graph.tick(10.6)
+    (answer,) = caller.take()
+    assert answer["result"] is False and "timed out" in answer["values"]
+
+
+def test_provider_disconnect_fails_pending_calls(graph: Graph) -> None:
+    """A provider that leaves: its pending calls are answered with failure."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(provider, graph, op="advertise_service", service="/s", type="std_srvs/Trigger")
+    op(caller, graph, op="call_service", service="/s", id="x")
+    graph.remove_peer(provider)
+    (answer,) = caller.take()
+    assert answer["result"] is False and "unadvertised" in answer["values"]
+    op(caller, graph, op="call_service", service="/s", id="y")
+    assert "does not exist" in caller.take()[0]["values"]
+
+
+def test_service_response_for_unknown_id_is_a_status_error(graph: Graph) -> None:
+    """A stray reply is reported to its sender only."""
+    stray = RecordingPeer(graph)
+    op(stray, graph, op="service_response", service="/s", id="nope", result=True)
+    assert stray.take()[0]["op"] == "status"

@@ -1,0 +1,83 @@
+from __future__ import annotations
+
+import pytest
+
+from simbridge.errors import TypeNotFoundError
+from simbridge.msgs import TypeRegistry, normalize_type, short_type
+
+
+@pytest.mark.parametrize(
+    ("given", "canonical"),
+    [
+        ("geometry_msgs/Twist", "geometry_msgs/msg/Twist"),
+        ("geometry_msgs/msg/Twist", "geometry_msgs/msg/Twist"),
+        ("/geometry_msgs//Twist", "geometry_msgs/msg/Twist"),
+        ("std_srvs/Empty", "std_srvs/msg/Empty"),
+    ],
+)
+def test_both_type_spellings_normalise_to_pkg_msg_type(given: str, canonical: str) -> None:
+    """'pkg/Type' and 'pkg/msg/Type' name the same type, as in rosbridge."""
+    assert normalize_type(given) == canonical
+
+
+@pytest.mark.parametrize("bad", ["Twist", "a/b/c/d", "pkg/foo/Type", "pkg/1Type", "", 3])
+def test_malformed_type_strings_are_refused(bad: object) -> None:
+    """Anything but pkg/Type or pkg/{msg,srv,action}/Type is an error with the expected form."""
+    with pytest.raises(TypeNotFoundError, match="type"):
+        normalize_type(bad)
+
+
+def test_every_standard_message_is_known() -> None:
+    """Rosbags provides the standard ROS 2 messages."""
+    reg = TypeRegistry()
+    for name in (
+        "sensor_msgs/msg/LaserScan",
+        "nav_msgs/Odometry",
+        "tf2_msgs/msg/TFMessage",
+        "rcl_interfaces/msg/Log",
+        "visualization_msgs/msg/MarkerArray",
+    ):
+        assert reg.known(name)
+    assert not reg.known("my_pkg/msg/Nope")
+    assert not reg.known("garbage")
+
+
+def test_spec_lists_fields_with_rosapi_array_lengths() -> None:
+    """Fields carry -1 for scalars, 0 for sequences, N for fixed arrays."""
+    spec = TypeRegistry().spec("nav_msgs/msg/Odometry")
+    assert [f.name for f in spec.fields] == ["header", "child_frame_id", "pose", "twist"]
+    pose = TypeRegistry().spec("geometry_msgs/msg/PoseWithCovariance")
+    cov = pose.fields[1]
+    assert (cov.name, cov.base, cov.arraylen) == ("covariance", "float64", 36)
+    scan = TypeRegistry().spec("sensor_msgs/LaserScan")
+    ranges = next(f for f in scan.fields if f.name == "ranges")
+    assert (ranges.base, ranges.arraylen, ranges.nested) == ("float32", 0, False)
+
+
+def test_unknown_type_spec_raises() -> None:
+    """spec() of an unknown type names it."""
+    with pytest.raises(TypeNotFoundError, match="my_pkg/Nope"):
+        TypeRegistry().spec("my_pkg/Nope")
+
+
+def test_definition_text_has_msg_sections_for_dependencies() -> None:
+    """Full text: the type's fields, then each dependency once under 'MSG: pkg/Type'."""
+    text = TypeRegistry().definition_text("nav_msgs/msg/Odometry")
+    assert text.startswith("std_msgs/Header header\n")
+    assert "\n" + "=" * 80 + "\nMSG: std_msgs/Header\n" in text
+    assert text.count("MSG: geometry_msgs/Point\n") == 1
+    assert "float64[36] covariance" in text
+
+
+def test_registering_a_service_part_makes_it_known() -> None:
+    """Interfaces rosbags lacks are registered from .msg text."""
+    reg = TypeRegistry()
+    reg.register_msg("example_interfaces/srv/AddTwoInts_Request", "int64 a\nint64 b\n")
+    spec = reg.spec("example_interfaces/srv/AddTwoInts_Request")
+    assert [(f.name, f.base) for f in spec.fields] == [("a", "int64"), ("b", "int64")]
+
+
+def test_short_type_drops_the_interface_kind() -> None:
+    """pkg/msg/Type -> pkg/Type (rosapi TypeDef spelling)."""
+    assert short_type("std_msgs/msg/Header") == "std_msgs/Header"
+    assert short_type("std_msgs/Header") == "std_msgs/Header"

@@ -1,0 +1,45 @@
+from __future__ import annotations
+
+import json
+
+import pytest
+
+from simbridge.errors import ProtocolError
+from simbridge.protocol import Defragmenter, Frame, split_frame
+from simbridge.protocol.ops import Fragment
+
+
+def test_split_frame_pieces_concatenate_to_the_original() -> None:
+    """Pieces of at most `size` characters, integer total, num from 0, one id."""
+    frame = Frame(
+        json.dumps({"op": "publish", "topic": "/t", "msg": {"data": "x" * 50}}).encode(), True
+    )
+    pieces = [json.loads(p.data) for p in split_frame(frame, 20, "id1")]
+    assert all(p["op"] == "fragment" and p["id"] == "id1" for p in pieces)
+    assert [p["num"] for p in pieces] == list(range(len(pieces)))
+    assert all(p["total"] == len(pieces) and isinstance(p["total"], int) for p in pieces)
+    assert "".join(p["data"] for p in pieces).encode() == frame.data
+
+
+def test_small_and_binary_frames_are_not_split() -> None:
+    """Only text frames larger than the size are fragmented."""
+    assert split_frame(Frame(b"{}", True), 10, 1) == [Frame(b"{}", True)]
+    assert split_frame(Frame(b"x" * 50, False), 10, 1) == [Frame(b"x" * 50, False)]
+
+
+def test_defragmenter_rejects_changing_totals_and_oversized_messages() -> None:
+    """A total that changes mid-message, or more data than allowed, is an error."""
+    d = Defragmenter(max_bytes=10)
+    d.add(Fragment("a", "12", 0, 3), 0.0)
+    with pytest.raises(ProtocolError, match="total changed"):
+        d.add(Fragment("a", "34", 1, 4), 0.0)
+    with pytest.raises(ProtocolError, match="larger than"):
+        d.add(Fragment("b", "x" * 11, 0, 2), 0.0)
+
+
+def test_incomplete_messages_expire() -> None:
+    """Pieces older than the timeout are forgotten."""
+    d = Defragmenter(timeout=5.0)
+    d.add(Fragment("a", "1", 0, 2), 0.0)
+    assert d.expire(10.0) == ["a"]
+    assert d.add(Fragment("a", "2", 1, 2), 10.0) is None

@@ -1,0 +1,148 @@
+from __future__ import annotations
+
+import asyncio
+import os
+import re
+import signal
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+from tests.helpers import ROOT, TIMEOUT_FACTOR
+
+
+PY = sys.executable
+
+
+def run(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [PY, "-m", "simbridge", *args], capture_output=True, text=True, timeout=60, cwd=cwd
+    )
+
+
+def test_help_explains_every_option() -> None:
+    """--help documents host, ports, world, params and the sub-commands."""
+    out = run("--help").stdout
+    for option in (
+        "--host",
+        "--port",
+        "--http-port",
+        "--world",
+        "--params",
+        "check-config",
+        "healthcheck",
+    ):
+        assert option in out
+    assert "9090" in out and "8080" in out
+
+
+def test_check_config_accepts_the_bundled_files() -> None:
+    """check-config validates the defaults and exits 0."""
+    result = run("check-config")
+    assert result.returncode == 0
+    assert result.stdout.startswith("ok: world 'default'")
+
+
+def test_bad_world_file_fails_fast_with_the_file_and_the_key(tmp_path: Path) -> None:
+    """The server refuses to start on a bad world, naming file and key, exit code 2."""
+    bad = tmp_path / "bad.yaml"
+    bad.write_text("walls:\n  - [0, 0, 1]\n")
+    result = run("--world", str(bad), "--port", "0", "--http-port", "0")
+    assert result.returncode == 2
+    assert "bad.yaml" in result.stderr and "walls[0]" in result.stderr
+
+
+async def start_server(
+    *extra: str, env: dict[str, str] | None = None
+) -> tuple[asyncio.subprocess.Process, int, int]:
+    proc = await asyncio.create_subprocess_exec(
+        PY,
+        "-m",
+        "simbridge",
+        "--host",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--http-port",
+        "0",
+        *extra,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd="/tmp",
+        env=env,
+    )
+    assert proc.stdout is not None
+    line = (await asyncio.wait_for(proc.stdout.readline(), 20 * TIMEOUT_FACTOR)).decode()
+    match = re.search(r"ws://127\.0\.0\.1:(\d+)/\s+page http://127\.0\.0\.1:(\d+)/", line)
+    assert match, line
+    return proc, int(match.group(1)), int(match.group(2))
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
+async def test_signal_stops_the_server_cleanly_with_exit_0(sig: signal.Signals) -> None:
+    """SIGTERM (docker stop) and SIGINT (Ctrl-C) exit 0 without a traceback."""
+    proc, _, _ = await start_server()
+    proc.send_signal(sig)
+    _, err = await asyncio.wait_for(proc.communicate(), 20 * TIMEOUT_FACTOR)
+    assert proc.returncode == 0
+    assert b"Traceback" not in err
+
+
+async def test_healthcheck_subcommand_probes_a_running_server() -> None:
+    """Simbridge healthcheck exits 0 against a live server and 1 against a dead port."""
+    proc, ws_port, _ = await start_server()
+    try:
+        ok = await asyncio.to_thread(
+            run, "healthcheck", "--url", f"http://127.0.0.1:{ws_port}/healthz"
+        )
+        assert ok.returncode == 0 and "healthy" in ok.stdout
+    finally:
+        proc.terminate()
+        await proc.wait()
+    dead = await asyncio.to_thread(
+        run, "healthcheck", "--url", f"http://127.0.0.1:{ws_port}/healthz"
+    )
+    assert dead.returncode == 1
+
+
+async def test_busy_port_is_a_clear_error() -> None:
+    """A port already in use exits 2 and says so."""
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        s.listen()
+        port = s.getsockname()[1]
+        result = await asyncio.to_thread(
+            run, "--host", "127.0.0.1", "--port", str(port), "--http-port", "0"
+        )
+    assert result.returncode == 2
+    assert "already in use" in result.stderr
+
+
+async def test_environment_overrides_the_defaults() -> None:
+    """SIMBRIDGE_PORT and SIMBRIDGE_HTTP_PORT are used when no option is given."""
+    with socket.socket() as a, socket.socket() as b:
+        a.bind(("127.0.0.1", 0))
+        b.bind(("127.0.0.1", 0))
+        ws_port, http_port = a.getsockname()[1], b.getsockname()[1]
+    env = {**os.environ, "SIMBRIDGE_PORT": str(ws_port), "SIMBRIDGE_HTTP_PORT": str(http_port)}
+    proc = await asyncio.create_subprocess_exec(
+        PY,
+        "-m",
+        "simbridge",
+        "--host",
+        "127.0.0.1",
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd="/tmp",
+        env=env,
+    )
+    try:
+        assert proc.stdout is not None
+        line = (await asyncio.wait_for(proc.stdout.readline(), 20 * TIMEOUT_FACTOR)).decode()
+        assert f"ws://127.0.0.1:{ws_port}/" in line and f"http://127.0.0.1:{http_port}/" in line
+    finally:
+        proc.terminate()
+        await proc.wait()

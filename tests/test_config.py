@@ -1,0 +1,138 @@
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from simbridge.config import (
+    Params,
+    load_params,
+    load_world,
+    resource_dir,
+)
+from simbridge.errors import ConfigError
+
+
+def write(tmp_path: Path, name: str, text: str) -> Path:
+    path = tmp_path / name
+    path.write_text(text)
+    return path
+
+
+def test_bundled_parameters_are_the_pi4b_platform_defaults() -> None:
+    """config/pi4b_params.yaml holds the course's figures (wheel radius, not diameter)."""
+    p = load_params(None)
+    assert p.robot.mass == 1.5
+    assert p.robot.wheel_radius == 0.033
+    assert p.robot.wheelbase == 0.160
+    assert p.robot.inertia == 0.0075
+    assert (p.robot.max_linear_velocity, p.robot.max_angular_velocity) == (0.5, 2.5)
+    assert (p.lidar.rays, p.lidar.range_min, p.lidar.range_max, p.lidar.rate) == (
+        360,
+        0.12,
+        3.5,
+        10.0,
+    )
+    assert p.lidar.mount == (0.0, 0.0, 0.0)
+    assert p == Params()
+
+
+def test_bundled_world_is_a_room_with_obstacles_and_a_corridor() -> None:
+    """The default world has walls, boxes, a pillar and starts the robot at the origin."""
+    w = load_world(None)
+    assert len(w.walls) >= 8
+    assert w.boxes and w.circles
+    assert w.robot.pose == (0.0, 0.0, 0.0)
+
+
+def test_minimal_world_form_is_accepted(tmp_path: Path) -> None:
+    """The issue's minimal form: walls as [x1, y1, x2, y2] and robot.pose."""
+    path = write(
+        tmp_path,
+        "w.yaml",
+        "walls:\n  - [-2.0, -2.0, 2.0, -2.0]\nrobot:\n  pose: [0.0, 0.0, 0.0]\n",
+    )
+    w = load_world(path)
+    assert w.segments() == [(-2.0, -2.0, 2.0, -2.0)]
+    assert w.name == "w"
+
+
+def test_boxes_circles_and_polygons_become_closed_rings_of_segments(tmp_path: Path) -> None:
+    """A box gives 4 segments, a circle its segment count, a triangle 3."""
+    path = write(
+        tmp_path,
+        "w.yaml",
+        "boxes: [{center: [0, 0], size: [2, 1]}]\n"
+        "circles: [{center: [5, 5], radius: 1, segments: 8}]\n"
+        "polygons: [[[0, 0], [1, 0], [0, 1]]]\n",
+    )
+    segs = load_world(path).segments()
+    assert len(segs) == 4 + 8 + 3
+    assert (-1.0, -0.5, 1.0, -0.5) in segs
+
+
+def test_wall_with_three_numbers_names_the_file_the_index_and_the_fix(tmp_path: Path) -> None:
+    """A wrong wall entry is reported with the file, walls[i] and the expected shape."""
+    path = write(tmp_path, "lab.yaml", "walls:\n  - [0, 0, 1, 1]\n  - [0, 0, 1]\n")
+    with pytest.raises(ConfigError) as err:
+        load_world(path)
+    text = str(err.value)
+    assert "lab.yaml" in text
+    assert "walls[1]" in text
+    assert "[x1, y1, x2, y2]" in text
+
+
+def test_negative_mass_names_the_key_and_the_value(tmp_path: Path) -> None:
+    """robot.mass: -1 is refused naming the file, robot.mass and the bound."""
+    path = write(tmp_path, "p.yaml", "robot:\n  mass: -1\n")
+    with pytest.raises(ConfigError, match=r"p\.yaml.*robot\.mass.*greater than 0"):
+        load_params(path)
+
+
+def test_misspelled_key_is_reported_as_unknown(tmp_path: Path) -> None:
+    """A typo (wheel_radus) is not silently ignored."""
+    path = write(tmp_path, "p.yaml", "robot:\n  wheel_radus: 0.033\n")
+    with pytest.raises(ConfigError, match=r"robot\.wheel_radus: unknown key"):
+        load_params(path)
+
+
+def test_range_min_above_range_max_is_refused(tmp_path: Path) -> None:
+    """Relations between fields are checked too."""
+    path = write(tmp_path, "p.yaml", "lidar:\n  range_min: 4.0\n")
+    with pytest.raises(ConfigError, match="range_min"):
+        load_params(path)
+
+
+def test_missing_file_and_bad_yaml_are_clear(tmp_path: Path) -> None:
+    """A missing file and invalid YAML each get a message naming the file."""
+    with pytest.raises(ConfigError, match="cannot be read"):
+        load_world(tmp_path / "nope.yaml")
+    bad = write(tmp_path, "bad.yaml", "walls: [1, 2\n")
+    with pytest.raises(ConfigError, match="not valid YAML"):
+        load_world(bad)
+    listy = write(tmp_path, "list.yaml", "- 1\n- 2\n")
+    with pytest.raises(ConfigError, match="must be a mapping"):
+        load_params(listy)
+
+
+def test_non_finite_pose_is_refused(tmp_path: Path) -> None:
+    """.nan in a pose is an error, not a robot at NaN."""
+    path = write(tmp_path, "w.yaml", "robot:\n  pose: [.nan, 0, 0]\n")
+    with pytest.raises(ConfigError, match="finite"):
+        load_world(path)
+
+
+def test_flat_parameters_round_trip() -> None:
+    """Params.flat() and Params.from_flat() are inverse; invalid values raise ValueError."""
+    p = Params()
+    assert Params.from_flat(p.flat()) == p
+    assert p.flat()["lidar.mount"] == [0.0, 0.0, 0.0]
+    with pytest.raises(ValueError, match=r"robot\.mass"):
+        Params.from_flat({**p.flat(), "robot.mass": 0})
+    assert set(Params.describe()) == set(p.flat())
+
+
+def test_resources_are_found() -> None:
+    """The page and config directories resolve (package data or checkout)."""
+    assert (resource_dir("static") / "index.html").is_file()
+    assert (resource_dir("config") / "pi4b_params.yaml").is_file()

@@ -1,0 +1,146 @@
+from __future__ import annotations
+
+import asyncio
+import base64
+import json
+import os
+import socket
+import urllib.request
+
+from websockets.asyncio.client import connect
+
+from simbridge.runner import App
+from tests.conftest import AppFactory
+from tests.helpers import recv_json, recv_until, send_json, wait_for, ws_url
+
+
+async def test_bad_input_gets_status_errors_and_the_connection_stays_open(app: App) -> None:
+    """Invalid JSON, unknown ops, missing and wrong-typed fields: one status error each."""
+    async with connect(ws_url(app)) as ws:
+        for frame in (
+            "{oops",
+            '{"op":"dance"}',
+            '{"op":"subscribe"}',
+            '{"op":"advertise","topic":1}',
+        ):
+            await ws.send(frame)
+            reply = await recv_json(ws)
+            assert reply["op"] == "status" and reply["level"] == "error", reply
+        await send_json(ws, {"op": "call_service", "service": "/rosapi/topics", "id": "after"})
+        reply = await recv_until(ws, lambda m: m.get("op") == "service_response")
+        assert reply["id"] == "after" and reply["result"] is True
+
+
+async def test_garbage_binary_frame_is_answered_not_fatal(app: App) -> None:
+    """A binary frame that is not UTF-8 JSON gets a status error; the client stays."""
+    async with connect(ws_url(app)) as ws:
+        await ws.send(b"\xff\x00\x13\x37")
+        reply = await recv_json(ws)
+        assert "could not decode the binary frame" in reply["msg"]
+
+
+async def test_a_bad_client_does_not_affect_others_or_the_robot(app: App) -> None:
+    """While one client sends junk and hostile commands, another sees /odom and a still robot."""
+    async with connect(ws_url(app)) as good, connect(ws_url(app)) as bad:
+        await send_json(good, {"op": "subscribe", "topic": "/odom"})
+        await recv_until(good, lambda m: m.get("topic") == "/odom")
+        for frame in (
+            "not json",
+            json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {"linear": {"x": None}}}),
+            json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {"linear": {"x": "fast"}}}),
+            '{"op": "publish", "topic": "/cmd_vel", "msg": {"linear": {"x": Infinity}}}',
+        ):
+            await bad.send(frame)
+            assert (await recv_json(bad))["op"] == "status"
+        odom = await recv_until(good, lambda m: m.get("topic") == "/odom")
+        assert odom["msg"]["pose"]["pose"]["position"]["x"] == 0.0
+        assert app.world.robots[""].cmd_v == 0.0
+
+
+async def stalled_client(port: int, subscribe: dict[str, object]) -> socket.socket:
+    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again."""
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.setblocking(False)
+    loop = asyncio.get_running_loop()
+    await loop.sock_connect(sock, ("127.0.0.1", port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    await loop.sock_sendall(
+        sock,
+        (
+            f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+            "Sec-WebSocket-Version: 13\r\n\r\n"
+        ).encode(),
+    )
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += await loop.sock_recv(sock, 1)
+    assert head.startswith(b"HTTP/1.1 101")
+    payload = json.dumps(subscribe).encode()
+    mask = os.urandom(4)
+    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+    assert len(payload) < 126
+    await loop.sock_sendall(sock, bytes([0x81, 0x80 | len(payload)]) + mask + masked)
+    return sock
+
+
+async def test_stalled_client_is_bounded_and_does_not_delay_others(make_app: AppFactory) -> None:
+    """A client that stops reading: its queue stays within the byte budget, others keep 20 Hz."""
+    app = await make_app(max_queue_bytes=200_000)
+    big = "x" * 100_000
+    sub = {"op": "subscribe", "topic": "/blob", "type": "std_msgs/String"}
+    stalled = await stalled_client(app.ws_port, sub)
+    try:
+        await _flood_while_stalled(app, big)
+    finally:
+        stalled.close()
+
+
+async def _flood_while_stalled(app: App, big: str) -> None:
+    async with connect(ws_url(app)) as talker, connect(ws_url(app)) as watcher:
+        await wait_for(lambda: any(c.session.subscriptions for c in app.server.clients))
+        await send_json(watcher, {"op": "subscribe", "topic": "/odom"})
+        await recv_until(watcher, lambda m: m.get("topic") == "/odom")
+        await send_json(talker, {"op": "advertise", "topic": "/blob", "type": "std_msgs/String"})
+        server_side = next(c for c in app.server.clients if c.session.subscriptions.get("/blob"))
+
+        async def flood() -> None:
+            while server_side.queue.dropped == 0:
+                await send_json(talker, {"op": "publish", "topic": "/blob", "msg": {"data": big}})
+                await asyncio.sleep(0.005)
+
+        await asyncio.wait_for(flood(), 30)
+        assert server_side.queue.bytes <= 200_000
+        ticks = app.stats.ticks
+        for _ in range(10):
+            await recv_until(watcher, lambda m: m.get("topic") == "/odom")
+        assert app.stats.ticks - ticks <= 12  # ten /odom within ~ten ticks: nobody waited
+
+
+async def test_websocket_port_answers_plain_http_health_checks(app: App) -> None:
+    """GET /healthz on the rosbridge port (Docker HEALTHCHECK) returns JSON status ok."""
+
+    def fetch() -> dict[str, object]:
+        with urllib.request.urlopen(f"http://127.0.0.1:{app.ws_port}/healthz", timeout=5) as r:
+            assert r.status == 200
+            return json.loads(r.read())
+
+    body = await asyncio.to_thread(fetch)
+    assert body["status"] == "ok"
+
+
+async def test_disconnect_cleans_up_the_client(app: App) -> None:
+    """After a client leaves, its subscriptions, topics and services are gone."""
+    async with connect(ws_url(app)) as ws:
+        await send_json(ws, {"op": "advertise", "topic": "/mine", "type": "std_msgs/String"})
+        await send_json(
+            ws, {"op": "advertise_service", "service": "/my_srv", "type": "std_srvs/Trigger"}
+        )
+        await send_json(ws, {"op": "subscribe", "topic": "/odom"})
+        await recv_until(ws, lambda m: m.get("topic") == "/odom")
+        assert "/mine" in app.graph.topics.topics
+    await wait_for(lambda: not app.server.clients)
+    assert "/mine" not in app.graph.topics.topics
+    assert "/my_srv" not in app.graph.services.services
+    assert not app.graph.topics.topics["/odom"].subscriptions
