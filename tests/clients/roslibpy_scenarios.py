@@ -364,6 +364,30 @@ def param(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return {"before": before, "setResult": None, "after": after}
 
 
+def bad_publish(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """Publish ill-typed /cmd_vel messages, then prove the connection and the robot are fine.
+
+    roslibpy logs the server's status replies ("No handler registered for operation status")
+    and carries on; the result reports the round trip and the robot's x.
+    """
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    cmd = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/msg/Twist")
+    cmd.publish(roslibpy.Message({"linear": {"x": "fast"}}))
+    cmd.publish(roslibpy.Message({"linear": {"x": float("nan")}}))
+    echoed: list[Any] = []
+    chatter = roslibpy.Topic(ros, "/chatter_after_bad", "std_msgs/msg/String")
+    chatter.subscribe(echoed.append)
+    chatter.publish(roslibpy.Message({"data": "still alive"}))
+    wait_for(lambda: echoed, timeout_s, "round trip after bad input")
+    odoms: list[Any] = []
+    odom = roslibpy.Topic(ros, "/odom", "nav_msgs/msg/Odometry")
+    odom.subscribe(odoms.append)
+    wait_for(lambda: odoms, timeout_s, "an /odom")
+    chatter.unsubscribe()
+    odom.unsubscribe()
+    return {"echoed": echoed[0], "x": odoms[-1]["pose"]["pose"]["position"]["x"]}
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "topics": topics,
     "odom_rate": odom_rate,
@@ -374,4 +398,5 @@ SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "reset": reset,
     "unknown_service": unknown_service,
     "param": param,
+    "bad_publish": bad_publish,
 }

@@ -160,3 +160,48 @@ async def test_param_reads_and_sets_a_robot_limit_live(app: App, client: Any) ->
     assert result["after"] == pytest.approx(0.25)
     assert app.world.params.robot.max_linear_velocity == pytest.approx(0.25)
     assert app.world.command("", 1.0, 0.0) == (0.25, 0.0)
+
+
+@pytest.mark.parametrize("lib", ["roslib1", "roslib2"])
+async def test_roslibjs_bad_publishes_get_status_errors_and_nothing_breaks(
+    app: App, run_js: ClientRunner, lib: str
+) -> None:
+    """Ill-typed, non-finite, unknown-field /cmd_vel from roslibjs: status errors, robot still."""
+    result = await run_js(lib, ws_url(app), "bad_publish")
+    texts = [s["msg"] for s in result["statuses"]]
+    assert all(s["level"] == "error" for s in result["statuses"])
+    assert any("linear.x must be a float64" in t for t in texts)
+    assert any("finite" in t for t in texts)
+    assert any("does not have a field wings" in t for t in texts)
+    assert result["echoed"] == {"data": "still alive"}
+    assert result["x"] == 0.0 and app.world.robots[""].cmd_v == 0.0
+
+
+async def test_roslibpy_bad_publishes_leave_the_connection_and_robot_intact(
+    app: App, run_roslibpy: ClientRunner
+) -> None:
+    """Roslibpy's bad publishes (a string, a NaN) change nothing; the session goes on."""
+    result = await run_roslibpy(ws_url(app), "bad_publish")
+    assert result["echoed"] == {"data": "still alive"}
+    assert result["x"] == 0.0 and app.world.robots[""].cmd_v == 0.0
+
+
+@pytest.mark.parametrize(
+    ("frames", "expected"),
+    [
+        (["{not json"], "could not decode the text frame"),
+        (['{"op": "levitate"}'], "unknown operation 'levitate'"),
+        (['{"op": "subscribe"}'], "expected a topic field"),
+        (['{"op": "subscribe", "topic": "/odom", "throttle_rate": "fast"}'], "throttle_rate"),
+        ([{"binary": "//79"}], "could not decode the binary frame"),
+    ],
+)
+async def test_raw_bad_frames_get_one_status_error_each(
+    app: App, run_js: ClientRunner, frames: list[Any], expected: str
+) -> None:
+    """Invalid JSON, unknown ops, missing or wrong-typed fields: a status error, socket open."""
+    result = await run_js("roslib2", ws_url(app), "raw", {"frames": frames, "collect_ms": 300})
+    assert result["close"] is None
+    (reply,) = result["replies"]
+    assert reply["op"] == "status" and reply["level"] == "error"
+    assert expected in reply["msg"]
