@@ -388,6 +388,20 @@ def bad_publish(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return {"echoed": echoed[0], "x": odoms[-1]["pose"]["pose"]["position"]["x"]}
 
 
+def throttle(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """/odom with throttle_rate (ms): same result shape as tests/js/scenarios/throttle.mjs."""
+    count = args.get("count", 6)
+    rate = args.get("throttle_rate", 200)
+    topic = roslibpy.Topic(
+        ros, "/odom", "nav_msgs/msg/Odometry", throttle_rate=rate, queue_length=1
+    )
+    times: list[float] = []
+    topic.subscribe(lambda _msg: times.append(now_ms()))
+    wait_for(lambda: len(times) >= count, args.get("timeout_ms", 5000 + count * rate * 2) / 1000)
+    topic.unsubscribe()
+    return {"times": times[:count]}
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "topics": topics,
     "odom_rate": odom_rate,
@@ -399,4 +413,5 @@ SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "unknown_service": unknown_service,
     "param": param,
     "bad_publish": bad_publish,
+    "throttle": throttle,
 }

@@ -205,3 +205,12 @@ async def test_raw_bad_frames_get_one_status_error_each(
     (reply,) = result["replies"]
     assert reply["op"] == "status" and reply["level"] == "error"
     assert expected in reply["msg"]
+
+
+@parametrize_clients
+async def test_throttle_rate_limits_what_a_subscriber_receives(app: App, client: Any) -> None:
+    """throttle_rate 200 ms on the 20 Hz /odom: one message per 200 ms (4 of 5 dropped)."""
+    result = await client(ws_url(app), "throttle", {"throttle_rate": 200, "count": 6})
+    gaps = [b - a for a, b in itertools.pairwise(result["times"])]
+    assert min(gaps) >= 150  # never two inside the window (one tick of jitter allowed)
+    assert statistics.mean(gaps) == pytest.approx(200, abs=30)
