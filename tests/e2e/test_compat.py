@@ -6,7 +6,6 @@ the suite stays short; the scenario results are checked here.
 
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import pytest
@@ -41,7 +40,7 @@ def parametrize_clients(fn: Any) -> Any:
 
 @parametrize_clients
 async def test_every_rosapi_service_and_parameter_interface(app: App, client: Any) -> None:
-    """rosapi helpers, rosapi services by name, Param, and /virtual_robot rcl_interfaces."""
+    """The rosapi helpers, rosapi services by name, Param, and /virtual_robot rcl_interfaces."""
     r = await client(ws_url(app), "rosapi_all")
     lib = client.lib
     assert "/rosout" in r["topics"]["topics"]

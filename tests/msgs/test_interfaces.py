@@ -45,7 +45,7 @@ def test_service_field_lists(
 def test_fibonacci_and_unknown_types() -> None:
     """Fibonacci: order -> sequence; unknown interfaces raise TypeNotFoundError."""
     registry = TypeRegistry()
-    goal, result, feedback = registry.action("example_interfaces/Fibonacci")
+    goal, _result, feedback = registry.action("example_interfaces/Fibonacci")
     assert [f.name for f in registry.spec(goal).fields] == ["order"]
     assert registry.spec(feedback).fields[0].arraylen == 0
     with pytest.raises(TypeNotFoundError):
