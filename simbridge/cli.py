@@ -106,6 +106,13 @@ def _run_parser() -> argparse.ArgumentParser:
     )
     _add_config_options(parser)
     parser.add_argument(
+        "--use-sim-time",
+        action="store_true",
+        default=(_env("USE_SIM_TIME", "") or "").lower() in ("1", "true", "yes"),
+        help="stamp headers with the simulated time published on /clock instead of the wall "
+        "clock (as ROS nodes with use_sim_time:=true expect) [SIMBRIDGE_USE_SIM_TIME]",
+    )
+    parser.add_argument(
         "--log-level",
         default=_env("LOG_LEVEL", "info"),
         choices=["debug", "info", "warning", "error"],
@@ -151,6 +158,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
         host=args.host,
         port=args.port,
         http_port=None if args.no_http else args.http_port,
+        use_sim_time=args.use_sim_time,
     )
     try:
         # validate before binding anything, so a bad file fails fast and clearly

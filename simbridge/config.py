@@ -360,6 +360,8 @@ class ServerSettings:
     #: WebSocket keepalive ping interval and timeout, seconds (None disables).
     ping_interval: float | None = 20.0
     ping_timeout: float | None = 20.0
+    #: Stamp headers with simulated time (``/clock``) instead of the wall clock.
+    use_sim_time: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
 
 
