@@ -55,14 +55,10 @@ geometry_msgs/Point point     # the contact point on the obstacle
 geometry_msgs/Vector3 normal  # unit vector from the obstacle towards the robot
 """
 
-_DEFINITIONS = {
-    "turtlesim/srv/Spawn_Request": "float32 x\nfloat32 y\nfloat32 theta\nstring name\n",
-    "turtlesim/srv/Spawn_Response": "string name\n",
-    "turtlesim/srv/Kill_Request": "string name\n",
-    "turtlesim/srv/Kill_Response": "",
-    "turtlesim/srv/TeleportAbsolute_Request": "float32 x\nfloat32 y\nfloat32 theta\n",
-    "turtlesim/srv/TeleportAbsolute_Response": "",
-    CONTACT_TYPE: CONTACT_DEFINITION,
+_SERVICES = {
+    "turtlesim/srv/Spawn": "float32 x\nfloat32 y\nfloat32 theta\nstring name\n---\nstring name\n",
+    "turtlesim/srv/Kill": "string name\n---\n",
+    "turtlesim/srv/TeleportAbsolute": "float32 x\nfloat32 y\nfloat32 theta\n---\n",
 }
 
 
@@ -87,9 +83,11 @@ def install_fleet(bridge: RobotBridge) -> None:
     from simbridge.graph.bridge import ROBOT_NODE
 
     registry = bridge.graph.registry
-    for name, text in _DEFINITIONS.items():
-        if not registry.known(name):
-            registry.register_msg(name, text)
+    if not registry.known(CONTACT_TYPE):
+        registry.register_msg(CONTACT_TYPE, CONTACT_DEFINITION)
+    for name, text in _SERVICES.items():
+        if name not in registry.services:
+            registry.register_srv(name, text)
     world, graph = bridge.world, bridge.graph
 
     def spawn(args: Any) -> dict[str, Any]:

@@ -88,9 +88,9 @@ def test_spawn_creates_a_robot_with_its_topics_and_tf_static(setup: Any) -> None
         ({"x": 4.95, "y": 0.0, "name": "r3"}, "overlaps the wall"),
         ({"x": 1.1, "y": 0.0, "name": "r3"}, "overlaps another robot"),
         ({"x": 2.0, "y": 2.0, "name": "r1"}, "already exists"),
-        ({"x": "a", "name": "r3"}, "'x' must be a finite number"),
+        ({"x": "a", "name": "r3"}, "field x must be a float32"),
         ({"x": 2.0, "name": "r 3"}, "not a valid ROS name"),
-        ({"x": 2.0, "colour": "red"}, "no field 'colour'"),
+        ({"x": 2.0, "colour": "red"}, "does not have a field colour"),
     ],
 )
 def test_spawn_refuses_bad_requests_with_the_reason(setup: Any, args: Any, error: str) -> None:
