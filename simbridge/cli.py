@@ -106,6 +106,13 @@ def _run_parser() -> argparse.ArgumentParser:
     )
     _add_config_options(parser)
     parser.add_argument(
+        "--admin-token",
+        metavar="TOKEN",
+        default=_env("ADMIN_TOKEN", None),
+        help="token the instructor's page http://HOST:HTTP-PORT/admin needs for every change "
+        "(default: none, every admin change is refused) [SIMBRIDGE_ADMIN_TOKEN]",
+    )
+    parser.add_argument(
         "--log-level",
         default=_env("LOG_LEVEL", "info"),
         choices=["debug", "info", "warning", "error"],
@@ -151,6 +158,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
         host=args.host,
         port=args.port,
         http_port=None if args.no_http else args.http_port,
+        admin_token=args.admin_token or None,
     )
     try:
         # validate before binding anything, so a bad file fails fast and clearly
