@@ -15,6 +15,7 @@ from playwright.async_api import Page
 
 from simbridge.runner import App
 from tests.browser.conftest import OpenPage, Watcher, screenshot
+from tests.conftest import AppFactory
 from tests.helpers import http_url, wait_for, ws_url
 
 
@@ -262,3 +263,27 @@ async def test_phone_viewport_touch_joystick_and_estop(
     await page.wait_for_selector("#estopBanner", state="visible")
     await screenshot(page, "phone-estop")
     assert log.errors == []
+
+
+async def test_page_reconnects_with_backoff_and_resubscribes(
+    make_app: AppFactory, open_page: OpenPage
+) -> None:
+    """Server gone: 'reconnecting' shows; server back on the same port: data flows again."""
+    first = await make_app()
+    port = first.ws_port
+    page, log = await open_connected(open_page, first)
+    await first.stop()
+    await page.wait_for_function("window.simbridge.conn.state === 'reconnecting'")
+    assert (await page.text_content("#statusText")).startswith("reconnecting")  # type: ignore[union-attr]
+    await screenshot(page, "reconnecting")
+    second = await make_app(port=port)
+    second.world.robots[""].place((1.0, 0.5, 0.0))  # tell the two servers' odometry apart
+    await page.wait_for_function(
+        "window.simbridge.conn.connected && window.simbridge.state.pose"
+        " && Math.abs(window.simbridge.state.pose.x - 1.0) < 1e-9",
+        timeout=20_000,
+    )
+    await page.wait_for_function("window.simbridge.view.scan.length > 0")
+    assert await page.text_content("#statusText") == "connected"
+    # the browser logs the refused connection attempts itself; the page adds nothing else
+    assert [e for e in log.errors if "WebSocket connection" not in e] == []
