@@ -73,7 +73,26 @@ async def test_canvas_draws_walls_robot_and_scan(app: App, open_page: OpenPage) 
     counts = await canvas_colours(page)
     await screenshot(page, "view-world")
     assert counts["wall"] > 500, counts
-    assert counts["robot"] > 100, counts
+    # the footprint's fill is drawn where the robot is (sampled off its heading arrow and the
+    # origin axes), and the background where nothing is
+    colours = await page.evaluate(
+        """() => {
+          const { view } = window.simbridge;
+          const c = document.getElementById('view');
+          const dpr = c.width / c.getBoundingClientRect().width;
+          const at = (x, y) => {
+            const r = c.getBoundingClientRect();
+            const sx = (r.width / 2 + (x - view.center.x) * view.scale) * dpr;
+            const sy = (r.height / 2 - (y - view.center.y) * view.scale) * dpr;
+            return [...c.getContext('2d').getImageData(Math.round(sx), Math.round(sy), 1, 1).data];
+          };
+          const p = view.pose, k = view.radius * 0.5;
+          return { robot: at(p.x - k, p.y - k), empty: at(p.x - 0.5, p.y - 0.7) };
+        }"""
+    )
+    r, g, b, _ = colours["robot"]
+    assert g > r + 30 and g > b + 15, colours  # green footprint
+    assert colours["empty"][:3] == [251, 251, 248], colours  # the view's background
     assert counts["scan"] > 50, counts
     # the scan points lie on the walls: every point within 5 cm of some wall segment
     far = await page.evaluate(

@@ -402,7 +402,88 @@ def throttle(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return {"times": times[:count]}
 
 
+def rosapi_all(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """Every rosapi helper of roslibpy, Param, other rosapi and rcl_interfaces services.
+
+    Same result keys as tests/js/scenarios/rosapi_all.mjs where the library has the feature.
+    """
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+
+    def call(name: str, type_name: str, request: Any) -> JSON:
+        return call_service(roslibpy, ros, name, type_name, request, timeout_s)
+
+    out: dict[str, Any] = {}
+    out["topics"] = {"topics": ros.get_topics()}
+    out["topicsForType"] = ros.get_topics_for_type("tf2_msgs/msg/TFMessage")
+    out["services"] = ros.get_services()
+    out["servicesForType"] = ros.get_services_for_type("std_srvs/srv/Empty")
+    out["requestDetails"] = dict(
+        ros.get_service_request_details("example_interfaces/srv/AddTwoInts")
+    )
+    out["responseDetails"] = dict(ros.get_service_response_details("rosapi_msgs/srv/GetParam"))
+    out["nodes"] = ros.get_nodes()
+    out["nodeDetails"] = dict(ros.get_node_details("/virtual_robot"))
+    out["params"] = ros.get_params()
+    out["topicType"] = ros.get_topic_type("/scan")
+    out["serviceType"] = ros.get_service_type("/reset")
+    out["messageDetails"] = dict(ros.get_message_details("nav_msgs/msg/Odometry"))["typedefs"]
+    servers: list[Any] = []
+    ros.get_action_servers(servers.append)
+    out["actionServers"] = wait_for(lambda: servers, timeout_s, "get_action_servers")[0][
+        "action_servers"
+    ]
+    t = ros.get_time()
+    out["time"] = {"time": {"secs": t.secs, "nsecs": t.nsecs}}
+    out["subscribers"] = call("/rosapi/subscribers", "rosapi/Subscribers", {"topic": "/cmd_vel"})
+    out["providers"] = call(
+        "/rosapi/service_providers", "rosapi/ServiceProviders", {"service": "std_srvs/srv/Empty"}
+    )
+    out["serviceNode"] = call("/rosapi/service_node", "rosapi/ServiceNode", {"service": "/reset"})
+    out["hasParam"] = call(
+        "/rosapi/has_param", "rosapi/HasParam", {"name": "/virtual_robot:lidar.rays"}
+    )
+    out["version"] = call("/rosapi/get_ros_version", "rosapi/GetROSVersion", {})
+    out["interfaces"] = len(call("/rosapi/interfaces", "rosapi/Interfaces", {})["interfaces"])
+    out["rawTypes"] = call("/rosapi/topics_and_raw_types", "rosapi/TopicsAndRawTypes", {})
+    out["publishers"] = call("/rosapi/publishers", "rosapi/Publishers", {"topic": "/odom"})[
+        "publishers"
+    ]
+    speed = roslibpy.Param(ros, "/virtual_robot:robot.max_angular_velocity")
+    speed.set(1.25, timeout=timeout_s)
+    out["paramSet"] = {"ok": True, "value": None}
+    out["paramGet"] = {"ok": True, "value": speed.get(timeout=timeout_s)}
+    out["paramDelete"] = {"ok": True, "value": ros.delete_param(speed.name)}
+    out["paramUnknown"] = {"ok": True, "value": ros.get_param("/virtual_robot:nope")}
+    out["getParameters"] = call(
+        "/virtual_robot/get_parameters",
+        "rcl_interfaces/srv/GetParameters",
+        {"names": ["robot.mass", "lidar.rays"]},
+    )
+    out["setParameters"] = call(
+        "/virtual_robot/set_parameters",
+        "rcl_interfaces/srv/SetParameters",
+        {
+            "parameters": [
+                {"name": "lidar.range_max", "value": {"type": 3, "double_value": 3.0}},
+                {"name": "lidar.range_min", "value": {"type": 3, "double_value": -1.0}},
+            ]
+        },
+    )
+    out["listParameters"] = call(
+        "/virtual_robot/list_parameters",
+        "rcl_interfaces/srv/ListParameters",
+        {"prefixes": ["robot"], "depth": 0},
+    )
+    out["describeParameters"] = call(
+        "/virtual_robot/describe_parameters",
+        "rcl_interfaces/srv/DescribeParameters",
+        {"names": ["lidar.range_max"]},
+    )
+    return out
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
+    "rosapi_all": rosapi_all,
     "topics": topics,
     "odom_rate": odom_rate,
     "drive": drive,
@@ -415,3 +496,9 @@ SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "bad_publish": bad_publish,
     "throttle": throttle,
 }
+
+# Scenarios of other areas, kept in their own modules (imported last: they use the helpers).
+from roslibpy_fleet import FLEET_SCENARIOS  # noqa: E402
+
+
+SCENARIOS.update(FLEET_SCENARIOS)
