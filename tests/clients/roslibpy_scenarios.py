@@ -605,3 +605,9 @@ SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "bad_publish": bad_publish,
     "throttle": throttle,
 }
+
+# Scenarios of other areas, kept in their own modules (imported last: they use the helpers).
+from roslibpy_fleet import FLEET_SCENARIOS  # noqa: E402
+
+
+SCENARIOS.update(FLEET_SCENARIOS)
