@@ -81,6 +81,8 @@ class Action:
     node: str
     provider: Peer | None = None
     server: ActionServer | None = None
+    #: The name as the server wrote it in ``advertise_action`` (roslibjs routes goals by it).
+    written: str = ""
 
 
 @dataclass(eq=False, slots=True)
@@ -188,7 +190,9 @@ class ActionTable:
             canonical = normalize_type(op.type, "action")
         except TypeNotFoundError as err:
             raise ProtocolError(f"advertise_action: {err}") from None
-        self._install(Action(name, canonical, op.type, BRIDGE_NODE, provider=peer))
+        self._install(
+            Action(name, canonical, op.type, BRIDGE_NODE, provider=peer, written=op.action)
+        )
         peer.session.actions[name] = canonical
 
     def _unadvertise(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
@@ -287,7 +291,7 @@ class ActionTable:
                 {
                     "op": "send_action_goal",
                     "id": server_id,
-                    "action": name,
+                    "action": action.written or name,
                     "action_type": action.written_type,
                     "args": message,
                     "feedback": True,
@@ -322,7 +326,11 @@ class ActionTable:
         elif action.provider is not None:
             action.provider.send(
                 json_frame(
-                    {"op": "cancel_action_goal", "id": goal.server_id, "action": action.name}
+                    {
+                        "op": "cancel_action_goal",
+                        "id": goal.server_id,
+                        "action": action.written or action.name,
+                    }
                 )
             )
 

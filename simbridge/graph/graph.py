@@ -256,7 +256,7 @@ class Graph:
             type_name = normalize_type(op.type, "srv")
         except TypeNotFoundError as err:
             raise ProtocolError(f"advertise_service: {err}") from None
-        self.services.advertise(peer, name, type_name)
+        self.services.advertise(peer, name, type_name, op.service)
 
     def _unadvertise_service(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:
         name = resolve_name(op.service, "service")

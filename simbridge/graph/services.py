@@ -124,6 +124,8 @@ class Service:
     node: str
     handler: Handler | None = None
     provider: Peer | None = None
+    #: The name as the provider wrote it in ``advertise_service`` (roslibjs routes by it).
+    written: str = ""
 
 
 @dataclass(eq=False, slots=True)
@@ -161,14 +163,14 @@ class ServiceTable:
         self.services[name] = service
         return service
 
-    def advertise(self, peer: Peer, name: str, type_name: str) -> Service:
+    def advertise(self, peer: Peer, name: str, type_name: str, written: str = "") -> Service:
         """Make ``peer`` the provider of ``name``; a previous provider's pending calls fail."""
         old = self.services.get(name)
         if old is not None:
             self._fail_pending(old, f"service {name} was re-advertised by another provider")
             if old.provider is not None:
                 old.provider.session.services.pop(name, None)
-        service = Service(name, type_name, BRIDGE_NODE, provider=peer)
+        service = Service(name, type_name, BRIDGE_NODE, provider=peer, written=written or name)
         self.services[name] = service
         peer.session.services[name] = type_name
         return service
@@ -221,7 +223,9 @@ class ServiceTable:
         self.pending[server_id] = PendingCall(server_id, service, peer, op.id, op.service, deadline)
         args = request if request is not None else {}
         provider.send(
-            json_frame({"op": "call_service", "id": server_id, "service": name, "args": args})
+            json_frame(
+                {"op": "call_service", "id": server_id, "service": service.written, "args": args}
+            )
         )
 
     def respond(self, peer: Peer, op: ServiceResponse) -> str | None:

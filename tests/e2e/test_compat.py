@@ -6,9 +6,12 @@ the suite stays short; the scenario results are checked here.
 
 from __future__ import annotations
 
+import asyncio
+import json
 from typing import Any
 
 import pytest
+from websockets.asyncio.client import connect
 
 from simbridge.runner import App
 from tests.conftest import ClientRunner
@@ -113,3 +116,112 @@ async def test_every_rosapi_service_and_parameter_interface(app: App, client: An
     assert "robot.mass" in names and not any(n.startswith("lidar") for n in names)
     (descriptor,) = r["describeParameters"]["descriptors"]
     assert descriptor["name"] == "lidar.range_max" and descriptor["type"] == 3
+
+
+@pytest.mark.parametrize("lib", ["roslib1", "roslib2"])
+async def test_roslibjs_services_and_actions_between_clients(
+    make_app: Any, run_js: ClientRunner, lib: str
+) -> None:
+    """Client-provided services in every reply shape, timeouts, and (2.x) ROS 2 actions."""
+    app = await make_app(service_timeout=1.0)
+    r = await run_js(lib, ws_url(app), "services_actions")
+    s = r["services"]
+    assert s["object"] == {"ok": True, "value": {"sum": 5}}
+    assert s["list"] == {"ok": True, "value": {"sum": 42}}
+    if lib == "roslib1":  # values without result: success
+        assert s["quiet"] == {"ok": True, "value": {"success": True, "message": "no result key"}}
+    else:  # 2.1 sends neither result nor values when the callback returns nothing: failure
+        assert s["quiet"]["ok"] is False and "no result" in s["quiet"]["error"]
+    assert s["refuse"]["ok"] is False
+    assert s["topicsWhileWaiting"] is True
+    assert s["slow"]["ok"] is False and "timed out" in s["slow"]["error"]
+    # roslibjs 2.1 sends timeout 0.4 s; 1.4.1 gets the server default (1 s here)
+    assert s["slowMs"] < (900 if lib == "roslib2" else 2500)
+    if lib == "roslib1":
+        return
+    assert s["asyncFail"] == {"ok": False, "error": "Error: no can do"}
+    a = r["actions"]
+    assert a["actionServers"] == ["/fibonacci"]
+    ok = a["succeeded"]
+    assert ok["ok"] is True and ok["result"] == {"sequence": [0, 1, 1, 2, 3, 5, 8]}
+    assert ok["feedback"][-1] == {"sequence": [0, 1, 1, 2, 3, 5, 8]} and len(ok["feedback"]) == 5
+    assert a["failed"]["ok"] is False and "aborted" in a["failed"]["error"].lower()
+    assert a["canceled"]["ok"] is False and "cancel" in a["canceled"]["error"].lower()
+    assert a["canceled"]["feedback"]
+    assert all(not x["ok"] and "cancel" in x["error"].lower() for x in a["cancelAll"])
+    assert a["cancels"] == 3
+    assert "does not exist" in a["missing"]
+
+
+async def _fibonacci_server(url: str, ready: asyncio.Event) -> None:
+    """A minimal ROS 2 action server speaking the protocol (roslibpy has none of its own)."""
+    async with connect(url) as ws:
+        await ws.send(
+            json.dumps(
+                {
+                    "op": "advertise_action",
+                    "action": "/fibonacci",
+                    "type": "example_interfaces/action/Fibonacci",
+                }
+            )
+        )
+        ready.set()
+        tasks: dict[str, asyncio.Task[None]] = {}
+
+        async def result(goal_id: str, values: Any, status: int, ok: bool = True) -> None:
+            body = {"op": "action_result", "id": goal_id, "action": "/fibonacci"}
+            body |= {"values": values, "status": status, "result": ok}
+            await ws.send(json.dumps(body))
+
+        async def forever(goal_id: str) -> None:
+            while True:
+                feedback = {"op": "action_feedback", "id": goal_id, "action": "/fibonacci"}
+                await ws.send(json.dumps(feedback | {"values": {"sequence": [0, 1]}}))
+                await asyncio.sleep(0.02)
+
+        async for frame in ws:
+            msg = json.loads(frame)
+            if msg["op"] == "send_action_goal":
+                order, goal_id = msg["args"]["order"], msg["id"]
+                if order < 0:
+                    await result(goal_id, None, 6, ok=False)
+                elif order > 50:
+                    tasks[goal_id] = asyncio.create_task(forever(goal_id))
+                else:
+                    seq = [0, 1]
+                    for i in range(2, order + 1):
+                        seq.append(seq[i - 1] + seq[i - 2])
+                        feedback = {"op": "action_feedback", "id": goal_id, "action": "/fibonacci"}
+                        await ws.send(json.dumps(feedback | {"values": {"sequence": seq}}))
+                    await result(goal_id, {"sequence": seq}, 4)
+            elif msg["op"] == "cancel_action_goal":
+                tasks.pop(msg["id"]).cancel()
+                await result(msg["id"], {"sequence": [0, 1]}, 5)
+
+
+async def test_roslibpy_services_and_action_client(
+    make_app: Any, run_roslibpy: ClientRunner
+) -> None:
+    """Roslibpy serves and calls services (result null and false too) and runs action goals."""
+    app = await make_app(service_timeout=1.0)
+    ready = asyncio.Event()
+    server = asyncio.create_task(_fibonacci_server(ws_url(app), ready))
+    try:
+        await asyncio.wait_for(ready.wait(), 5)
+        r = await run_roslibpy(ws_url(app), "services_actions")
+    finally:
+        server.cancel()
+    s = r["services"]
+    assert s["object"] == {"ok": True, "value": {"sum": 5}}
+    assert s["quiet"] == {"ok": True, "value": {"success": True, "message": "no result key"}}
+    assert s["refuse"]["ok"] is False
+    assert s["slow"]["ok"] is False and "timed out" in s["slow"]["error"]
+    assert s["slowMs"] < 2500
+    a = r["actions"]
+    ok = a["succeeded"]
+    assert (ok["ok"], ok["status"], ok["values"]) == (True, 4, {"sequence": [0, 1, 1, 2, 3, 5, 8]})
+    assert len(ok["feedback"]) == 5
+    assert (a["failed"]["ok"], a["failed"]["status"]) == (False, 6)
+    assert (a["canceled"]["ok"], a["canceled"]["status"]) == (True, 5)
+    assert a["canceled"]["feedback"]
+    assert a["missing"]["ok"] is False and "does not exist" in a["missing"]["values"]
