@@ -48,7 +48,7 @@ def world_file(directory: Path) -> Path:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = argv if argv is not None else sys.argv[1:]
+    args = argv or []
     seconds = float(args[0]) if args else 60.0
     with (
         tempfile.TemporaryDirectory() as tmp,
@@ -135,4 +135,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(sys.argv[1:]))

@@ -81,7 +81,7 @@ def row(r: dict[str, Any]) -> str:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = argv if argv is not None else sys.argv[1:]
+    args = argv or []
     seconds = float(args[0]) if args else 20.0
     print(f"fanout: clients subscribed to /odom + /scan, {seconds:g} s measured per row")
     print(
@@ -119,4 +119,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    raise SystemExit(main(sys.argv[1:]))
