@@ -4,8 +4,10 @@
 
 SPEC: ``{"url", "clients": [{"subscribe": [topics], "drive": topic or null}], "start", "end"}``
 with ``start``/``end`` wall-clock seconds (``time.time()``): only messages stamped inside the
-window are counted. Each client subscribes (``queue_length`` 0: the server's default bound)
-and, if ``drive`` is set, publishes a Twist on it at 10 Hz (a slowly turning command).
+window are counted; a client reads until each of its topics has delivered a message stamped
+after the window (at most 60 s more). Each client subscribes (``queue_length`` 0: the server's
+default bound) and, if ``drive`` is set, publishes a Twist on it at 10 Hz (a slowly turning
+command).
 
 Latency is receive time minus the message's ``header.stamp`` (wall clock of the same host, set
 by the server when it publishes). The stamp is read with a regular expression from the head of
@@ -62,9 +64,12 @@ async def _client(
                     await asyncio.sleep(max(0.0, t0 + k * 0.1 - time.monotonic()))
 
             driver = asyncio.create_task(drive_loop())
+        # Frames of a connection arrive in order: once a topic delivers a message stamped at or
+        # after ``end``, every message of the window on that topic has arrived (or was lost).
+        done: set[str] = set()
         try:
-            while True:
-                remaining = end + 1.0 - time.time()
+            while len(done) < len(stamps):
+                remaining = end + 60.0 - time.time()
                 if remaining <= 0:
                     break
                 try:
@@ -79,9 +84,11 @@ async def _client(
                 if m is None or t is None:
                     continue
                 stamp_ns = int(m.group(1)) * 1_000_000_000 + int(m.group(2))
+                topic = t.group(1).decode()
+                if stamp_ns / 1e9 >= end:
+                    done.add(topic)
                 if not (start <= stamp_ns / 1e9 < end):
                     continue
-                topic = t.group(1).decode()
                 if topic in stamps:
                     stamps[topic].append(stamp_ns)
                     arrivals[topic].append(now)

@@ -236,7 +236,7 @@ class RobotBridge:
                 who = f"robot '{name}'" if name else "the robot"
                 what = "a wall" if other == "wall" else f"robot '{other}'"
                 self.graph.log(
-                    "warn",
+                    "info",
                     f"{who} hit {what} at ({c.point[0]:.2f}, {c.point[1]:.2f}): "
                     "motion into it stopped",
                     name=ROBOT_NODE.lstrip("/"),
