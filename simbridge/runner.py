@@ -28,6 +28,7 @@ from simbridge.config import (
     resource_dir,
 )
 from simbridge.graph import Graph, RobotBridge, install_rosapi
+from simbridge.graph.simclock import SimClock
 from simbridge.server import BridgeServer
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
@@ -100,6 +101,13 @@ class App:
         install_rosapi(self.graph)
         #: The virtual robot's ROS interface.
         self.bridge = RobotBridge(self.graph, self.world)
+        #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
+        self.simclock = SimClock(
+            self.graph,
+            self.world,
+            lambda: self.advance(time.monotonic()),
+            use_sim_time=self.settings.use_sim_time,
+        )
         #: HTTP answers (page, /healthz).
         self.web = WebApp(static_dir or resource_dir("static"), self.health)
         #: The WebSocket server.
@@ -170,9 +178,14 @@ class App:
         clock = loop.time
         start = clock()
         k = 0
+        period = self.world.dt
         while True:
+            # one step per period of wall time: dt / real-time factor; a new period (factor or
+            # sim.rate changed) restarts the deadlines from the last one
+            dt = self.world.dt / self.simclock.real_time_factor
+            if dt != period:
+                start, k, period = start + k * period, 0, dt
             k += 1
-            dt = self.world.dt
             deadline = start + k * dt
             delay = deadline - clock()
             if delay > 0:
@@ -199,9 +212,15 @@ class App:
                 await asyncio.sleep(0)  # let clients run even when the loop is behind
 
     def tick(self, now: float) -> None:
-        """Run one step: simulate, publish, expire timeouts, run hooks."""
-        self.world.step()
-        self.bridge.publish(now)
+        """Run one tick: step and publish (unless paused), expire timeouts, run hooks."""
+        if not self.simclock.paused:
+            self.advance(now)
         self.graph.tick(now)
         for hook in self.tick_hooks:
             hook(now)
+
+    def advance(self, now: float) -> None:
+        """Step the simulation once and publish the step (/odom, /tf, /scan, /clock)."""
+        self.world.step()
+        self.bridge.publish(now)
+        self.simclock.publish(now)
