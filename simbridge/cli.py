@@ -106,6 +106,13 @@ def _run_parser() -> argparse.ArgumentParser:
     )
     _add_config_options(parser)
     parser.add_argument(
+        "--admin-token",
+        metavar="TOKEN",
+        default=_env("ADMIN_TOKEN", None),
+        help="token the instructor's page http://HOST:HTTP-PORT/admin needs for every change "
+        "(default: none, every admin change is refused) [SIMBRIDGE_ADMIN_TOKEN]",
+    )
+    parser.add_argument(
         "--use-sim-time",
         action="store_true",
         default=(_env("USE_SIM_TIME", "") or "").lower() in ("1", "true", "yes"),
@@ -158,6 +165,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
         host=args.host,
         port=args.port,
         http_port=None if args.no_http else args.http_port,
+        admin_token=args.admin_token or None,
         use_sim_time=args.use_sim_time,
     )
     try:

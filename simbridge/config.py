@@ -86,6 +86,15 @@ class RobotParams(_Strict):
         2.5, gt=0, le=50, description="angular-velocity limit on /cmd_vel, rad/s"
     )
     radius: float = Field(0.105, gt=0, le=5, description="footprint radius for drawing, m")
+    max_wheel_torque: float = Field(
+        0.05, gt=0, le=100, description="dynamic model: torque limit of each wheel motor, N m"
+    )
+    velocity_gain: float = Field(
+        0.25,
+        gt=0,
+        le=1000,
+        description="dynamic model: wheel velocity-loop gain, N m per m/s of wheel-speed error",
+    )
 
 
 class LidarParams(_Strict):
@@ -360,6 +369,8 @@ class ServerSettings:
     #: WebSocket keepalive ping interval and timeout, seconds (None disables).
     ping_interval: float | None = 20.0
     ping_timeout: float | None = 20.0
+    #: Token the instructor's /admin needs for every change (None: every change is refused).
+    admin_token: str | None = None
     #: Stamp headers with simulated time (``/clock``) instead of the wall clock.
     use_sim_time: bool = False
     extra: dict[str, Any] = field(default_factory=dict)

@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from simbridge import __version__
+from simbridge.admin import install_admin
 from simbridge.config import (
     Params,
     ServerSettings,
@@ -28,7 +29,9 @@ from simbridge.config import (
     resource_dir,
 )
 from simbridge.graph import Graph, RobotBridge, install_rosapi
+from simbridge.graph.estop import EStop
 from simbridge.graph.simclock import SimClock
+from simbridge.graph.walls import WallsPublisher
 from simbridge.server import BridgeServer
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
@@ -112,6 +115,11 @@ class App:
         self.web = WebApp(static_dir or resource_dir("static"), self.health)
         #: The WebSocket server.
         self.server = BridgeServer(self.graph, self.settings, self.web)
+        #: The latching emergency stop (/estop, /estop/reset, /estop/state).
+        self.estop = EStop(self.graph, self.world)
+        #: The walls as a latched /walls marker, for pages and tools.
+        self.walls = WallsPublisher(self.graph, self.world)
+        install_admin(self)
         #: Loop timing.
         self.stats = LoopStats()
         #: Hooks run after each tick's publishing, with ``now`` (extensions).
@@ -158,6 +166,7 @@ class App:
             self._http = await serve_http(self.web, self.settings.host, self.settings.http_port)
         loop = asyncio.get_running_loop()
         self.bridge.publish_static(loop.time())
+        self.walls.publish(loop.time())
         self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
         self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
         self.ready.set()

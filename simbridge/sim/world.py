@@ -96,6 +96,9 @@ class World:
         self.time = 0.0
         #: Steps since start (or the last reset).
         self.steps = 0
+        #: Emergency stop latched: commands are ignored and every robot is held still until
+        #: :meth:`release_estop` (a world reset does not release it).
+        self.estopped = False
         #: Seeded noise source (LiDAR noise); reseeded by reset for repeatable runs.
         self._seed = seed
         self.rng = np.random.default_rng(seed)
@@ -112,6 +115,8 @@ class World:
     def command(self, name: str, v: float, omega: float) -> tuple[float, float]:
         """Set a robot's velocity command; return it as clamped to the current limits.
 
+        While the emergency stop is latched the command is dropped and ``(0, 0)`` returned.
+
         Raises:
             ValueError: a value is not finite (NaN or infinity never reaches the state).
             KeyError: no robot of that name.
@@ -120,6 +125,8 @@ class World:
             msg = f"velocity command must be finite, got linear {v}, angular {omega}"
             raise ValueError(msg)
         robot = self.robots[name]
+        if self.estopped:
+            return 0.0, 0.0
         robot.cmd_v, robot.cmd_omega = v, omega
         limits = self.params.robot
         return clamp_command(v, omega, limits.max_linear_velocity, limits.max_angular_velocity)
@@ -137,6 +144,10 @@ class World:
         robots = list(self.robots.values())
         p0 = [(r.state.x, r.state.y) for r in robots]
         for robot in robots:
+            if self.estopped:
+                robot.cmd_v = robot.cmd_omega = 0.0
+                robot.state.v = robot.state.omega = 0.0
+                continue
             v, omega = clamp_command(
                 robot.cmd_v,
                 robot.cmd_omega,
@@ -212,6 +223,17 @@ class World:
         if lidar.noise_stddev > 0:
             ranges = ranges + self.rng.normal(0.0, lidar.noise_stddev, ranges.shape)
         return np.clip(ranges, lidar.range_min, lidar.range_max).astype(np.float32)
+
+    def estop(self) -> None:
+        """Latch the emergency stop: every robot halts at once and ignores commands."""
+        self.estopped = True
+        for robot in self.robots.values():
+            robot.cmd_v = robot.cmd_omega = 0.0
+            robot.state.v = robot.state.omega = 0.0
+
+    def release_estop(self) -> None:
+        """Release the emergency stop; robots stay still until the next command."""
+        self.estopped = False
 
     # -- robots at run time ----------------------------------------------------------------
 
