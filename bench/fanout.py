@@ -8,6 +8,8 @@ each: server CPU (its own user + system seconds per second), publish-to-receive 
 any client received must reach every client, and the server must drop nothing
 (``dropped_frames`` of /healthz).
 
+``python -m bench.fanout [SECONDS [N ...]]`` (default 20 s, N = 100 and 500).
+
 Targets (issue 6): 100 clients: p99 <= 20 ms, nothing lost, CPU <= 1.3x the broadcaster's;
 500 clients: nothing lost.
 """
@@ -15,6 +17,7 @@ Targets (issue 6): 100 clients: p99 <= 20 ms, nothing lost, CPU <= 1.3x the broa
 from __future__ import annotations
 
 import json
+import statistics
 import sys
 import time
 import urllib.request
@@ -83,22 +86,43 @@ def row(r: dict[str, Any]) -> str:
 def main(argv: list[str] | None = None) -> int:
     args = argv or []
     seconds = float(args[0]) if args else 20.0
+    counts = [int(a) for a in args[1:]] or [100, 500]
     print(f"fanout: clients subscribed to /odom + /scan, {seconds:g} s measured per row")
     print(
         f"{'server':<11} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
         f"{'received':>8} {'missing':>7} {'dropped':>7} {'errors':>6} {'RSS MB':>6}"
     )
-    out: dict[tuple[str, int], dict[str, Any]] = {}
-    for n in (100, 500):
-        for kind in ("simbridge", "broadcaster"):
-            r = phase(kind, n, seconds)
-            out[(kind, n)] = r
-            print(row(r), flush=True)
-    s100, b100 = out[("simbridge", 100)], out[("broadcaster", 100)]
-    s500 = out[("simbridge", 500)]
-    ratio = s100["cpu"] / b100["cpu"]
+    runs: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    for n in counts:
+        # Alternate the two servers (3 rounds at 100 clients) so that a burst of load from
+        # other programs on the machine does not land on one of them only.
+        for _ in range(3 if n <= 100 else 1):
+            for kind in ("simbridge", "broadcaster"):
+                r = phase(kind, n, seconds)
+                runs.setdefault((kind, n), []).append(r)
+                print(row(r), flush=True)
+    if (("simbridge", 100) not in runs) or (("simbridge", 500) not in runs):
+        return 0  # a partial run (other client counts): figures only
+    s_cpu = statistics.median(r["cpu"] for r in runs[("simbridge", 100)])
+    b_cpu = statistics.median(r["cpu"] for r in runs[("broadcaster", 100)])
+    ratio = s_cpu / b_cpu
+    print(
+        f"100 clients, median CPU: simbridge {s_cpu * 100:.1f} %, broadcaster "
+        f"{b_cpu * 100:.1f} %: {ratio:.2f}x"
+    )
+    s100 = {
+        "p99": statistics.median(r["p99"] for r in runs[("simbridge", 100)]),
+        "missing": sum(r["missing"] for r in runs[("simbridge", 100)]),
+        "dropped": sum(r["dropped"] or 0 for r in runs[("simbridge", 100)]),
+        "errors": sum(r["errors"] for r in runs[("simbridge", 100)]),
+    }
+    s500 = runs[("simbridge", 500)][0]
     checks = [
-        ("100 clients: p99 <= 20 ms", s100["p99"] <= 20.0, f"{s100['p99']:.2f} ms"),
+        (
+            "100 clients: p99 <= 20 ms (median of rounds)",
+            s100["p99"] <= 20.0,
+            f"{s100['p99']:.2f} ms",
+        ),
         (
             "100 clients: nothing lost",
             s100["missing"] == 0 and not s100["dropped"] and not s100["errors"],

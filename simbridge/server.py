@@ -23,7 +23,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
 
 from simbridge.config import ServerSettings
-from simbridge.graph import Graph
+from simbridge.graph import Graph, Peer
 from simbridge.protocol import Frame, SendQueue, Session, status_frame
 from simbridge.web import HttpRequest, WebApp, parse_target
 
@@ -107,6 +107,28 @@ class BridgeServer:
         self.clients: set[Client] = set()
         #: Connections accepted since start.
         self.connections_total = 0
+        graph.topics.send_many = self._send_many
+
+    def _send_many(self, frame: Frame, entries: list[tuple[Peer, Hashable, int]]) -> None:
+        """Write ``frame`` to many subscribers: one ``broadcast`` for all that keep up.
+
+        The same rule as :meth:`Client.send`, applied to a whole group at once; a client with
+        queued frames or a full socket buffer gets the frame through its queue.
+        """
+        direct = []
+        for peer, key, limit in entries:
+            if (
+                type(peer) is Client
+                and not peer.closed
+                and not peer.queue
+                and peer.ws.transport.get_write_buffer_size() <= WRITE_HIGH_WATER
+            ):
+                direct.append(peer.ws)
+                peer.frames_sent += 1
+            else:
+                peer.send(frame, key, limit)
+        if direct:
+            broadcast(direct, frame.data, text=frame.text)
 
     @property
     def port(self) -> int:

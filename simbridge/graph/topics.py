@@ -94,6 +94,9 @@ class TopicTable:
         self.default_queue_length = default_queue_length
         #: Topics by absolute name.
         self.topics: dict[str, Topic] = {}
+        #: Sends one frame to many subscribers at once, ``(frame, [(peer, key, limit)])`` (set by
+        #: the server: one ``websockets.broadcast`` per frame instead of one call per client).
+        self.send_many: Callable[[Frame, list[tuple[Peer, Hashable, int]]], None] | None = None
         #: Makes the CDR-bytes function of a message for ``cbor-raw`` (set by extensions).
         self.cdr_factory: Callable[[str, Any], Callable[[], bytes]] | None = None
 
@@ -246,10 +249,13 @@ class TopicTable:
             topic.latched = out
         if topic.subscriptions:
             default_limit = self.default_queue_length
-            for (peer, _written), sub in topic.subscriptions.items():
-                if sub.throttle_rate and not sub.admit(now):
-                    continue
-                self.send_to(peer, sub, out, default_limit)
+            if self.send_many is not None:
+                self._deliver_many(topic, out, now, default_limit, self.send_many)
+            else:
+                for (peer, _written), sub in topic.subscriptions.items():
+                    if sub.throttle_rate and not sub.admit(now):
+                        continue
+                    self.send_to(peer, sub, out, default_limit)
         refusal: ProtocolError | None = None
         for _node, callback in topic.internal:
             try:
@@ -258,6 +264,44 @@ class TopicTable:
                 refusal = err
         if refusal is not None:
             raise refusal
+
+    def _deliver_many(
+        self,
+        topic: Topic,
+        out: Outgoing,
+        now: float,
+        default_limit: int,
+        send_many: Callable[[Frame, list[tuple[Peer, Hashable, int]]], None],
+    ) -> None:
+        """Deliver ``out`` grouping the subscribers that get the very same frame.
+
+        Frames are cached per (compression, topic spelling), so most subscribers share one;
+        fragmented subscriptions and encoding errors take the one-by-one path.
+        """
+        groups: dict[tuple[str, str], tuple[Frame, list[tuple[Peer, Hashable, int]]]] = {}
+        last: tuple[str, str] | None = None
+        entries: list[tuple[Peer, Hashable, int]] = []
+        for (peer, _written), sub in topic.subscriptions.items():
+            if sub.throttle_rate and not sub.admit(now):
+                continue
+            if sub.fragment_size is not None or peer.session.fragment_size is not None:
+                self.send_to(peer, sub, out, default_limit)
+                continue
+            key = (sub.compression, sub.topic)
+            if key != last:
+                group = groups.get(key)
+                if group is None:
+                    try:
+                        frame = out.frame(sub.compression, sub.topic)
+                    except ProtocolError:
+                        self.send_to(peer, sub, out, default_limit)  # reports the error once
+                        continue
+                    group = groups[key] = (frame, [])
+                entries = group[1]
+                last = key
+            entries.append((peer, sub, sub.queue_length or default_limit))
+        for frame, group_entries in groups.values():
+            send_many(frame, group_entries)
 
     def send_to(self, peer: Peer, sub: Subscription, out: Outgoing, default_limit: int) -> None:
         """Encode ``out`` as ``sub`` wants it (cached) and queue it for ``peer``."""
