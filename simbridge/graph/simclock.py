@@ -36,6 +36,9 @@ SIM_NODE = "/sim"
 CLOCK_TOPIC = "/clock"
 #: The fastest the real-time loop may be asked to run (the headless API has no limit).
 MAX_REAL_TIME_FACTOR = 20.0
+#: The real-time-factor service's type (no standard interface fits) and its .srv text.
+RTF_TYPE = "simbridge_msgs/srv/SetRealTimeFactor"
+RTF_DEFINITION = "float64 factor\n---\nbool success\nstring message"
 
 
 class SimClock:
@@ -70,9 +73,11 @@ class SimClock:
         self.topic = graph.advertise(CLOCK_TOPIC, "rosgraph_msgs/msg/Clock", SIM_NODE)
         graph.add_service("/sim/pause", "std_srvs/srv/SetBool", SIM_NODE, self._pause)
         graph.add_service("/sim/step", "std_srvs/srv/Trigger", SIM_NODE, self._step)
+        if RTF_TYPE not in graph.registry.services:
+            graph.registry.register_srv(RTF_TYPE, RTF_DEFINITION)
         graph.add_service(
             "/sim/set_real_time_factor",
-            "simbridge_msgs/srv/SetRealTimeFactor",
+            RTF_TYPE,
             SIM_NODE,
             self._set_rtf,
         )
