@@ -263,7 +263,7 @@ async function loadLimits() {
   showSpeeds();
 }
 conn.addEventListener('connected', () => { discoverRobots(); loadLimits(); });
-setInterval(() => { discoverRobots(); loadLimits(); }, 5000);
+setInterval(() => { discoverRobots(); loadLimits(); }, 3000);
 
 // ---- PID lab -------------------------------------------------------------------------------
 const lab = new PidLab(publishTwist, () => state.limits);
