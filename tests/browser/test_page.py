@@ -428,6 +428,33 @@ async def test_robot_selector_lists_namespaced_robots_and_drives_the_chosen_one(
         )
     )
     assert watcher.odom()["v"] == 0.0  # type: ignore[index]  # the default robot stays put
+    await page.wait_for_function("window.simbridge.view.others.has('')")  # drawn in grey
     await page.keyboard.up("ArrowUp")
     await watcher.wait(lambda: watcher.latest["/r1/odom"]["twist"]["twist"]["linear"]["x"] == 0)
     await screenshot(page, "robot-r1")
+
+
+async def test_pid_lab_position_mode_reaches_a_goal_1_m_ahead(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """Position control: goal 1 m ahead is reached within 2 cm and held, then Stop sends zero."""
+    page, _ = await open_connected(open_page, app)
+    await page.click("button[data-tab=pid]")
+    await page.select_option("#pidMode", "position")
+    await page.fill("#spX", "1.0")
+    await page.fill("#spY", "0.0")
+    await page.fill("#kp", "1.5")
+    await page.fill("#ki", "0")
+    await page.fill("#kd", "0")
+    assert "goal = { x: 1.00, y: 0.00 }" in (await page.text_content("#example") or "")
+    await page.click("#pidStart")
+
+    def arrived() -> bool:
+        o = watcher.odom()
+        return o is not None and math.hypot(o["x"] - 1.0, o["y"]) < 0.02 and abs(o["v"]) < 0.02
+
+    await watcher.wait(arrived, timeout=10)
+    await page.wait_for_function("window.simbridge.lab.figures().settlingTime !== null")
+    await screenshot(page, "pid-position-step")
+    await page.click("#pidStop")
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
