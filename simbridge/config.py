@@ -27,6 +27,7 @@ __all__ = [
     "Params",
     "RobotParams",
     "RobotSpec",
+    "SafetyParams",
     "ServerSettings",
     "SimParams",
     "WorldSpec",
@@ -121,17 +122,33 @@ class SimParams(_Strict):
     rate: float = Field(20.0, gt=0, le=1000, description="kinematics and /odom rate, Hz")
 
 
+class SafetyParams(_Strict):
+    """Server-side safety of the robots (``config/classroom_params.yaml`` turns it on)."""
+
+    cmd_vel_timeout: float = Field(
+        0.0,
+        ge=0,
+        le=3600,
+        description="stop a robot after this many seconds without /cmd_vel (0 = off: the "
+        "robot keeps its last command, as the course describes)",
+    )
+    stop_on_disconnect: bool = Field(
+        False, description="stop a robot when the client that last commanded it disconnects"
+    )
+
+
 class Params(_Strict):
     """The whole parameter file (``config/pi4b_params.yaml``)."""
 
     robot: RobotParams = Field(default_factory=RobotParams)
     lidar: LidarParams = Field(default_factory=LidarParams)
     sim: SimParams = Field(default_factory=SimParams)
+    safety: SafetyParams = Field(default_factory=SafetyParams)
 
     def flat(self) -> dict[str, Any]:
         """Return every setting under its dotted name (``robot.mass``): ROS 2 parameters."""
         out: dict[str, Any] = {}
-        for section in ("robot", "lidar", "sim"):
+        for section in type(self).model_fields:
             for key, value in getattr(self, section).model_dump().items():
                 out[f"{section}.{key}"] = list(value) if isinstance(value, tuple) else value
         return out
@@ -304,6 +321,41 @@ class ServerSettings:
     ping_interval: float | None = 20.0
     ping_timeout: float | None = 20.0
     extra: dict[str, Any] = field(default_factory=dict)
+    # -- reliability and security (docs/security.md) --
+    #: Administrator token: /admin and administrative services require it (None: no check).
+    admin_token: str | None = None
+    #: Connected WebSocket clients at most; one more is refused with HTTP 503.
+    max_clients: int = 200
+    #: Subscribed topic spellings per client at most.
+    max_subscriptions: int = 200
+    #: Advertised topics, services and actions per client at most.
+    max_advertisements: int = 100
+    #: Sustained ``publish`` ops per second per client, and the burst allowed above it.
+    publish_rate: float = 200.0
+    publish_burst: int = 400
+    #: Sustained incoming WebSocket messages per second per client, and the burst.
+    message_rate: float = 1000.0
+    message_burst: int = 2000
+    #: Seconds a client may go without reading while messages wait for it; then it is
+    #: disconnected (None: never).
+    stall_timeout: float | None = 30.0
+    #: Client tokens (query parameter ``?token=``): token -> scope. A scope is ``"*"`` (any
+    #: topic) or a robot name (publish only under ``/<name>/``). Empty: no client tokens.
+    client_tokens: dict[str, str] = field(default_factory=dict)
+    #: rosauth shared secret for the ``auth`` op (None: the op is refused).
+    auth_secret: str | None = None
+    #: Seconds of clock difference an ``auth`` op's ``t`` may have (rosauth's allowed_time_delta).
+    auth_time_delta: float = 5.0
+    #: Allowed ``Origin`` headers of WebSocket upgrades (None: any; browsers only send one).
+    allowed_origins: tuple[str, ...] | None = None
+    #: TLS certificate chain and private key (PEM): serve wss:// and https://.
+    certfile: str | None = None
+    keyfile: str | None = None
+
+    @property
+    def auth_required(self) -> bool:
+        """Whether clients must authenticate (a client token or a rosauth MAC)."""
+        return bool(self.client_tokens) or self.auth_secret is not None
 
 
 def _format_errors(err: ValidationError) -> str:

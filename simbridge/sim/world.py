@@ -6,6 +6,7 @@ no I/O. The runner calls :meth:`World.step` at the fixed rate ``params.sim.rate`
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -19,6 +20,8 @@ from simbridge.sim.lidar import FloatArray, beam_angles, raycast, segments_array
 
 
 __all__ = ["KinematicModel", "MotionModel", "Robot", "World"]
+
+logger = logging.getLogger(__name__)
 
 
 class MotionModel(Protocol):
@@ -87,6 +90,8 @@ class World:
         self.motion: MotionModel = KinematicModel()
         #: Simulated seconds since start (or the last reset).
         self.time = 0.0
+        #: Robot updates that raised (each robot was reset).
+        self.failures = 0
         #: Steps since start (or the last reset).
         self.steps = 0
         #: Seeded noise source (LiDAR noise); reseeded by reset for repeatable runs.
@@ -118,17 +123,30 @@ class World:
         return clamp_command(v, omega, limits.max_linear_velocity, limits.max_angular_velocity)
 
     def step(self) -> None:
-        """Advance every robot by one ``dt``."""
+        """Advance every robot by one ``dt``.
+
+        A robot whose update raises, or leaves a non-finite state, is logged and put back at
+        its start pose, stopped; the other robots and the loop go on.
+        """
         dt = self.dt
         limits = self.params.robot
         for robot in self.robots.values():
-            v, omega = clamp_command(
-                robot.cmd_v,
-                robot.cmd_omega,
-                limits.max_linear_velocity,
-                limits.max_angular_velocity,
-            )
-            self.motion.step(robot.state, v, omega, dt, limits)
+            try:
+                v, omega = clamp_command(
+                    robot.cmd_v,
+                    robot.cmd_omega,
+                    limits.max_linear_velocity,
+                    limits.max_angular_velocity,
+                )
+                self.motion.step(robot.state, v, omega, dt, limits)
+                s = robot.state
+                if not all(map(math.isfinite, (s.x, s.y, s.theta, s.v, s.omega))):
+                    msg = f"non-finite state {s}"
+                    raise FloatingPointError(msg)
+            except Exception:
+                logger.exception("robot '%s' failed to update: reset to its start pose", robot.name)
+                robot.place(robot.start)
+                self.failures += 1
         self.time += dt
         self.steps += 1
 
