@@ -10,6 +10,7 @@ Files are read with ``yaml.safe_load`` (YAML 1.1: quote ``"off"``/``"no"`` in sh
 from __future__ import annotations
 
 import math
+import re
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from importlib import resources
@@ -33,6 +34,7 @@ __all__ = [
     "WorldSpec",
     "default_params_path",
     "default_world_path",
+    "load_client_tokens",
     "load_params",
     "load_world",
     "resource_dir",
@@ -422,3 +424,44 @@ def load_world(path: Path | str | None = None) -> WorldSpec:
     except ValidationError as err:
         msg = f"world file '{p}': {_format_errors(err)}"
         raise ConfigError(msg) from None
+
+
+def load_client_tokens(path: Path | str) -> dict[str, str]:
+    """Load a client-token file: ``tokens: {TOKEN: SCOPE}``.
+
+    A scope is a robot name (publish only under ``/<robot>/``), ``"*"`` (every topic) or
+    ``"admin"`` (every topic and administrative services).
+
+    Raises:
+        ConfigError: the file is missing or malformed, or a token is too short to be secret.
+    """
+    p = Path(path)
+    data = _read_yaml(p, "client tokens")
+    tokens = data.get("tokens")
+    extra = sorted(set(data) - {"tokens"})
+    if extra:
+        msg = f"client tokens file '{p}': {extra[0]}: unknown key (expected only 'tokens')"
+        raise ConfigError(msg)
+    if not isinstance(tokens, dict) or not tokens:
+        msg = f"client tokens file '{p}': tokens: must be a mapping TOKEN: SCOPE (robot name)"
+        raise ConfigError(msg)
+    out: dict[str, str] = {}
+    for token, scope in tokens.items():
+        shown = str(token)[:4] + "..."
+        if not isinstance(token, str) or len(token) < 8:
+            msg = (
+                f"client tokens file '{p}': tokens: {shown}: a token must be a quoted string "
+                "of at least 8 characters"
+            )
+            raise ConfigError(msg)
+        if not isinstance(scope, str) or not scope or not _SCOPE.match(scope):
+            msg = (
+                f"client tokens file '{p}': tokens.{shown}: scope {scope!r} must be a robot "
+                "name, '*' or 'admin'"
+            )
+            raise ConfigError(msg)
+        out[token] = scope
+    return out
+
+
+_SCOPE = re.compile(r"^(\*|[A-Za-z_][A-Za-z0-9_]*)$")
