@@ -47,6 +47,7 @@ from simbridge.protocol import Op, ops as o, resolve_name, status_frame
 __all__ = [
     "ADMIN_SCOPE",
     "DEFAULT_ADMIN_SERVICES",
+    "MIN_FRAGMENT_SIZE",
     "Access",
     "Guard",
     "TokenBucket",
@@ -60,6 +61,8 @@ logger = logging.getLogger(__name__)
 ANY_SCOPE = "*"
 #: The rosauth ``level`` (and token scope) of an administrator.
 ADMIN_SCOPE = "admin"
+#: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
+MIN_FRAGMENT_SIZE = 256
 #: Services that change the world or the server for everyone.
 DEFAULT_ADMIN_SERVICES = frozenset({"/reset", "/rosapi/set_param", "/rosapi/delete_param"})
 
@@ -196,6 +199,13 @@ class Guard:
             if isinstance(op, o.CallService):
                 peer.send(service_response(op.service, msg, result=False, op_id=op.id))
                 return False
+            raise ProtocolError(msg)
+        size = getattr(op, "fragment_size", None)
+        if size is not None and size < MIN_FRAGMENT_SIZE:
+            msg = (
+                f"fragment_size {size} is too small: at least {MIN_FRAGMENT_SIZE} bytes "
+                "(tiny fragments multiply the server's work)"
+            )
             raise ProtocolError(msg)
         check = self._checks.get(type(op))
         return True if check is None else check(self, peer, access, op, now)

@@ -23,6 +23,9 @@ __all__ = ["KinematicModel", "MotionModel", "Robot", "World"]
 
 logger = logging.getLogger(__name__)
 
+#: Command magnitude (m/s or rad/s) refused outright rather than clamped to the limits.
+ABSURD_VELOCITY = 1000.0
+
 
 class MotionModel(Protocol):
     """How commanded velocities move a robot during one step."""
@@ -111,11 +114,18 @@ class World:
         """Set a robot's velocity command; return it as clamped to the current limits.
 
         Raises:
-            ValueError: a value is not finite (NaN or infinity never reaches the state).
+            ValueError: a value is not finite (NaN or infinity never reaches the state) or is
+                absurd (above :data:`ABSURD_VELOCITY`: a unit or overflow bug, not a wish).
             KeyError: no robot of that name.
         """
         if not (math.isfinite(v) and math.isfinite(omega)):
             msg = f"velocity command must be finite, got linear {v}, angular {omega}"
+            raise ValueError(msg)
+        if abs(v) > ABSURD_VELOCITY or abs(omega) > ABSURD_VELOCITY:
+            msg = (
+                f"velocity command linear {v:g}, angular {omega:g} is absurd (above "
+                f"{ABSURD_VELOCITY:g}); commands within the limits are clamped to them"
+            )
             raise ValueError(msg)
         robot = self.robots[name]
         robot.cmd_v, robot.cmd_omega = v, omega

@@ -216,3 +216,11 @@ def test_auth_op_is_refused_when_no_secret_is_configured() -> None:
     p = peer(graph, guard)
     out = errors(_auth(graph, p, "0123456789abcdef"))
     assert "takes no rosauth MAC" in out[0]
+
+
+def test_tiny_fragment_sizes_are_refused() -> None:
+    graph, guard = make()
+    p = peer(graph, guard)
+    assert "too small" in errors(op(p, graph, op="subscribe", topic="/scan", fragment_size=1))[0]
+    assert not p.session.subscriptions
+    assert not errors(op(p, graph, op="subscribe", topic="/scan", fragment_size=256))

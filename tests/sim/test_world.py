@@ -127,3 +127,12 @@ def test_a_non_finite_state_is_treated_as_a_failure_and_reset() -> None:
     world.robots[""].state.x = math.inf
     world.step()
     assert world.robots[""].state.x == world.robots[""].start[0] and world.failures == 1
+
+
+@pytest.mark.parametrize(("v", "omega"), [(1e308, 0.0), (0.0, -2e3), (1001.0, 1.0)])
+def test_absurd_command_is_refused_not_clamped(v: float, omega: float) -> None:
+    world = World(load_world(None), Params())
+    world.command("", 0.1, 0.0)
+    with pytest.raises(ValueError, match="absurd"):
+        world.command("", v, omega)
+    assert world.robots[""].cmd_v == 0.1
