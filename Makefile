@@ -25,8 +25,8 @@ deps: $(BIN)/python
 	scripts/setup-test-deps.sh
 
 lint:
-	$(BIN)/ruff format --check simbridge tests bench
-	$(BIN)/ruff check simbridge tests bench
+	$(BIN)/ruff format --check simbridge tests bench examples
+	$(BIN)/ruff check simbridge tests bench examples
 
 typecheck:
 	$(BIN)/mypy
@@ -37,8 +37,8 @@ pytest:
 test: deps lint typecheck pytest
 
 format:
-	$(BIN)/ruff format simbridge tests bench
-	$(BIN)/ruff check --fix simbridge tests bench
+	$(BIN)/ruff format simbridge tests bench examples
+	$(BIN)/ruff check --fix simbridge tests bench examples
 
 bench: deps
 	$(BIN)/python -m bench

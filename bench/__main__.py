@@ -10,6 +10,7 @@ import sys
 QUICK = {
     "encoding": "/scan and /odom frames for N subscribers vs stdlib json.dumps per subscriber",
     "raycast": "one 360-ray scan against 20, 100 and 500 walls",
+    "headless": "headless simulation speed-up over real time",
 }
 
 

@@ -101,17 +101,27 @@ async def soak() -> int:
         rss1, fds1 = memory(proc)
         assert rss0 is not None and fds0 is not None
         print(f"soak: {SECONDS:.0f} s with churn against a real simbridge process")
-        print(f"  churn clients {churned} (half abrupt), stalled {stalled}, hostile frames {hostile}")
-        print(f"  server: connections_total {doc['connections_total']}, clients now "
-              f"{doc['clients']}, stalled evicted {doc.get('stalled_total')}")
-        print(f"  RSS after 30 s warm-up {rss0:.1f} MiB -> end {rss1:.1f} MiB "
-              f"(drift {rss1 - rss0:+.1f} MiB)")
+        print(
+            f"  churn clients {churned} (half abrupt), stalled {stalled}, hostile frames {hostile}"
+        )
+        print(
+            f"  server: connections_total {doc['connections_total']}, clients now "
+            f"{doc['clients']}, stalled evicted {doc.get('stalled_total')}"
+        )
+        print(
+            f"  RSS after 30 s warm-up {rss0:.1f} MiB -> end {rss1:.1f} MiB "
+            f"(drift {rss1 - rss0:+.1f} MiB)"
+        )
         print(f"  open fds after warm-up {fds0} -> end {fds1}")
-        print(f"  steady /odom rate per 10 s window: min {min(windows):.1f} Hz, "
-              f"max {max(windows):.1f} Hz over {len(windows)} windows")
+        print(
+            f"  steady /odom rate per 10 s window: min {min(windows):.1f} Hz, "
+            f"max {max(windows):.1f} Hz over {len(windows)} windows"
+        )
         loop = doc["loop"]
-        print(f"  loop: ticks {loop['ticks']}, late {loop['late_ticks']}, skipped "
-              f"{loop['skipped_ticks']}, lateness p99 {loop['lateness_ms_p99']} ms")
+        print(
+            f"  loop: ticks {loop['ticks']}, late {loop['late_ticks']}, skipped "
+            f"{loop['skipped_ticks']}, lateness p99 {loop['lateness_ms_p99']} ms"
+        )
         return 0
 
 

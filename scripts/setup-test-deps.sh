@@ -27,3 +27,18 @@ node_packages() {
 
 need_node
 node_packages
+
+# Debian's chromium for the browser tests (Playwright drives it via executable_path).
+need_chromium() {
+  if command -v chromium >/dev/null 2>&1; then
+    return
+  fi
+  if [ "$(id -u)" = 0 ] && command -v apt-get >/dev/null 2>&1; then
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends chromium fonts-dejavu-core >/dev/null
+  else
+    echo "setup-test-deps: chromium is needed for the browser tests (apt-get install chromium)" >&2
+    exit 1
+  fi
+}
+need_chromium

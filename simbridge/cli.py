@@ -89,12 +89,6 @@ def _add_security_options(parser: argparse.ArgumentParser) -> None:
     """Options of docs/security.md: tokens, TLS, origins and limits."""
     group = parser.add_argument_group("security and limits (see docs/security.md)")
     group.add_argument(
-        "--admin-token",
-        default=_env("ADMIN_TOKEN", None),
-        help="token that /admin and administrative services (/reset, set_param) require; "
-        "give it as ?token= (default: none, administration open) [SIMBRIDGE_ADMIN_TOKEN]",
-    )
-    group.add_argument(
         "--client-tokens",
         metavar="FILE",
         default=_env("CLIENT_TOKENS", None),
@@ -242,6 +236,20 @@ def _run_parser() -> argparse.ArgumentParser:
     _add_config_options(parser)
     _add_security_options(parser)
     parser.add_argument(
+        "--admin-token",
+        metavar="TOKEN",
+        default=_env("ADMIN_TOKEN", None),
+        help="token the instructor's page http://HOST:HTTP-PORT/admin needs for every change "
+        "(default: none, every admin change is refused) [SIMBRIDGE_ADMIN_TOKEN]",
+    )
+    parser.add_argument(
+        "--use-sim-time",
+        action="store_true",
+        default=(_env("USE_SIM_TIME", "") or "").lower() in ("1", "true", "yes"),
+        help="stamp headers with the simulated time published on /clock instead of the wall "
+        "clock (as ROS nodes with use_sim_time:=true expect) [SIMBRIDGE_USE_SIM_TIME]",
+    )
+    parser.add_argument(
         "--log-level",
         default=_env("LOG_LEVEL", "info"),
         choices=["debug", "info", "warning", "error"],
@@ -288,6 +296,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
             host=args.host,
             port=args.port,
             http_port=None if args.no_http else args.http_port,
+            use_sim_time=args.use_sim_time,
             **_security_settings(args),
         )
         # validate before binding anything, so a bad file fails fast and clearly
@@ -343,10 +352,31 @@ def _cmd_healthcheck(argv: Sequence[str]) -> int:
     return 0 if ok else 1
 
 
+def _cmd_topic(argv: Sequence[str]) -> int:
+    from simbridge.rostool import topic_main
+
+    return topic_main(argv)
+
+
+def _cmd_service(argv: Sequence[str]) -> int:
+    from simbridge.rostool import service_main
+
+    return service_main(argv)
+
+
+def _cmd_param(argv: Sequence[str]) -> int:
+    from simbridge.rostool import param_main
+
+    return param_main(argv)
+
+
 #: Sub-commands: name -> (one-line help, function(argv) -> exit code).
 COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "check-config": ("validate a world and a parameter file, then exit", _cmd_check_config),
     "healthcheck": ("probe a running server's /healthz; exit 0 or 1", _cmd_healthcheck),
+    "topic": ("list|echo|hz|pub topics of any rosbridge URL (as `ros2 topic`)", _cmd_topic),
+    "service": ("list|call services of any rosbridge URL (as `ros2 service`)", _cmd_service),
+    "param": ("list|get|set parameters through rosapi (as `ros2 param`)", _cmd_param),
 }
 
 

@@ -25,6 +25,7 @@ from simbridge.errors import ConfigError
 
 __all__ = [
     "LidarParams",
+    "NamedRobotSpec",
     "Params",
     "RobotParams",
     "RobotSpec",
@@ -87,6 +88,15 @@ class RobotParams(_Strict):
         2.5, gt=0, le=50, description="angular-velocity limit on /cmd_vel, rad/s"
     )
     radius: float = Field(0.105, gt=0, le=5, description="footprint radius for drawing, m")
+    max_wheel_torque: float = Field(
+        0.05, gt=0, le=100, description="dynamic model: torque limit of each wheel motor, N m"
+    )
+    velocity_gain: float = Field(
+        0.25,
+        gt=0,
+        le=1000,
+        description="dynamic model: wheel velocity-loop gain, N m per m/s of wheel-speed error",
+    )
 
 
 class LidarParams(_Strict):
@@ -197,6 +207,36 @@ class RobotSpec(_Strict):
         return v
 
 
+#: A robot name usable as a ROS namespace: ``r1``, ``alice``, ``team_3``.
+ROBOT_NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
+
+
+def check_robot_name(name: object) -> str:
+    """Return ``name`` if it is a valid robot name (a ROS namespace token).
+
+    Raises:
+        ValueError: it is not.
+    """
+    if not isinstance(name, str) or not ROBOT_NAME.match(name):
+        msg = (
+            f"robot name {name!r} is not a valid ROS name: use a letter then letters, "
+            "digits or '_' (e.g. r1, alice, team_3)"
+        )
+        raise ValueError(msg)
+    return name
+
+
+class NamedRobotSpec(RobotSpec):
+    """A robot of a ``robots:`` list: its name (its topic namespace) and start pose."""
+
+    name: str
+
+    @field_validator("name")
+    @classmethod
+    def _name(cls, v: str) -> str:
+        return check_robot_name(v)
+
+
 def _check_numbers(value: Any, count: int, what: str) -> list[float]:
     if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != count:
         got = len(value) if isinstance(value, Sequence) and not isinstance(value, str) else value
@@ -240,6 +280,31 @@ class WorldSpec(_Strict):
     circles: list[Circle] = Field(default_factory=list)
     polygons: list[list[tuple[float, float]]] = Field(default_factory=list)
     robot: RobotSpec = Field(default_factory=RobotSpec)
+    #: Named robots (``/r1/odom``...); ``None`` means the single un-namespaced ``robot``.
+    robots: list[NamedRobotSpec] | None = None
+
+    def model_post_init(self, context: Any, /) -> None:
+        """Check that ``robot`` and ``robots`` are not both given and names are unique."""
+        if self.robots is None:
+            return
+        if "robot" in self.model_fields_set:
+            msg = (
+                "give either 'robot:' (one robot, un-namespaced topics) or 'robots:' "
+                "(named robots, /NAME/odom...), not both"
+            )
+            raise ValueError(msg)
+        seen: set[str] = set()
+        for i, r in enumerate(self.robots):
+            if r.name in seen:
+                msg = f"robots[{i}]: name '{r.name}' is used twice; robot names must be unique"
+                raise ValueError(msg)
+            seen.add(r.name)
+
+    def start_poses(self) -> dict[str, tuple[float, float, float]]:
+        """Return the robots at start by name (``""`` for the single un-namespaced robot)."""
+        if self.robots is None:
+            return {"": self.robot.pose}
+        return {r.name: r.pose for r in self.robots}
 
     @field_validator("walls", mode="before")
     @classmethod
@@ -322,10 +387,13 @@ class ServerSettings:
     #: WebSocket keepalive ping interval and timeout, seconds (None disables).
     ping_interval: float | None = 20.0
     ping_timeout: float | None = 20.0
-    extra: dict[str, Any] = field(default_factory=dict)
-    # -- reliability and security (docs/security.md) --
-    #: Administrator token: /admin and administrative services require it (None: no check).
+    #: Token the instructor's /admin needs for every change (None: every change is refused).
     admin_token: str | None = None
+    #: Stamp headers with simulated time (``/clock``) instead of the wall clock.
+    use_sim_time: bool = False
+    extra: dict[str, Any] = field(default_factory=dict)
+    # -- reliability and security (docs/security.md); admin_token above also guards the
+    # administrative ROS services (when it is None they are open: a laptop on its own) --
     #: Connected WebSocket clients at most; one more is refused with HTTP 503.
     max_clients: int = 200
     #: Subscribed topic spellings per client at most.

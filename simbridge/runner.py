@@ -19,6 +19,7 @@ from pathlib import Path
 from typing import Any
 
 from simbridge import __version__
+from simbridge.admin import install_admin
 from simbridge.config import (
     Params,
     ServerSettings,
@@ -28,6 +29,9 @@ from simbridge.config import (
     resource_dir,
 )
 from simbridge.graph import Graph, RobotBridge, install_rosapi
+from simbridge.graph.estop import EStop
+from simbridge.graph.simclock import SimClock
+from simbridge.graph.walls import WallsPublisher
 from simbridge.security import install_security
 from simbridge.server import BridgeServer, tls_context
 from simbridge.sim import World
@@ -101,10 +105,22 @@ class App:
         install_rosapi(self.graph)
         #: The virtual robot's ROS interface.
         self.bridge = RobotBridge(self.graph, self.world)
+        #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
+        self.simclock = SimClock(
+            self.graph,
+            self.world,
+            lambda: self.advance(time.monotonic()),
+            use_sim_time=self.settings.use_sim_time,
+        )
         #: HTTP answers (page, /healthz).
         self.web = WebApp(static_dir or resource_dir("static"), self.health)
         #: The WebSocket server.
         self.server = BridgeServer(self.graph, self.settings, self.web)
+        #: The latching emergency stop (/estop, /estop/reset, /estop/state).
+        self.estop = EStop(self.graph, self.world)
+        #: The walls as a latched /walls marker, for pages and tools.
+        self.walls = WallsPublisher(self.graph, self.world)
+        install_admin(self)
         #: Loop timing.
         self.stats = LoopStats()
         #: Hooks run after each tick's publishing, with ``now`` (extensions).
@@ -156,6 +172,7 @@ class App:
             self._http = await serve_http(self.web, s.host, s.http_port, ssl=tls)
         loop = asyncio.get_running_loop()
         self.bridge.publish_static(loop.time())
+        self.walls.publish(loop.time())
         self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
         self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
         self.ready.set()
@@ -176,9 +193,14 @@ class App:
         clock = loop.time
         start = clock()
         k = 0
+        period = self.world.dt
         while True:
+            # one step per period of wall time: dt / real-time factor; a new period (factor or
+            # sim.rate changed) restarts the deadlines from the last one
+            dt = self.world.dt / self.simclock.real_time_factor
+            if dt != period:
+                start, k, period = start + k * period, 0, dt
             k += 1
-            dt = self.world.dt
             deadline = start + k * dt
             delay = deadline - clock()
             if delay > 0:
@@ -205,9 +227,15 @@ class App:
                 await asyncio.sleep(0)  # let clients run even when the loop is behind
 
     def tick(self, now: float) -> None:
-        """Run one step: simulate, publish, expire timeouts, run hooks."""
-        self.world.step()
-        self.bridge.publish(now)
+        """Run one tick: step and publish (unless paused), expire timeouts, run hooks."""
+        if not self.simclock.paused:
+            self.advance(now)
         self.graph.tick(now)
         for hook in self.tick_hooks:
             hook(now)
+
+    def advance(self, now: float) -> None:
+        """Step the simulation once and publish the step (/odom, /tf, /scan, /clock)."""
+        self.world.step()
+        self.bridge.publish(now)
+        self.simclock.publish(now)

@@ -136,3 +136,28 @@ def test_resources_are_found() -> None:
     """The page and config directories resolve (package data or checkout)."""
     assert (resource_dir("static") / "index.html").is_file()
     assert (resource_dir("config") / "pi4b_params.yaml").is_file()
+
+
+def test_a_world_may_list_named_robots(tmp_path: Path) -> None:
+    """robots: [{name, pose}] gives named robots; the single robot: key keeps name ''."""
+    path = write(
+        tmp_path,
+        "fleet.yaml",
+        "robots:\n  - {name: r1, pose: [1, 2, 0]}\n  - {name: r2, pose: [-1, 0, 3.14]}\n",
+    )
+    assert load_world(path).start_poses() == {"r1": (1.0, 2.0, 0.0), "r2": (-1.0, 0.0, 3.14)}
+    assert load_world(None).start_poses() == {"": (0.0, 0.0, 0.0)}
+
+
+@pytest.mark.parametrize(
+    ("text", "error"),
+    [
+        ("robot: {pose: [0, 0, 0]}\nrobots: [{name: a}]\n", "either 'robot:'"),
+        ("robots: [{name: a}, {name: a}]\n", "robots[1]: name 'a' is used twice"),
+        ("robots: [{name: 'r-1'}]\n", "robots.0.name: robot name 'r-1' is not a valid ROS name"),
+        ("robots: [{pose: [0, 0, 0]}]\n", "robots.0.name: Field required"),
+    ],
+)
+def test_bad_robot_lists_fail_naming_the_key(tmp_path: Path, text: str, error: str) -> None:
+    with pytest.raises(ConfigError, match=error.replace("[", r"\[")):
+        load_world(write(tmp_path, "bad.yaml", text))

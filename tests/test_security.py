@@ -79,18 +79,6 @@ def certificate(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     return certfile, keyfile
 
 
-async def test_admin_page_needs_the_admin_token(make_app: AppFactory, tmp_path: Path) -> None:
-    app = await make_app(admin_token=ADMIN)
-    base = f"http://127.0.0.1:{app.http_port}"
-    for path in ("/admin", "/admin.html", "/admin?token=wrong"):
-        status, body = await asyncio.to_thread(fetch, base + path)
-        assert status == 401 and b"admin token" in body, path
-    status, _ = await asyncio.to_thread(fetch, f"{base}/admin?token={ADMIN}")
-    assert status != 401  # the page itself (404 until the admin page exists)
-    status, _ = await asyncio.to_thread(fetch, f"{base}/healthz")
-    assert status == 200
-
-
 async def test_administrative_services_need_the_admin_token(make_app: AppFactory) -> None:
     app = await make_app(admin_token=ADMIN)
     async with connect(ws_url(app)) as anyone:

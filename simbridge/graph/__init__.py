@@ -10,6 +10,7 @@ from simbridge.graph.graph import ROSOUT, Graph
 from simbridge.graph.params import ParameterStore, ParamNode
 from simbridge.graph.rosapi import ROSAPI_NODE, install_rosapi, request_fields
 from simbridge.graph.services import Service, ServiceTable, service_response
+from simbridge.graph.simclock import SIM_NODE, SimClock
 from simbridge.graph.topics import BRIDGE_NODE, Peer, Topic, TopicTable
 
 
@@ -18,6 +19,7 @@ __all__ = [
     "ROBOT_NODE",
     "ROSAPI_NODE",
     "ROSOUT",
+    "SIM_NODE",
     "Graph",
     "ParamNode",
     "ParameterStore",
@@ -25,6 +27,7 @@ __all__ = [
     "RobotBridge",
     "Service",
     "ServiceTable",
+    "SimClock",
     "Topic",
     "TopicTable",
     "install_rosapi",

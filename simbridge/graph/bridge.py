@@ -10,11 +10,18 @@ Node ``/virtual_robot`` publishes, per robot (REP-105 frames, wall-clock header 
   ``angle_increment = 2 pi / rays``, ``angle_max = angle_min + (rays - 1) * increment``;
 
 and subscribes ``/cmd_vel`` (geometry_msgs/Twist). It serves ``/reset`` (std_srvs/Empty).
+
+Named robots (``robots:`` in the world file, or spawned at run time) have the same topics under
+their name (``/r1/odom``, frames ``r1/odom``, ``r1/base_link``, ``r1/laser``) on the shared
+``/tf`` and ``/tf_static``, plus ``contact`` (``simbridge_msgs/msg/Contact``, each step in which
+an obstacle stopped the robot; the start of each contact also goes to ``/rosout``). The
+run-time services (spawn, kill, teleport) are in :mod:`simbridge.graph.fleet`.
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -22,6 +29,12 @@ import numpy as np
 
 from simbridge.config import Params
 from simbridge.errors import ProtocolError
+from simbridge.graph.fleet import (
+    CONTACT_TYPE,
+    add_robot_services,
+    install_fleet,
+    remove_robot_services,
+)
 from simbridge.graph.graph import Graph
 from simbridge.graph.params import ParamNode
 from simbridge.graph.rosapi import request_fields
@@ -50,6 +63,10 @@ class _RobotTopics:
     odom: Topic
     scan: Topic
     cmd_vel: Topic
+    #: Contacts of this robot (``simbridge_msgs/msg/Contact``).
+    contact: Topic | None = None
+    #: The ``/cmd_vel`` callback (to remove it with the robot).
+    on_cmd_vel: Any = None
 
 
 class RobotBridge:
@@ -66,6 +83,8 @@ class RobotBridge:
             "/tf_static", "tf2_msgs/msg/TFMessage", ROBOT_NODE, latch=True
         )
         self.robots: dict[str, _RobotTopics] = {}
+        #: Called with the name of each robot removed, after its topics are gone (extensions).
+        self.on_robot_removed: list[Callable[[str], None]] = []
         for robot in world.robots.values():
             self.add_robot(robot)
         graph.add_service("/reset", "std_srvs/srv/Empty", ROBOT_NODE, self._reset)
@@ -79,6 +98,9 @@ class RobotBridge:
         )
         self.params.on_change.append(self._params_changed)
         graph.params.add(self.params)
+        #: Robots that were in contact at the previous step (a new contact is logged once).
+        self._touching: set[str] = set()
+        install_fleet(self)
 
     def _write_params(self, flat: dict[str, Any]) -> None:
         self.world.params = Params.from_flat(flat)
@@ -100,7 +122,23 @@ class RobotBridge:
             g.advertise(robot.topic("odom"), "nav_msgs/msg/Odometry", ROBOT_NODE),
             g.advertise(robot.topic("scan"), "sensor_msgs/msg/LaserScan", ROBOT_NODE),
             g.subscribe(robot.topic("cmd_vel"), "geometry_msgs/msg/Twist", ROBOT_NODE, on_cmd_vel),
+            g.advertise(robot.topic("contact"), CONTACT_TYPE, ROBOT_NODE),
+            on_cmd_vel,
         )
+        add_robot_services(self, robot)
+
+    def remove_robot(self, name: str) -> None:
+        """Remove the topics and services of one robot (the world keeps its own list)."""
+        rt = self.robots.pop(name)
+        topics = self.graph.topics
+        for topic in (rt.odom, rt.scan, rt.contact):
+            if topic is not None:
+                topics.unadvertise(topic.name, ROBOT_NODE)
+        topics.unsubscribe_internal(rt.cmd_vel.name, rt.on_cmd_vel)
+        remove_robot_services(self, rt.robot)
+        self._touching.discard(name)
+        for callback in self.on_robot_removed:
+            callback(name)
 
     def _on_cmd_vel(self, name: str, msg: Any) -> None:
         v = msg["linear"]["x"]
@@ -176,6 +214,7 @@ class RobotBridge:
             )
         if self.tf.subscriptions or self.tf.internal:
             g.publish(self.tf, {"transforms": transforms}, now)
+        self.publish_contacts(now, stamp)
         if self._scan_due():
             self.publish_scans(now, stamp)
 
@@ -191,13 +230,46 @@ class RobotBridge:
         self._scan_phase = max(self._scan_phase - 1.0, 0.0)
         return True
 
+    def publish_contacts(self, now: float, stamp: dict[str, int]) -> None:
+        """Publish this step's contacts; log each new one to ``/rosout``."""
+        touching = self.world.touching
+        for name, other, c in self.world.contacts:
+            rt = self.robots.get(name)
+            if rt is None:
+                continue
+            if name not in self._touching:
+                who = f"robot '{name}'" if name else "the robot"
+                what = "a wall" if other == "wall" else f"robot '{other}'"
+                self.graph.log(
+                    "warn",
+                    f"{who} hit {what} at ({c.point[0]:.2f}, {c.point[1]:.2f}): "
+                    "motion into it stopped",
+                    name=ROBOT_NODE.lstrip("/"),
+                )
+            topic = rt.contact
+            if topic is not None and (topic.subscriptions or topic.internal):
+                msg = {
+                    "header": {"stamp": stamp, "frame_id": rt.robot.frame("odom")},
+                    "robot": name,
+                    "other": other,
+                    "point": {"x": c.point[0], "y": c.point[1], "z": 0.0},
+                    "normal": {"x": c.normal[0], "y": c.normal[1], "z": 0.0},
+                }
+                self.graph.publish(topic, msg, now)
+        self._touching = set(touching)
+
     def publish_scans(self, now: float, stamp: dict[str, int]) -> None:
-        """Raycast and publish every robot's /scan (skipped for robots nobody listens to)."""
+        """Raycast and publish every robot's /scan (skipped for robots nobody listens to).
+
+        The scans of every listened-to robot are cast in one batch.
+        """
         lidar = self.world.params.lidar
         increment = 2.0 * math.pi / lidar.rays
-        for rt in self.robots.values():
-            if not (rt.scan.subscriptions or rt.scan.internal):
-                continue
+        wanted = [rt for rt in self.robots.values() if rt.scan.subscriptions or rt.scan.internal]
+        if not wanted:
+            return
+        all_ranges = self.world.scans([rt.robot.name for rt in wanted])
+        for rt, ranges in zip(wanted, all_ranges, strict=True):
             scan = {
                 "header": {"stamp": stamp, "frame_id": rt.robot.frame("laser")},
                 "angle_min": 0.0,
@@ -207,7 +279,7 @@ class RobotBridge:
                 "scan_time": 1.0 / lidar.rate,
                 "range_min": lidar.range_min,
                 "range_max": lidar.range_max,
-                "ranges": self.world.scan(rt.robot.name),
+                "ranges": ranges,
                 "intensities": _EMPTY32,
             }
             self.graph.publish(rt.scan, scan, now)

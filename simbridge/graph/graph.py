@@ -18,11 +18,12 @@ from collections.abc import Callable
 from typing import Any
 
 from simbridge.config import ServerSettings
-from simbridge.errors import ProtocolError, SimbridgeError
+from simbridge.errors import ProtocolError, SimbridgeError, TypeNotFoundError
+from simbridge.graph.actions import ActionTable
 from simbridge.graph.params import ParameterStore
-from simbridge.graph.services import Handler, ServiceTable, service_response
+from simbridge.graph.services import Handler, ServiceTable, service_response, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
-from simbridge.msgs import Converter, TypeRegistry
+from simbridge.msgs import Converter, TypeRegistry, normalize_type
 from simbridge.protocol import ClientId, Op, Session, ops as o, resolve_name, status_frame
 
 
@@ -61,6 +62,7 @@ class Graph:
         )
         #: Services.
         self.services = ServiceTable(default_timeout=self.settings.service_timeout)
+        self.services.prepare, self.services.finish = typed_calls(self.registry, self.converter)
         #: Parameters of the in-process nodes.
         self.params = ParameterStore()
         #: Connected clients.
@@ -89,6 +91,10 @@ class Graph:
         self.gates: list[Callable[[Peer, Op, float], bool]] = []
         #: Services that need admin rights (see :mod:`simbridge.graph.guard`).
         self.admin_services: set[str] = set()
+        #: Actions (client-served and in-process) and the goals in flight.
+        self.actions = ActionTable(self)
+        self.handlers.update(self.actions.handlers())
+        self.on_disconnect.append(self.actions.drop_peer)
         self._ids = itertools.count(1)
         self.topics.advertise(ROSOUT, "rcl_interfaces/msg/Log", "/simbridge")
         self.nodes["/simbridge"] = "simbridge itself (/rosout)"
@@ -258,7 +264,11 @@ class Graph:
 
     def _advertise_service(self, peer: Peer, op: o.AdvertiseService, now: float) -> None:
         name = resolve_name(op.service, "service")
-        self.services.advertise(peer, name, op.type)
+        try:
+            type_name = normalize_type(op.type, "srv")
+        except TypeNotFoundError as err:
+            raise ProtocolError(f"advertise_service: {err}") from None
+        self.services.advertise(peer, name, type_name, op.service)
 
     def _unadvertise_service(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:
         name = resolve_name(op.service, "service")

@@ -64,7 +64,21 @@ ADMIN_SCOPE = "admin"
 #: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
 MIN_FRAGMENT_SIZE = 256
 #: Services that change the world or the server for everyone.
-DEFAULT_ADMIN_SERVICES = frozenset({"/reset", "/rosapi/set_param", "/rosapi/delete_param"})
+DEFAULT_ADMIN_SERVICES = frozenset(
+    {
+        "/reset",
+        "/rosapi/set_param",
+        "/rosapi/delete_param",
+        "/estop/reset",
+        "/spawn",
+        "/kill",
+        "/sim/pause",
+        "/sim/step",
+        "/sim/set_real_time_factor",
+    }
+)
+#: Name endings of administrative services of any node (ROS 2 parameter services).
+ADMIN_SUFFIXES = ("/set_parameters", "/set_parameters_atomically")
 
 
 @dataclass(slots=True)
@@ -300,7 +314,8 @@ class Guard:
         except ProtocolError:
             return True  # the graph answers the bad name
         reason = None
-        if name in self.graph.admin_services and not access.admin:
+        admin_only = name in self.graph.admin_services or name.endswith(ADMIN_SUFFIXES)
+        if admin_only and not access.admin:
             reason = (
                 f"service {name} is administrative: connect with the admin token "
                 "(?token=ADMIN_TOKEN) to call it"

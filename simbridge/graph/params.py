@@ -106,10 +106,14 @@ class ParameterStore:
     def __init__(self) -> None:
         #: Nodes by name.
         self.nodes: dict[str, ParamNode] = {}
+        #: Called with each node added (e.g. to offer its rcl_interfaces services).
+        self.on_add: list[Callable[[ParamNode], None]] = []
 
     def add(self, node: ParamNode) -> None:
         """Register a node's parameters."""
         self.nodes[node.name] = node
+        for callback in self.on_add:
+            callback(node)
 
     def node(self, name: str) -> ParamNode:
         """Return a node by name (``virtual_robot`` or ``/virtual_robot``).

@@ -10,15 +10,28 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from simbridge.errors import ServiceError
+from simbridge.errors import ServiceError, TypeNotFoundError
+from simbridge.graph.paramservices import install_parameter_services
+from simbridge.graph.topics import BRIDGE_NODE
+from simbridge.msgs import normalize_type, typedefs
 
 
 if TYPE_CHECKING:
     from simbridge.graph.graph import Graph
 
-__all__ = ["ROSAPI_NODE", "install_rosapi", "request_fields"]
+__all__ = ["ROSAPI_NODE", "ROS_DISTRO", "install_rosapi", "request_fields", "visible"]
 
 ROSAPI_NODE = "/rosapi"
+#: The ROS 2 distribution simbridge answers to ``get_ros_version`` (its message set is rosbags'
+#: latest store).
+ROS_DISTRO = "jazzy"
+#: rosapi's failure text for a definition it cannot give (``typedefs_full_text``).
+_NO_TEXT = "# failed to get full definition text for {type}: {reason}"
+
+
+def visible(name: str) -> bool:
+    """Return whether a graph name is listed (hidden names have a component starting '_')."""
+    return not any(part.startswith("_") for part in name.split("/"))
 
 
 def request_fields(args: Any, fields: tuple[str, ...], service: str) -> dict[str, Any]:
@@ -50,26 +63,198 @@ def _string(req: dict[str, Any], key: str, service: str) -> str:
 
 
 def install_rosapi(graph: Graph) -> None:
-    """Register the rosapi services on ``graph``."""
+    """Register the rosapi services on ``graph``, and rcl_interfaces parameter services.
+
+    Every service of ``rosapi_msgs`` that rosbridge 2.x offers is answered (protocol reference
+    section 4), plus the later ``interfaces``, ``action_type`` and ``action_*_details``.
+    """
     graph.nodes[ROSAPI_NODE] = "rosapi, answered by simbridge"
+    topics_of = graph.topics
 
-    def topics(args: Any) -> dict[str, Any]:
-        request_fields(args, (), "/rosapi/topics")
-        listed = graph.topics.listed()
-        return {"topics": [t.name for t in listed], "types": [t.type for t in listed]}
+    def absolute(name: str) -> str:
+        return name if not name or name.startswith("/") else "/" + name
 
-    def topic_type(args: Any) -> dict[str, Any]:
-        req = request_fields(args, ("topic",), "/rosapi/topic_type")
-        name = _string(req, "topic", "/rosapi/topic_type")
-        if name and not name.startswith("/"):
-            name = "/" + name
-        topic = graph.topics.topics.get(name)
-        return {"type": (topic.type or "") if topic is not None else ""}
+    def canonical(type_name: str, kind: Any = "msg") -> str:
+        try:
+            return normalize_type(type_name, kind)
+        except TypeNotFoundError:
+            return type_name
 
-    def services(args: Any) -> dict[str, Any]:
-        request_fields(args, (), "/rosapi/services")
-        return {"services": sorted(graph.services.services)}
+    def owner_node(owner: object) -> str:
+        return owner if isinstance(owner, str) else BRIDGE_NODE
 
+    def listed_topics() -> list[Any]:
+        return [t for t in topics_of.listed() if visible(t.name)]
+
+    def publishers_of(name: str) -> list[str]:
+        topic = topics_of.topics.get(name)
+        if topic is None:
+            return []
+        return sorted({owner_node(owner) for owner in topic.publishers})
+
+    def subscribers_of(name: str) -> list[str]:
+        topic = topics_of.topics.get(name)
+        if topic is None:
+            return []
+        nodes = {node for node, _callback in topic.internal}
+        if topic.subscriptions:
+            nodes.add(BRIDGE_NODE)
+        return sorted(nodes)
+
+    def listed_services() -> list[Any]:
+        return [s for n, s in sorted(graph.services.services.items()) if visible(n)]
+
+    def action_servers() -> list[str]:
+        return sorted(graph.actions.actions)
+
+    def details(type_name: str, pick: Any) -> dict[str, Any]:
+        try:
+            name = pick(type_name)
+            return {"typedefs": typedefs(graph.registry, name)}
+        except TypeNotFoundError as err:
+            raise ServiceError(str(err)) from None
+
+    def full_text(type_name: str | None) -> str:
+        if type_name is None:
+            return _NO_TEXT.format(type="?", reason="the topic has no type yet")
+        try:
+            return graph.registry.definition_text(type_name)
+        except TypeNotFoundError as err:
+            return _NO_TEXT.format(type=type_name, reason=err)
+
+    handlers: dict[str, tuple[str, Any]] = {
+        "topics": (
+            "Topics",
+            lambda r: {
+                "topics": [t.name for t in listed_topics()],
+                "types": [t.type for t in listed_topics()],
+            },
+        ),
+        "topics_for_type": (
+            "TopicsForType",
+            lambda r: {
+                "topics": [t.name for t in listed_topics() if t.type == canonical(r["type"])]
+            },
+        ),
+        "topics_and_raw_types": (
+            "TopicsAndRawTypes",
+            lambda r: {
+                "topics": [t.name for t in listed_topics()],
+                "types": [t.type for t in listed_topics()],
+                "typedefs_full_text": [full_text(t.type) for t in listed_topics()],
+            },
+        ),
+        "topic_type": (
+            "TopicType",
+            lambda r: {
+                "type": (getattr(topics_of.topics.get(absolute(r["topic"])), "type", "") or "")
+            },
+        ),
+        "publishers": ("Publishers", lambda r: {"publishers": publishers_of(absolute(r["topic"]))}),
+        "subscribers": (
+            "Subscribers",
+            lambda r: {"subscribers": subscribers_of(absolute(r["topic"]))},
+        ),
+        "services": ("Services", lambda r: {"services": [s.name for s in listed_services()]}),
+        "services_for_type": (
+            "ServicesForType",
+            lambda r: {
+                "services": [
+                    s.name for s in listed_services() if s.type == canonical(r["type"], "srv")
+                ]
+            },
+        ),
+        "service_type": (
+            "ServiceType",
+            lambda r: {
+                "type": getattr(graph.services.services.get(absolute(r["service"])), "type", "")
+            },
+        ),
+        "service_providers": (
+            "ServiceProviders",
+            lambda r: {
+                "providers": sorted(
+                    {
+                        s.node
+                        for s in graph.services.services.values()
+                        if s.type == canonical(r["service"], "srv")
+                    }
+                )
+            },
+        ),
+        "service_node": (
+            "ServiceNode",
+            lambda r: {
+                "node": getattr(graph.services.services.get(absolute(r["service"])), "node", "")
+            },
+        ),
+        "nodes": ("Nodes", lambda r: {"nodes": sorted(graph.nodes)}),
+        "node_details": ("NodeDetails", lambda r: node_details(absolute(r["node"]))),
+        "action_servers": ("GetActionServers", lambda r: {"action_servers": action_servers()}),
+        "action_type": (
+            "ActionType",
+            lambda r: {
+                "type": getattr(graph.actions.actions.get(absolute(r["action"])), "type", "")
+            },
+        ),
+        "message_details": ("MessageDetails", lambda r: details(r["type"], lambda t: t)),
+        "service_request_details": (
+            "ServiceRequestDetails",
+            lambda r: details(r["type"], lambda t: graph.registry.service(t)[0]),
+        ),
+        "service_response_details": (
+            "ServiceResponseDetails",
+            lambda r: details(r["type"], lambda t: graph.registry.service(t)[1]),
+        ),
+        "action_goal_details": (
+            "ActionGoalDetails",
+            lambda r: details(r["type"], lambda t: graph.registry.action(t)[0]),
+        ),
+        "action_result_details": (
+            "ActionResultDetails",
+            lambda r: details(r["type"], lambda t: graph.registry.action(t)[1]),
+        ),
+        "action_feedback_details": (
+            "ActionFeedbackDetails",
+            lambda r: details(r["type"], lambda t: graph.registry.action(t)[2]),
+        ),
+        "interfaces": (
+            "Interfaces",
+            lambda r: {
+                "interfaces": sorted(
+                    [*graph.registry.types(), *graph.registry.services, *graph.registry.actions]
+                )
+            },
+        ),
+        "get_time": ("GetTime", lambda r: get_time()),
+        "get_ros_version": ("GetROSVersion", lambda r: {"version": 2, "distro": ROS_DISTRO}),
+    }
+
+    def node_details(node: str) -> dict[str, Any]:
+        if node not in graph.nodes:
+            msg = f"node {node} does not exist (see /rosapi/nodes)"
+            raise ServiceError(msg)
+        subscribing, publishing = [], []
+        for topic in topics_of.listed():
+            if node in publishers_of(topic.name):
+                publishing.append(topic.name)
+            if node in subscribers_of(topic.name):
+                subscribing.append(topic.name)
+        services = [s.name for s in listed_services() if s.node == node]
+        return {"subscribing": subscribing, "publishing": publishing, "services": services}
+
+    def get_time() -> dict[str, Any]:
+        sec, nanosec = graph.stamp()
+        # ROS 2 spelling, plus roslibpy's ROS 1 spelling (its get_time reads secs/nsecs)
+        return {"time": {"sec": sec, "nanosec": nanosec, "secs": sec, "nsecs": nanosec}}
+
+    for name, (type_name, handler) in handlers.items():
+        graph.add_service(f"/rosapi/{name}", f"rosapi_msgs/srv/{type_name}", ROSAPI_NODE, handler)
+    _install_params(graph)
+    install_parameter_services(graph)
+
+
+def _install_params(graph: Graph) -> None:
     def split_name(name: str, service: str) -> tuple[str, str]:
         node, sep, param = name.partition(":")
         if not sep or not node or not param:
@@ -140,6 +325,3 @@ def install_rosapi(graph: Graph) -> None:
         ("get_param_names", "GetParamNames", get_param_names),
     ):
         graph.add_service(f"/rosapi/{name}", f"rosapi_msgs/srv/{type_name}", ROSAPI_NODE, handler)
-    graph.add_service("/rosapi/topics", "rosapi_msgs/srv/Topics", ROSAPI_NODE, topics)
-    graph.add_service("/rosapi/topic_type", "rosapi_msgs/srv/TopicType", ROSAPI_NODE, topic_type)
-    graph.add_service("/rosapi/services", "rosapi_msgs/srv/Services", ROSAPI_NODE, services)

@@ -9,8 +9,9 @@ turns them on.
 * ``safety.stop_on_disconnect``: when the client that last commanded a robot disconnects
   (cleanly or not), that robot is stopped.
 
-Commands are observed as an in-process subscriber of each robot's ``cmd_vel`` topic, resolved to
-the tick they arrive in; robots added to the world later are picked up at the next tick.
+Commands are observed as an in-process subscriber (of node ``/virtual_robot``) of each robot's
+``cmd_vel`` topic, resolved to the tick they arrive in; robots added to or removed from the
+world are followed at the next tick.
 """
 
 from __future__ import annotations
@@ -18,15 +19,13 @@ from __future__ import annotations
 import math
 from typing import Any
 
+from simbridge.graph.bridge import ROBOT_NODE
 from simbridge.graph.graph import Graph
-from simbridge.graph.topics import Peer
+from simbridge.graph.topics import InternalCallback, Peer
 from simbridge.sim import World
 
 
-__all__ = ["SAFETY_NODE", "Safety"]
-
-#: The in-process node that watches the commands.
-SAFETY_NODE = "/simbridge_safety"
+__all__ = ["Safety"]
 
 
 def _finite_command(msg: Any) -> bool:
@@ -51,15 +50,25 @@ class Safety:
         #: Robots stopped by the watchdog or a disconnect so far.
         self.stops = 0
         self._fresh: set[str] = set()
-        self._watched: set[str] = set()
-        self._watch_new_robots()
+        self._callbacks: dict[str, tuple[str, InternalCallback]] = {}
+        self._follow_robots()
         graph.on_disconnect.append(self.disconnected)
 
-    def _watch_new_robots(self) -> None:
+    def forget(self, name: str) -> None:
+        """Stop watching a robot that left the world (its ``cmd_vel`` topic may go)."""
+        entry = self._callbacks.pop(name, None)
+        if entry is not None:
+            self.graph.topics.unsubscribe_internal(*entry)
+        self.last_command.pop(name, None)
+        self.commander.pop(name, None)
+
+    def _follow_robots(self) -> None:
+        """Watch the ``cmd_vel`` of robots added to the world; forget removed ones."""
+        for name in [n for n in self._callbacks if n not in self.world.robots]:
+            self.forget(name)
         for name, robot in self.world.robots.items():
-            if name in self._watched:
+            if name in self._callbacks:
                 continue
-            self._watched.add(name)
 
             def on_cmd_vel(msg: Any, source: Peer | None, name: str = name) -> None:
                 if not _finite_command(msg):
@@ -68,14 +77,15 @@ class Safety:
                 if source is not None:
                     self.commander[name] = source
 
-            self.graph.subscribe(
-                robot.topic("cmd_vel"), "geometry_msgs/msg/Twist", SAFETY_NODE, on_cmd_vel
-            )
+            topic = robot.topic("cmd_vel")
+            # the robot's own node: the watchdog is part of its driver, as in turtlesim
+            self.graph.subscribe(topic, "geometry_msgs/msg/Twist", ROBOT_NODE, on_cmd_vel)
+            self._callbacks[name] = (topic, on_cmd_vel)
 
     def tick(self, now: float) -> None:
         """Stamp this tick's commands and stop robots whose command is stale."""
-        if len(self._watched) != len(self.world.robots):
-            self._watch_new_robots()
+        if self._callbacks.keys() != self.world.robots.keys():
+            self._follow_robots()
         for name in self._fresh:
             self.last_command[name] = now
         self._fresh.clear()

@@ -24,19 +24,34 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from simbridge.errors import ServiceError
+from simbridge.errors import ConversionError, ServiceError, TypeNotFoundError
 from simbridge.graph.topics import BRIDGE_NODE, Peer
+from simbridge.msgs import Converter, TypeRegistry, short_type
 from simbridge.protocol import Frame, OpId, json_frame
 from simbridge.protocol.ops import CallService, ServiceResponse
 
 
-__all__ = ["Handler", "PendingCall", "Service", "ServiceTable", "service_response"]
+__all__ = [
+    "Handler",
+    "PendingCall",
+    "Service",
+    "ServiceTable",
+    "service_response",
+    "typed_calls",
+]
 
 logger = logging.getLogger(__name__)
 
-#: An in-process service: request (``args`` as sent: object, list or None) -> response object.
-#: Raise :class:`ServiceError` to answer ``result: false`` with the error text.
+#: An in-process service: request -> response object. The request is the complete, validated
+#: request message when the service type is known (see :attr:`ServiceTable.prepare`), else
+#: ``args`` as sent (object, list or None). Raise :class:`ServiceError` to answer
+#: ``result: false`` with the error text.
 Handler = Callable[[Any], dict[str, Any]]
+#: Turns ``(service type, args as sent)`` into the request to hand on, or raises
+#: :class:`ServiceError`; ``None`` from it means "type unknown: pass args through unchanged".
+Prepare = Callable[[str, Any], Any]
+#: Checks and completes a client provider's response values: ``(service type, values)``.
+Finish = Callable[[str, Any], Any]
 
 
 def service_response(service: str, values: Any, *, result: bool, op_id: OpId | None) -> Frame:
@@ -52,6 +67,54 @@ def service_response(service: str, values: Any, *, result: bool, op_id: OpId | N
     return json_frame(body)
 
 
+def typed_calls(registry: TypeRegistry, converter: Converter) -> tuple[Prepare, Finish]:
+    """Return the request and response checks for services whose type ``registry`` knows.
+
+    A request (``args`` as an object, or a list zipped onto the request fields in declaration
+    order, protocol reference section 3.5) becomes the complete request message: missing fields
+    get their defaults, unknown fields and wrong types are refused. A service type simbridge
+    does not know passes ``args`` through unchanged.
+    """
+
+    def parts(type_name: str) -> tuple[str, str] | None:
+        try:
+            return registry.service(type_name)
+        except TypeNotFoundError:
+            return None
+
+    def convert(name: str, value: Any, what: str) -> Any:
+        spec = registry.spec(name)
+        try:
+            return converter.from_json(name, value)
+        except ConversionError as err:
+            fields = ", ".join(f.name for f in spec.fields) or "no fields"
+            msg = f"{err} ({what} of {short_type(name)}; expected {fields})"
+            raise ServiceError(msg) from None
+
+    def prepare(type_name: str, args: Any) -> Any:
+        found = parts(type_name)
+        if found is None:
+            return None
+        request = found[0]
+        if args is None:
+            args = {}
+        elif isinstance(args, list):
+            names = [f.name for f in registry.spec(request).fields]
+            if len(args) > len(names):
+                msg = f"request of {type_name} has {len(names)} fields, got {len(args)} args"
+                raise ServiceError(msg)
+            args = dict(zip(names, args, strict=False))
+        return convert(request, args, "request")
+
+    def finish(type_name: str, values: Any) -> Any:
+        found = parts(type_name)
+        if found is None:
+            return values
+        return convert(found[1], values, "response")
+
+    return prepare, finish
+
+
 @dataclass(eq=False, slots=True)
 class Service:
     """One service: answered in process (``handler``) or by a client (``provider``)."""
@@ -61,6 +124,8 @@ class Service:
     node: str
     handler: Handler | None = None
     provider: Peer | None = None
+    #: The name as the provider wrote it in ``advertise_service`` (roslibjs routes by it).
+    written: str = ""
 
 
 @dataclass(eq=False, slots=True)
@@ -86,6 +151,10 @@ class ServiceTable:
         self.services: dict[str, Service] = {}
         #: Calls forwarded to providers, by server id.
         self.pending: dict[str, PendingCall] = {}
+        #: Validates and completes requests of known service types (set by the graph).
+        self.prepare: Prepare | None = None
+        #: Validates and completes provider responses of known service types (set by the graph).
+        self.finish: Finish | None = None
         self._counter = itertools.count(1)
 
     def add(self, name: str, type_name: str, node: str, handler: Handler) -> Service:
@@ -94,14 +163,14 @@ class ServiceTable:
         self.services[name] = service
         return service
 
-    def advertise(self, peer: Peer, name: str, type_name: str) -> Service:
+    def advertise(self, peer: Peer, name: str, type_name: str, written: str = "") -> Service:
         """Make ``peer`` the provider of ``name``; a previous provider's pending calls fail."""
         old = self.services.get(name)
         if old is not None:
             self._fail_pending(old, f"service {name} was re-advertised by another provider")
             if old.provider is not None:
                 old.provider.session.services.pop(name, None)
-        service = Service(name, type_name, BRIDGE_NODE, provider=peer)
+        service = Service(name, type_name, BRIDGE_NODE, provider=peer, written=written or name)
         self.services[name] = service
         peer.session.services[name] = type_name
         return service
@@ -126,9 +195,18 @@ class ServiceTable:
                 )
             )
             return
+        request: Any = op.args
+        if self.prepare is not None:
+            try:
+                prepared = self.prepare(service.type, op.args)
+            except ServiceError as err:
+                peer.send(service_response(op.service, str(err), result=False, op_id=op.id))
+                return
+            if prepared is not None:
+                request = prepared
         if service.handler is not None:
             try:
-                values: Any = service.handler(op.args)
+                values: Any = service.handler(request)
                 ok = True
             except ServiceError as err:
                 values, ok = str(err), False
@@ -143,9 +221,11 @@ class ServiceTable:
         deadline = now + timeout if timeout > 0 else math.inf
         server_id = f"service_request:{name}:{next(self._counter)}"
         self.pending[server_id] = PendingCall(server_id, service, peer, op.id, op.service, deadline)
-        args = op.args if isinstance(op.args, dict) else {}
+        args = request if request is not None else {}
         provider.send(
-            json_frame({"op": "call_service", "id": server_id, "service": name, "args": args})
+            json_frame(
+                {"op": "call_service", "id": server_id, "service": service.written, "args": args}
+            )
         )
 
     def respond(self, peer: Peer, op: ServiceResponse) -> str | None:
@@ -166,6 +246,11 @@ class ServiceTable:
         else:
             ok = False
             values = f"service provider sent no result object (values: {values!r})"
+        if ok and self.finish is not None:
+            try:
+                values = self.finish(call.service.type, values)
+            except ServiceError as err:
+                ok, values = False, f"service provider sent an invalid response: {err}"
         call.caller.send(service_response(call.written, values, result=ok, op_id=call.caller_id))
         return None
 

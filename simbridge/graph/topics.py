@@ -193,6 +193,14 @@ class TopicTable:
         topic.internal.append((node, callback))
         return topic
 
+    def unsubscribe_internal(self, name: str, callback: InternalCallback) -> None:
+        """Remove an in-process subscriber added by :meth:`subscribe_internal`."""
+        topic = self.topics.get(name)
+        if topic is None:
+            return
+        topic.internal = [(n, cb) for n, cb in topic.internal if cb is not callback]
+        self._forget_if_unused(topic)
+
     def drop_peer(self, peer: Peer) -> None:
         """Remove every subscription and advertisement of a client that left."""
         for written in list(peer.session.subscriptions):

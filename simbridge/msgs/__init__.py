@@ -14,6 +14,7 @@ from simbridge.msgs.registry import (
     normalize_type,
     short_type,
 )
+from simbridge.msgs.typedefs import typedefs
 
 
 __all__ = [
@@ -24,4 +25,5 @@ __all__ = [
     "TypeRegistry",
     "normalize_type",
     "short_type",
+    "typedefs",
 ]

@@ -48,6 +48,8 @@ PRIMITIVES: frozenset[str] = frozenset(
     }
 )
 
+#: The uint8 member rosbags gives an empty message (CDR needs one); not a ROS field.
+_EMPTY_FIELD = "structure_needs_at_least_one_member"
 _PKG = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -120,11 +122,45 @@ class MessageSpec:
 class TypeRegistry:
     """Every interface type simbridge knows, looked up by any accepted spelling."""
 
-    def __init__(self, store: Stores = Stores.LATEST) -> None:
+    def __init__(self, store: Stores = Stores.LATEST, *, interfaces: bool = True) -> None:
         #: The rosbags type store: definitions, CDR serializers, message classes.
         self.store = get_typestore(store)
         #: Compiled specs by canonical name, filled lazily.
         self._specs: dict[str, MessageSpec] = {}
+        #: Services: ``pkg/srv/Type`` -> (request message, response message).
+        self.services: dict[str, tuple[str, str]] = {}
+        #: Actions: ``pkg/action/Type`` -> (goal, result, feedback messages).
+        self.actions: dict[str, tuple[str, str, str]] = {}
+        #: The .msg text each registered (non-rosbags) message was defined with.
+        self.texts: dict[str, str] = {}
+        self._batch: dict[str, Any] | None = None
+        if interfaces:
+            self._add_interfaces()
+
+    def _add_interfaces(self) -> None:
+        """Add simbridge's service/action interfaces (generated once per process, then copied)."""
+        global _INTERFACES
+        if _INTERFACES is None:
+            from simbridge.msgs.interfaces import register_interfaces
+
+            fresh = TypeRegistry(interfaces=False)
+            before = set(fresh.store.fielddefs)
+            register_interfaces(fresh)
+            added = set(fresh.store.fielddefs) - before
+            _INTERFACES = (
+                {k: fresh.store.fielddefs[k] for k in added},
+                {k: fresh.store.types[k] for k in added},
+                fresh.services,
+                fresh.actions,
+                fresh.texts,
+            )
+        fielddefs, types, services, actions, texts = _INTERFACES
+        for name in fielddefs.keys() - self.store.fielddefs.keys():
+            self.store.fielddefs[name] = fielddefs[name]
+            self.store.types[name] = types[name]
+        self.services.update(services)
+        self.actions.update(actions)
+        self.texts.update(texts)
 
     # -- lookup -----------------------------------------------------------------------------
 
@@ -152,7 +188,7 @@ class TypeRegistry:
             raise TypeNotFoundError(msg) from None
         spec = MessageSpec(
             canonical,
-            tuple(_field_spec(fname, desc) for fname, desc in fields),
+            tuple(_field_spec(fname, desc) for fname, desc in fields if fname != _EMPTY_FIELD),
             tuple((c[0], c[1], c[2]) for c in consts),
         )
         self._specs[canonical] = spec
@@ -172,6 +208,41 @@ class TypeRegistry:
         text, _digest = self.store.generate_msgdef(canonical, ros_version=2)
         return str(text)
 
+    def service(self, name: str) -> tuple[str, str]:
+        """Return the (request, response) message names of a service type.
+
+        Raises:
+            TypeNotFoundError: the name is malformed or the service type is unknown.
+        """
+        canonical = normalize_type(name, "srv")
+        parts = self.services.get(canonical)
+        if parts is None:
+            msg = f"unknown service type '{name}'"
+            raise TypeNotFoundError(msg)
+        return parts
+
+    def action(self, name: str) -> tuple[str, str, str]:
+        """Return the (goal, result, feedback) message names of an action type.
+
+        Raises:
+            TypeNotFoundError: the name is malformed or the action type is unknown.
+        """
+        canonical = normalize_type(name, "action")
+        parts = self.actions.get(canonical)
+        if parts is None:
+            msg = f"unknown action type '{name}'"
+            raise TypeNotFoundError(msg)
+        return parts
+
+    def message_text(self, name: str) -> str:
+        """Return the .msg text of one message type (without its dependencies)."""
+        canonical = normalize_type(name)
+        text = self.texts.get(canonical)
+        if text is not None:
+            return text
+        full = self.definition_text(canonical)
+        return full.split("\n" + "=" * 80 + "\n", 1)[0]
+
     # -- registration -------------------------------------------------------------------------
 
     def register_msg(self, name: str, text: str) -> str:
@@ -183,13 +254,75 @@ class TypeRegistry:
         if len(parts) != 3:
             msg = f"register_msg needs 'pkg/kind/Type', got '{name}'"
             raise TypeNotFoundError(msg)
-        types = get_types_from_msg(text, f"{parts[0]}/msg/{parts[2]}")
+        key = f"{parts[0]}/msg/{parts[2]}"
+        parsed = _PARSED.get((key, text))
+        if parsed is None:
+            parsed = _PARSED[(key, text)] = get_types_from_msg(text or "\n", key)
         renamed = {}
-        for key, value in types.items():
-            renamed[name if key == f"{parts[0]}/msg/{parts[2]}" else key] = value
-        self.store.register(renamed)
+        for k, value in parsed.items():
+            renamed[name if k == key else k] = value
+        if self._batch is not None:
+            self._batch.update(renamed)
+        else:
+            self.store.register(renamed)
         self._specs.pop(name, None)
+        self.texts[name] = text
         return name
+
+    def register_many(self, definitions: list[tuple[str, str, str]]) -> None:
+        """Register many ``(kind, name, text)`` definitions at once (one code generation)."""
+        self._batch = {}
+        try:
+            for kind, name, text in definitions:
+                if kind == "msg":
+                    self.register_msg(name, text)
+                elif kind == "srv":
+                    self.register_srv(name, text)
+                else:
+                    self.register_action(name, text)
+            batch = self._batch
+        finally:
+            self._batch = None
+        self.store.register(batch)
+        self._specs.clear()
+
+    def register_srv(self, name: str, text: str) -> str:
+        """Register a service type from ``.srv`` text (request ``---`` response)."""
+        canonical = normalize_type(name, "srv")
+        request, response = _sections(text, 2, name)
+        self.register_msg(f"{canonical}_Request", request)
+        self.register_msg(f"{canonical}_Response", response)
+        self.services[canonical] = (f"{canonical}_Request", f"{canonical}_Response")
+        return canonical
+
+    def register_action(self, name: str, text: str) -> str:
+        """Register an action type from ``.action`` text (goal ``---`` result ``---`` feedback)."""
+        canonical = normalize_type(name, "action")
+        goal, result, feedback = _sections(text, 3, name)
+        names = (f"{canonical}_Goal", f"{canonical}_Result", f"{canonical}_Feedback")
+        for part, body in zip(names, (goal, result, feedback), strict=True):
+            self.register_msg(part, body)
+        self.actions[canonical] = names
+        return canonical
+
+
+_INTERFACES: Any = None
+
+#: Parsed .msg texts, shared by every registry of the process (parsing is the slow part).
+_PARSED: dict[tuple[str, str], Any] = {}
+
+
+def _sections(text: str, count: int, name: str) -> list[str]:
+    parts: list[list[str]] = [[]]
+    for line in text.splitlines():
+        if line.strip() == "---":
+            parts.append([])
+        else:
+            parts[-1].append(line)
+    if len(parts) != count:
+        msg = f"{name}: expected {count} sections separated by '---', got {len(parts)}"
+        raise TypeNotFoundError(msg)
+    return ["\n".join(p).strip("\n") for p in parts]
 
 
 def _field_spec(fname: str, desc: tuple[Any, Any]) -> FieldSpec:

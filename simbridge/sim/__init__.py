@@ -5,12 +5,14 @@ numpy only, no I/O and no clock: deterministic given a seed and the sequence of 
 
 from __future__ import annotations
 
+from simbridge.sim.dynamics import DynamicModel
 from simbridge.sim.kinematics import RobotState, clamp_command, integrate, wrap_angle
 from simbridge.sim.lidar import beam_angles, raycast, segments_array
 from simbridge.sim.world import KinematicModel, MotionModel, Robot, World
 
 
 __all__ = [
+    "DynamicModel",
     "KinematicModel",
     "MotionModel",
     "Robot",

@@ -14,9 +14,10 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from simbridge.config import Params, RobotParams, WorldSpec
-from simbridge.sim.kinematics import RobotState, clamp_command, integrate
-from simbridge.sim.lidar import FloatArray, beam_angles, raycast, segments_array
+from simbridge.config import Params, RobotParams, WorldSpec, check_robot_name
+from simbridge.sim.collision import Contact, pose_clear, resolve_moves
+from simbridge.sim.kinematics import RobotState, clamp_command, integrate, wrap_angle
+from simbridge.sim.lidar import FloatArray, beam_angles, raycast_batch, segments_array
 
 
 __all__ = ["KinematicModel", "MotionModel", "Robot", "World"]
@@ -88,7 +89,13 @@ class World:
         #: Every wall and obstacle edge, ``(N, 4)``.
         self.segments: FloatArray = segments_array(spec.segments())
         #: Robots by name.
-        self.robots: dict[str, Robot] = {"": Robot("", spec.robot.pose)}
+        self.robots: dict[str, Robot] = {
+            name: Robot(name, pose) for name, pose in spec.start_poses().items()
+        }
+        #: Contacts of the last step: (robot name, obstacle name or "wall", contact).
+        self.contacts: list[tuple[str, str, Contact]] = []
+        #: Robots whose motion an obstacle stopped (fully or partly) in the last step.
+        self.touching: set[str] = set()
         #: How commands move robots.
         self.motion: MotionModel = KinematicModel()
         #: Simulated seconds since start (or the last reset).
@@ -97,6 +104,9 @@ class World:
         self.failures = 0
         #: Steps since start (or the last reset).
         self.steps = 0
+        #: Emergency stop latched: commands are ignored and every robot is held still until
+        #: :meth:`release_estop` (a world reset does not release it).
+        self.estopped = False
         #: Seeded noise source (LiDAR noise); reseeded by reset for repeatable runs.
         self._seed = seed
         self.rng = np.random.default_rng(seed)
@@ -113,6 +123,8 @@ class World:
     def command(self, name: str, v: float, omega: float) -> tuple[float, float]:
         """Set a robot's velocity command; return it as clamped to the current limits.
 
+        While the emergency stop is latched the command is dropped and ``(0, 0)`` returned.
+
         Raises:
             ValueError: a value is not finite (NaN or infinity never reaches the state) or is
                 absurd (above :data:`ABSURD_VELOCITY`: a unit or overflow bug, not a wish).
@@ -128,19 +140,32 @@ class World:
             )
             raise ValueError(msg)
         robot = self.robots[name]
+        if self.estopped:
+            return 0.0, 0.0
         robot.cmd_v, robot.cmd_omega = v, omega
         limits = self.params.robot
         return clamp_command(v, omega, limits.max_linear_velocity, limits.max_angular_velocity)
 
     def step(self) -> None:
-        """Advance every robot by one ``dt``.
+        """Advance every robot by one ``dt``; footprints never pass through walls or robots.
+
+        Each robot's motion model proposes a move; :func:`~simbridge.sim.collision.
+        resolve_moves` cuts it at the first contact (sliding along walls). A robot whose move
+        was cut gets the speed it actually achieved along its heading, and the contact is
+        listed in :attr:`contacts` for this step.
 
         A robot whose update raises, or leaves a non-finite state, is logged and put back at
         its start pose, stopped; the other robots and the loop go on.
         """
         dt = self.dt
         limits = self.params.robot
-        for robot in self.robots.values():
+        robots = list(self.robots.values())
+        p0 = [(r.state.x, r.state.y) for r in robots]
+        for i, robot in enumerate(robots):
+            if self.estopped:
+                robot.cmd_v = robot.cmd_omega = 0.0
+                robot.state.v = robot.state.omega = 0.0
+                continue
             try:
                 v, omega = clamp_command(
                     robot.cmd_v,
@@ -156,7 +181,25 @@ class World:
             except Exception:
                 logger.exception("robot '%s' failed to update: reset to its start pose", robot.name)
                 robot.place(robot.start)
+                p0[i] = (robot.state.x, robot.state.y)  # a reset is a jump, not a move to cut
                 self.failures += 1
+        self.contacts = []
+        if robots and (len(robots) > 1 or self.segments.shape[0]):
+            start = np.array(p0, dtype=np.float64).reshape(-1, 2)
+            proposed = np.array([(r.state.x, r.state.y) for r in robots], dtype=np.float64)
+            final, contacts = resolve_moves(start, proposed, limits.radius, self.segments)
+            for c in contacts:
+                robot = robots[c.robot]
+                s = robot.state
+                x, y = float(final[c.robot, 0]), float(final[c.robot, 1])
+                achieved = ((x - p0[c.robot][0]) * math.cos(s.theta)) + (
+                    (y - p0[c.robot][1]) * math.sin(s.theta)
+                )
+                s.x, s.y = x, y
+                s.v = achieved / dt if abs(achieved) < abs(s.v * dt) else s.v
+                other = "wall" if c.other < 0 else robots[c.other].name
+                self.contacts.append((robot.name, other, c))
+        self.touching = {name for name, _, _ in self.contacts}
         self.time += dt
         self.steps += 1
 
@@ -177,17 +220,124 @@ class World:
 
     def scan(self, name: str) -> npt.NDArray[np.float32]:
         """Return the LiDAR ranges of a robot as float32, in ``[range_min, range_max]``."""
+        ranges: npt.NDArray[np.float32] = self.scans([name])[0]
+        return ranges
+
+    def scans(self, names: list[str]) -> npt.NDArray[np.float32]:
+        """Return the LiDAR ranges of several robots at once, ``(len(names), rays)`` float32.
+
+        Each scan sees the walls and every other robot's footprint (a disc of
+        ``robot.radius``), never its own robot. All scans are cast in one batch
+        (:func:`~simbridge.sim.lidar.raycast_batch`).
+        """
         lidar = self.params.lidar
-        lx, ly, lyaw = self.laser_pose(name)
-        ranges = raycast(lx, ly, lyaw, self.angles(), self.segments, lidar.range_max)
+        everyone = list(self.robots)
+        index = {n: i for i, n in enumerate(everyone)}
+        poses = np.array([self.laser_pose(n) for n in names], dtype=np.float64).reshape(-1, 3)
+        centres = np.array(
+            [(r.state.x, r.state.y) for r in self.robots.values()], dtype=np.float64
+        ).reshape(-1, 2)
+        owners = np.array([index[n] for n in names], dtype=np.intp)
+        ranges = raycast_batch(
+            poses[:, :2],
+            poses[:, 2],
+            lidar.rays,
+            self.segments,
+            lidar.range_max,
+            circles=centres,
+            circle_radius=self.params.robot.radius,
+            owners=owners,
+        )
         if lidar.noise_stddev > 0:
-            ranges = ranges + self.rng.normal(0.0, lidar.noise_stddev, ranges.shape[0])
+            ranges = ranges + self.rng.normal(0.0, lidar.noise_stddev, ranges.shape)
         return np.clip(ranges, lidar.range_min, lidar.range_max).astype(np.float32)
+
+    def estop(self) -> None:
+        """Latch the emergency stop: every robot halts at once and ignores commands."""
+        self.estopped = True
+        for robot in self.robots.values():
+            robot.cmd_v = robot.cmd_omega = 0.0
+            robot.state.v = robot.state.omega = 0.0
+
+    def release_estop(self) -> None:
+        """Release the emergency stop; robots stay still until the next command."""
+        self.estopped = False
+
+    # -- robots at run time ----------------------------------------------------------------
+
+    def check_pose(self, pose: tuple[float, float, float], *, ignore: str | None = None) -> None:
+        """Refuse a pose whose footprint would overlap a wall or another robot.
+
+        ``ignore`` is the robot being moved (its own footprint does not count). Other robots
+        count at their current position and at their start pose (so /reset stays clear).
+
+        Raises:
+            ValueError: the pose is not finite or is not clear.
+        """
+        if not all(math.isfinite(v) for v in pose):
+            msg = f"pose must be three finite numbers [x, y, theta], got {list(pose)}"
+            raise ValueError(msg)
+        others = [
+            p
+            for r in self.robots.values()
+            if r.name != ignore
+            for p in ((r.state.x, r.state.y), (r.start[0], r.start[1]))
+        ]
+        why = pose_clear(
+            pose[0],
+            pose[1],
+            self.params.robot.radius,
+            self.segments,
+            np.array(others, dtype=np.float64).reshape(-1, 2),
+        )
+        if why is not None:
+            msg = f"cannot place a robot at ({pose[0]:g}, {pose[1]:g}): {why}"
+            raise ValueError(msg)
+
+    def spawn(self, name: str, pose: tuple[float, float, float]) -> Robot:
+        """Add a robot at ``pose`` (also its start pose for /reset); return it.
+
+        Raises:
+            ValueError: the name is invalid or taken, or the pose is not clear.
+        """
+        check_robot_name(name)
+        if name in self.robots:
+            msg = f"a robot named '{name}' already exists; pick another name"
+            raise ValueError(msg)
+        self.check_pose(pose)
+        start = (pose[0], pose[1], wrap_angle(pose[2]))
+        robot = Robot(name, start)
+        robot.place(start)
+        self.robots[name] = robot
+        return robot
+
+    def remove(self, name: str) -> Robot:
+        """Remove a robot; return it.
+
+        Raises:
+            KeyError: no robot of that name.
+        """
+        robot = self.robots.pop(name)
+        self.touching.discard(name)
+        return robot
+
+    def teleport(self, name: str, pose: tuple[float, float, float]) -> None:
+        """Move a robot to ``pose`` at once, stopped, keeping its start pose.
+
+        Raises:
+            KeyError: no robot of that name.
+            ValueError: the pose is not clear.
+        """
+        robot = self.robots[name]
+        self.check_pose(pose, ignore=name)
+        robot.place((pose[0], pose[1], wrap_angle(pose[2])))
 
     def reset(self) -> None:
         """Put every robot back at its start pose, stopped; restart time and noise."""
         for robot in self.robots.values():
             robot.place(robot.start)
+        self.contacts = []
+        self.touching = set()
         self.time = 0.0
         self.steps = 0
         self.rng = np.random.default_rng(self._seed)

@@ -402,7 +402,197 @@ def throttle(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return {"times": times[:count]}
 
 
+def rosapi_all(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """Every rosapi helper of roslibpy, Param, other rosapi and rcl_interfaces services.
+
+    Same result keys as tests/js/scenarios/rosapi_all.mjs where the library has the feature.
+    """
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+
+    def call(name: str, type_name: str, request: Any) -> JSON:
+        return call_service(roslibpy, ros, name, type_name, request, timeout_s)
+
+    out: dict[str, Any] = {}
+    out["topics"] = {"topics": ros.get_topics()}
+    out["topicsForType"] = ros.get_topics_for_type("tf2_msgs/msg/TFMessage")
+    out["services"] = ros.get_services()
+    out["servicesForType"] = ros.get_services_for_type("std_srvs/srv/Empty")
+    out["requestDetails"] = dict(
+        ros.get_service_request_details("example_interfaces/srv/AddTwoInts")
+    )
+    out["responseDetails"] = dict(ros.get_service_response_details("rosapi_msgs/srv/GetParam"))
+    out["nodes"] = ros.get_nodes()
+    out["nodeDetails"] = dict(ros.get_node_details("/virtual_robot"))
+    out["params"] = ros.get_params()
+    out["topicType"] = ros.get_topic_type("/scan")
+    out["serviceType"] = ros.get_service_type("/reset")
+    out["messageDetails"] = dict(ros.get_message_details("nav_msgs/msg/Odometry"))["typedefs"]
+    servers: list[Any] = []
+    ros.get_action_servers(servers.append)
+    out["actionServers"] = wait_for(lambda: servers, timeout_s, "get_action_servers")[0][
+        "action_servers"
+    ]
+    t = ros.get_time()
+    out["time"] = {"time": {"secs": t.secs, "nsecs": t.nsecs}}
+    out["subscribers"] = call("/rosapi/subscribers", "rosapi/Subscribers", {"topic": "/cmd_vel"})
+    out["providers"] = call(
+        "/rosapi/service_providers", "rosapi/ServiceProviders", {"service": "std_srvs/srv/Empty"}
+    )
+    out["serviceNode"] = call("/rosapi/service_node", "rosapi/ServiceNode", {"service": "/reset"})
+    out["hasParam"] = call(
+        "/rosapi/has_param", "rosapi/HasParam", {"name": "/virtual_robot:lidar.rays"}
+    )
+    out["version"] = call("/rosapi/get_ros_version", "rosapi/GetROSVersion", {})
+    out["interfaces"] = len(call("/rosapi/interfaces", "rosapi/Interfaces", {})["interfaces"])
+    out["rawTypes"] = call("/rosapi/topics_and_raw_types", "rosapi/TopicsAndRawTypes", {})
+    out["publishers"] = call("/rosapi/publishers", "rosapi/Publishers", {"topic": "/odom"})[
+        "publishers"
+    ]
+    speed = roslibpy.Param(ros, "/virtual_robot:robot.max_angular_velocity")
+    speed.set(1.25, timeout=timeout_s)
+    out["paramSet"] = {"ok": True, "value": None}
+    out["paramGet"] = {"ok": True, "value": speed.get(timeout=timeout_s)}
+    out["paramDelete"] = {"ok": True, "value": ros.delete_param(speed.name)}
+    out["paramUnknown"] = {"ok": True, "value": ros.get_param("/virtual_robot:nope")}
+    out["getParameters"] = call(
+        "/virtual_robot/get_parameters",
+        "rcl_interfaces/srv/GetParameters",
+        {"names": ["robot.mass", "lidar.rays"]},
+    )
+    out["setParameters"] = call(
+        "/virtual_robot/set_parameters",
+        "rcl_interfaces/srv/SetParameters",
+        {
+            "parameters": [
+                {"name": "lidar.range_max", "value": {"type": 3, "double_value": 3.0}},
+                {"name": "lidar.range_min", "value": {"type": 3, "double_value": -1.0}},
+            ]
+        },
+    )
+    out["listParameters"] = call(
+        "/virtual_robot/list_parameters",
+        "rcl_interfaces/srv/ListParameters",
+        {"prefixes": ["robot"], "depth": 0},
+    )
+    out["describeParameters"] = call(
+        "/virtual_robot/describe_parameters",
+        "rcl_interfaces/srv/DescribeParameters",
+        {"names": ["lidar.range_max"]},
+    )
+    return out
+
+
+def services_actions(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """Roslibpy serves and calls services on one connection; ActionClient against /fibonacci.
+
+    Same result keys as tests/js/scenarios/services_actions.mjs. The /fibonacci action server
+    is run by the test (roslibpy has no action server side).
+    """
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+
+    def add(request: Any, response: Any) -> bool:
+        response["sum"] = request["a"] + request["b"]
+        return True
+
+    def quiet(request: Any, response: Any) -> None:
+        response["success"] = True
+        response["message"] = "no result key"
+
+    served = [
+        roslibpy.Service(ros, "/add_two_ints", "example_interfaces/srv/AddTwoInts"),
+        roslibpy.Service(ros, "/quiet", "std_srvs/srv/Trigger"),
+        roslibpy.Service(ros, "/refuse", "std_srvs/srv/Trigger"),
+    ]
+    served[0].advertise(add)
+    served[1].advertise(quiet)
+    served[2].advertise(lambda request, response: False)
+    ros.send_on_ready(
+        roslibpy.Message(
+            {"op": "advertise_service", "service": "/slow", "type": "std_srvs/Trigger"}
+        )
+    )
+    wait_for(lambda: "/slow" in ros.get_services(), timeout_s, "services advertised")
+
+    def outcome(name: str, type_name: str, request: Any) -> JSON:
+        try:
+            return {
+                "ok": True,
+                "value": call_service(roslibpy, ros, name, type_name, request, timeout_s),
+            }
+        except ServiceFailure as exc:
+            return {"ok": False, "error": exc.values}
+
+    out: dict[str, Any] = {"services": {}}
+    s = out["services"]
+    s["object"] = outcome("/add_two_ints", "example_interfaces/srv/AddTwoInts", {"a": 2, "b": 3})
+    s["quiet"] = outcome("/quiet", "std_srvs/srv/Trigger", {})
+    s["refuse"] = outcome("/refuse", "std_srvs/srv/Trigger", {})
+    started = now_ms()
+    s["slow"] = outcome("/slow", "std_srvs/srv/Trigger", {})
+    s["slowMs"] = now_ms() - started
+    for service in served:
+        service.unadvertise()
+
+    a: dict[str, Any] = {}
+    out["actions"] = a
+    wait_for(
+        lambda: (
+            "/fibonacci"
+            in call_service(
+                roslibpy, ros, "/rosapi/action_servers", "rosapi/GetActionServers", {}, timeout_s
+            )["action_servers"]
+        ),
+        timeout_s,
+        "/fibonacci advertised",
+    )
+    client = roslibpy.ActionClient(ros, "/fibonacci", "example_interfaces/action/Fibonacci")
+
+    def send(goal: dict[str, Any]) -> tuple[str, dict[str, Any], threading.Event]:
+        state: dict[str, Any] = {"feedback": []}
+        done = threading.Event()
+
+        def resultback(result: Any) -> None:
+            state.update(ok=True, status=int(result["status"].value), values=result["values"])
+            done.set()
+
+        def errback(err: Any) -> None:
+            state.update(ok=False, status=int(err["status"].value), values=err["values"])
+            done.set()
+
+        goal_id = client.send_goal(
+            goal, resultback, lambda fb: state["feedback"].append(dict(fb)), errback
+        )
+        return goal_id, state, done
+
+    def finished(item: tuple[str, dict[str, Any], threading.Event]) -> dict[str, Any]:
+        if not item[2].wait(timeout_s):
+            raise TimeoutError(f"goal {item[0]} did not finish")
+        return item[1]
+
+    a["succeeded"] = finished(send({"order": 6}))
+    a["failed"] = finished(send({"order": -1}))
+    long = send({"order": 100})
+    wait_for(lambda: long[1]["feedback"], timeout_s, "feedback of the long goal")
+    client.cancel_goal(long[0])
+    a["canceled"] = finished(long)
+    missing = roslibpy.ActionClient(ros, "/no_such_action", "example_interfaces/action/Fibonacci")
+    state: dict[str, Any] = {}
+    got = threading.Event()
+    missing.send_goal(
+        {"order": 1},
+        lambda r: (state.update(ok=True), got.set()),
+        None,
+        lambda e: (state.update(ok=False, values=e["values"]), got.set()),
+    )
+    if not got.wait(timeout_s):
+        raise TimeoutError("goal to a missing action got no result")
+    a["missing"] = state
+    return out
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
+    "services_actions": services_actions,
+    "rosapi_all": rosapi_all,
     "topics": topics,
     "odom_rate": odom_rate,
     "drive": drive,
@@ -415,3 +605,9 @@ SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
     "bad_publish": bad_publish,
     "throttle": throttle,
 }
+
+# Scenarios of other areas, kept in their own modules (imported last: they use the helpers).
+from roslibpy_fleet import FLEET_SCENARIOS  # noqa: E402
+
+
+SCENARIOS.update(FLEET_SCENARIOS)

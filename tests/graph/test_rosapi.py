@@ -93,3 +93,46 @@ def test_services_lists_reset_and_rosapi(graph: Graph) -> None:
     """rosapi/services includes the simulator's /reset."""
     services = call(graph, "/rosapi/services")["values"]["services"]
     assert "/reset" in services and "/rosapi/topics" in services
+
+
+def test_topics_and_raw_types_give_full_text_with_msg_sections(graph: Graph) -> None:
+    """typedefs_full_text: the .msg text then each dependency as an 80 '=' MSG: section."""
+    values = call(graph, "/rosapi/topics_and_raw_types", {})["values"]
+    text = dict(zip(values["topics"], values["typedefs_full_text"], strict=True))
+    assert text["/cmd_vel"].startswith(
+        "geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular"
+    )
+    assert "=" * 80 + "\nMSG: geometry_msgs/Vector3\nfloat64 x" in text["/cmd_vel"]
+    assert "MSG: builtin_interfaces/Time" in text["/rosout"]
+
+
+def test_graph_introspection_services(graph: Graph) -> None:
+    """publishers, subscribers, service_type/node/providers, node_details, action_type."""
+    assert call(graph, "/rosapi/publishers", {"topic": "/odom"})["values"] == {
+        "publishers": ["/virtual_robot"]
+    }
+    assert call(graph, "rosapi/subscribers", ["/cmd_vel"])["values"] == {
+        "subscribers": ["/virtual_robot"]
+    }
+    assert call(graph, "/rosapi/service_type", {"service": "reset"})["values"] == {
+        "type": "std_srvs/srv/Empty"
+    }
+    assert call(graph, "/rosapi/service_node", {"service": "/nope"})["values"] == {"node": ""}
+    providers = call(graph, "/rosapi/service_providers", {"service": "rosapi_msgs/Topics"})
+    assert providers["values"] == {"providers": ["/rosapi"]}
+    bad = call(graph, "/rosapi/node_details", {"node": "/ghost"})
+    assert bad["result"] is False and "does not exist" in bad["values"]
+    assert call(graph, "/rosapi/action_type", {"action": "/nope"})["values"] == {"type": ""}
+
+
+def test_details_services_and_versions(graph: Graph) -> None:
+    """message/service/action details as TypeDefs; unknown type fails with a reason."""
+    req = call(graph, "/rosapi/service_request_details", {"type": "std_srvs/SetBool"})
+    assert req["values"]["typedefs"][0]["fieldnames"] == ["data"]
+    fb = call(graph, "/rosapi/action_feedback_details", {"type": "example_interfaces/Fibonacci"})
+    assert fb["values"]["typedefs"][0]["fieldtypes"] == ["int32"]
+    unknown = call(graph, "/rosapi/message_details", {"type": "nope/Nope"})
+    assert unknown["result"] is False and "unknown message type" in unknown["values"]
+    assert call(graph, "/rosapi/get_ros_version")["values"] == {"version": 2, "distro": "jazzy"}
+    stamp = call(graph, "/rosapi/get_time")["values"]["time"]
+    assert stamp["sec"] == stamp["secs"] and stamp["nanosec"] == stamp["nsecs"]

@@ -3,7 +3,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from simbridge.config import Params, SafetyParams, load_world
+from simbridge.config import Params, SafetyParams, WorldSpec
 from simbridge.graph import Graph, RobotBridge
 from simbridge.graph.safety import Safety
 from simbridge.sim import World
@@ -12,7 +12,7 @@ from tests.helpers import RecordingPeer
 
 def make(**safety: Any) -> tuple[Graph, World, Safety]:
     graph = Graph()
-    world = World(load_world(None), Params(safety=SafetyParams(**safety)))
+    world = World(WorldSpec(), Params(safety=SafetyParams(**safety)))
     RobotBridge(graph, world)
     return graph, world, Safety(graph, world)
 
@@ -77,3 +77,19 @@ def test_disconnect_leaves_the_robot_moving_when_the_option_is_off() -> None:
     drive(graph, driver, 0.2, 0.0)
     graph.remove_peer(driver)
     assert world.robots[""].cmd_v == 0.2
+
+
+def test_a_removed_robot_is_forgotten_and_its_topic_can_go() -> None:
+    graph = Graph()
+    spec = WorldSpec.model_validate(
+        {"robots": [{"name": "r1", "pose": [0, 0, 0]}, {"name": "r2", "pose": [1, 0, 0]}]}
+    )
+    world = World(spec, Params(safety=SafetyParams(cmd_vel_timeout=0.5)))
+    bridge = RobotBridge(graph, world)
+    safety = Safety(graph, world)
+    bridge.on_robot_removed.append(safety.forget)
+    world.remove("r2")
+    bridge.remove_robot("r2")
+    assert "/r2/cmd_vel" not in graph.topics.topics
+    safety.tick(0.0)
+    assert "/r2/cmd_vel" not in graph.topics.topics and "/r1/cmd_vel" in graph.topics.topics

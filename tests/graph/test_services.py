@@ -107,7 +107,7 @@ def test_every_client_reply_shape_is_answered(
 ) -> None:
     """Replies without result, with result null or without object values never hang."""
     provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(provider, graph, op="advertise_service", service="/s", type="std_srvs/Trigger")
+    op(provider, graph, op="advertise_service", service="/s", type="my_pkg/srv/Sum")
     op(caller, graph, op="call_service", service="/s", id="x")
     (request,) = provider.take()
     op(provider, graph, op="service_response", service="/s", id=request["id"], **reply)
@@ -144,3 +144,52 @@ def test_service_response_for_unknown_id_is_a_status_error(graph: Graph) -> None
     stray = RecordingPeer(graph)
     op(stray, graph, op="service_response", service="/s", id="nope", result=True)
     assert stray.take()[0]["op"] == "status"
+
+
+def test_known_service_type_completes_requests_and_responses(graph: Graph) -> None:
+    """AddTwoInts: list args zipped onto (a, b); a partial reply gets its defaults filled."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(
+        provider,
+        graph,
+        op="advertise_service",
+        service="/add",
+        type="example_interfaces/AddTwoInts",
+    )
+    op(caller, graph, op="call_service", service="add", args=[2], id=7)
+    (request,) = provider.take()
+    assert request["args"] == {"a": 2, "b": 0}
+    op(provider, graph, op="service_response", service="/add", id=request["id"], values={})
+    (answer,) = caller.take()
+    assert answer == {
+        "op": "service_response",
+        "service": "add",
+        "values": {"sum": 0},
+        "result": True,
+        "id": 7,
+    }
+
+
+def test_invalid_request_of_a_known_type_is_refused_before_the_provider(graph: Graph) -> None:
+    """A string for an int64 field: result false naming the field; the provider sees nothing."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(
+        provider,
+        graph,
+        op="advertise_service",
+        service="/add",
+        type="example_interfaces/AddTwoInts",
+    )
+    op(caller, graph, op="call_service", service="/add", args={"a": "one"}, id=1)
+    assert provider.take() == []
+    (answer,) = caller.take()
+    assert answer["result"] is False and "a must be an integer" in answer["values"]
+
+
+def test_unknown_service_type_passes_list_args_through_unchanged(graph: Graph) -> None:
+    """No definition: no validation, no default filling."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(provider, graph, op="advertise_service", service="/x", type="my_pkg/Thing")
+    op(caller, graph, op="call_service", service="/x", args=[1, "two"], id=1)
+    (request,) = provider.take()
+    assert request["args"] == [1, "two"]

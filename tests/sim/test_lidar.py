@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 
 from simbridge.config import WorldSpec
-from simbridge.sim.lidar import beam_angles, raycast, segments_array
+from simbridge.sim.lidar import beam_angles, raycast, raycast_batch, segments_array
 
 
 SQUARE = WorldSpec.model_validate(
@@ -70,3 +70,43 @@ def test_beam_angles_are_360_increments_of_2_pi_over_n() -> None:
     assert len(angles) == 360
     assert angles[0] == 0.0
     assert angles[-1] == pytest.approx(359 * 2 * math.pi / 360)
+
+
+def test_batched_scans_equal_one_scan_at_a_time() -> None:
+    """raycast_batch (culled by range and angle) gives exactly what the brute force gives."""
+    rng = np.random.default_rng(5)
+    segments = rng.uniform(-5.0, 5.0, (100, 4))
+    origins = rng.uniform(-5.0, 5.0, (50, 2))
+    yaws = rng.uniform(-4.0, 4.0, 50)
+    batch = raycast_batch(origins, yaws, 360, segments, 3.5)
+    for i in range(50):
+        one = raycast(origins[i, 0], origins[i, 1], yaws[i], beam_angles(360), segments, 3.5)
+        np.testing.assert_allclose(batch[i], one, atol=1e-9)
+
+
+def test_batched_scan_sees_other_footprints_but_not_its_own() -> None:
+    """Two robots 2 m apart: each sees the other's disc at 2 - r straight ahead, not itself."""
+    origins = np.array([[0.0, 0.0], [2.0, 0.0]])
+    ranges = raycast_batch(
+        origins,
+        np.array([0.0, math.pi]),
+        360,
+        np.zeros((0, 4)),
+        3.5,
+        circles=origins,
+        circle_radius=0.105,
+        owners=np.array([0, 1]),
+    )
+    assert ranges[0, 0] == pytest.approx(2.0 - 0.105)
+    assert ranges[1, 0] == pytest.approx(2.0 - 0.105)
+    assert ranges[0, 180] == 3.5  # behind: nothing
+    # the disc subtends 2 asin(0.105 / 2) = 6 degrees: rays 3 and 357 graze it, 4 misses
+    assert ranges[0, 3] < 3.5 and ranges[0, 357] < 3.5 and ranges[0, 4] == 3.5
+
+
+def test_walls_beyond_range_max_are_culled_without_changing_ranges() -> None:
+    """A wall 5 m away cannot shorten a 3.5 m ray."""
+    segments = np.array([[5.0, -1.0, 5.0, 1.0], [1.0, -1.0, 1.0, 1.0]])
+    ranges = raycast_batch(np.zeros((1, 2)), np.zeros(1), 360, segments, 3.5)
+    assert ranges[0, 0] == pytest.approx(1.0)
+    assert ranges[0, 90] == 3.5

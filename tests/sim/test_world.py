@@ -136,3 +136,92 @@ def test_absurd_command_is_refused_not_clamped(v: float, omega: float) -> None:
     with pytest.raises(ValueError, match="absurd"):
         world.command("", v, omega)
     assert world.robots[""].cmd_v == 0.1
+
+
+BOX = {"walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]]}
+
+
+def fleet(*robots: tuple[str, float, float, float]) -> World:
+    spec = WorldSpec.model_validate(
+        {**BOX, "robots": [{"name": n, "pose": [x, y, t]} for n, x, y, t in robots]}
+    )
+    return World(spec, Params())
+
+
+def test_a_robots_list_gives_named_robots_at_their_poses() -> None:
+    world = fleet(("r1", -1.0, 0.0, 0.0), ("r2", 1.0, 0.0, math.pi))
+    assert list(world.robots) == ["r1", "r2"]
+    assert (world.robots["r2"].state.x, world.robots["r2"].start) == (1.0, (1.0, 0.0, math.pi))
+    assert world.robots["r1"].topic("odom") == "/r1/odom"
+    assert world.robots["r1"].frame("base_link") == "r1/base_link"
+
+
+def test_scans_see_other_robots_and_never_their_own_footprint() -> None:
+    """r1 faces r2 2 m away: its front ray reads 2 - radius; r2's ray towards r1 likewise."""
+    world = fleet(("r1", -1.0, 0.0, 0.0), ("r2", 1.0, 0.0, math.pi))
+    r1, r2 = world.scans(["r1", "r2"])
+    radius = world.params.robot.radius
+    assert r1[0] == pytest.approx(2.0 - radius, abs=1e-5)
+    assert r2[0] == pytest.approx(2.0 - radius, abs=1e-5)
+    assert r1[180] == pytest.approx(3.5)  # 4 m to the west wall: range_max
+    np.testing.assert_array_equal(world.scan("r1"), r1)
+
+
+def test_a_robot_driving_into_another_stops_at_contact_and_reports_it() -> None:
+    world = fleet(("r1", -1.0, 0.0, 0.0), ("r2", 1.0, 0.0, math.pi))
+    world.command("r1", 0.5, 0.0)
+    for _ in range(200):
+        world.step()
+    r1 = world.robots["r1"].state
+    assert r1.x == pytest.approx(1.0 - 2 * world.params.robot.radius, abs=1e-6)
+    assert r1.v == pytest.approx(0.0)
+    assert [(name, other) for name, other, _ in world.contacts] == [("r1", "r2")]
+    assert world.touching == {"r1"}
+
+
+def test_a_robot_driving_into_a_wall_stops_with_its_footprint_on_it() -> None:
+    world = fleet(("r1", 4.0, 0.0, 0.0))
+    world.command("r1", 0.5, 0.0)
+    for _ in range(100):
+        world.step()
+    assert world.robots["r1"].state.x == pytest.approx(5.0 - world.params.robot.radius, abs=1e-3)
+    assert [(n, o) for n, o, _ in world.contacts] == [("r1", "wall")]
+
+
+def test_spawn_teleport_remove_and_reset() -> None:
+    """Spawned robots reset to their spawn pose; teleport keeps the start; remove forgets."""
+    world = fleet(("r1", -1.0, 0.0, 0.0))
+    world.spawn("r2", (2.0, 2.0, 0.5))
+    world.teleport("r2", (3.0, -2.0, 0.0))
+    assert (world.robots["r2"].state.x, world.robots["r2"].state.y) == (3.0, -2.0)
+    world.reset()
+    assert (world.robots["r2"].state.x, world.robots["r2"].state.theta) == (2.0, 0.5)
+    world.remove("r2")
+    assert list(world.robots) == ["r1"]
+
+
+@pytest.mark.parametrize(
+    ("name", "pose", "error"),
+    [
+        ("r1", (3.0, 3.0, 0.0), "already exists"),
+        ("2bad", (3.0, 3.0, 0.0), "not a valid ROS name"),
+        ("r3", (4.95, 0.0, 0.0), "overlaps the wall"),
+        ("r3", (-0.9, 0.0, 0.0), "overlaps another robot"),
+        ("r3", (math.nan, 0.0, 0.0), "finite"),
+    ],
+)
+def test_spawn_refuses_taken_names_bad_names_and_occupied_poses(
+    name: str, pose: tuple[float, float, float], error: str
+) -> None:
+    world = fleet(("r1", -1.0, 0.0, 0.0))
+    with pytest.raises(ValueError, match=error):
+        world.spawn(name, pose)
+    assert list(world.robots) == ["r1"]
+
+
+def test_teleport_refuses_a_pose_inside_another_robots_start_pose() -> None:
+    """Start poses count too, so /reset never puts two robots on top of each other."""
+    world = fleet(("r1", -1.0, 0.0, 0.0), ("r2", 1.0, 0.0, 0.0))
+    world.teleport("r1", (0.0, 2.0, 0.0))
+    with pytest.raises(ValueError, match="overlaps another robot"):
+        world.teleport("r2", (-1.0, 0.05, 0.0))

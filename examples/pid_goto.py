@@ -1,0 +1,146 @@
+#!/usr/bin/env python3
+"""Drive to a goal position (and heading) with two PID loops at 10 Hz, over rosbridge (roslibpy).
+
+Works unchanged against simbridge and against rosbridge on the real robot:
+
+    pip install roslibpy
+    python examples/pid_goto.py --url ws://127.0.0.1:9090 --goal 1.0 0.5 --heading 1.57
+
+Reads /odom (nav_msgs/msg/Odometry), publishes /cmd_vel (geometry_msgs/msg/Twist) every 100 ms:
+
+* heading loop: angular.z = PID(wrap(bearing to goal - yaw)); once within ``--tolerance`` of
+  the goal, the error is wrap(``--heading`` - yaw) instead (when a heading is given);
+* position loop: linear.x = PID(distance to goal) * max(0, cos(heading error)) (no driving
+  while facing away), clamped to ``--max-speed``.
+
+Prints one JSON line at the end: ``{"reached": bool, "x", "y", "yaw", "distance_error",
+"heading_error", "seconds"}``; exit code 0 when the goal was reached in time.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import threading
+import time
+from urllib.parse import urlparse
+
+import roslibpy
+
+
+def wrap(angle: float) -> float:
+    """Return ``angle`` in (-pi, pi]."""
+    return math.atan2(math.sin(angle), math.cos(angle))
+
+
+class PID:
+    """A PID controller with output and integral limits (derivative on the error)."""
+
+    def __init__(self, kp: float, ki: float, kd: float, limit: float) -> None:
+        self.kp, self.ki, self.kd, self.limit = kp, ki, kd, limit
+        self.integral = 0.0
+        self.previous: float | None = None
+
+    def update(self, error: float, dt: float) -> float:
+        """Return the command for ``error`` after ``dt`` seconds."""
+        self.integral += error * dt
+        bound = self.limit / self.ki if self.ki else 0.0
+        self.integral = max(-bound, min(bound, self.integral))  # anti-windup
+        derivative = 0.0 if self.previous is None else (error - self.previous) / dt
+        self.previous = error
+        out = self.kp * error + self.ki * self.integral + self.kd * derivative
+        return max(-self.limit, min(self.limit, out))
+
+
+def main() -> int:
+    """Run the example; return the exit code."""
+    parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    parser.add_argument("--url", default="ws://127.0.0.1:9090", help="rosbridge URL")
+    parser.add_argument("--goal", nargs=2, type=float, default=[1.0, 0.5], metavar=("X", "Y"))
+    parser.add_argument("--heading", type=float, default=None, help="final yaw, radians")
+    parser.add_argument("--tolerance", type=float, default=0.05, help="metres (default 0.05)")
+    parser.add_argument("--heading-tolerance", type=float, default=0.05, help="radians")
+    parser.add_argument("--max-speed", type=float, default=0.3, help="m/s (default 0.3)")
+    parser.add_argument("--timeout", type=float, default=30.0, help="seconds (default 30)")
+    args = parser.parse_args()
+
+    url = urlparse(args.url)
+    ros = roslibpy.Ros(host=url.hostname or "127.0.0.1", port=url.port or 9090)
+    ros.run(timeout=10)
+    odom = roslibpy.Topic(ros, "/odom", "nav_msgs/msg/Odometry")
+    cmd_vel = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/msg/Twist")
+    cmd_vel.advertise()
+
+    pose: list[float] = []
+    lock = threading.Lock()
+    first = threading.Event()
+
+    def on_odom(msg: dict) -> None:
+        p = msg["pose"]["pose"]
+        q = p["orientation"]
+        yaw = math.atan2(
+            2 * (q["w"] * q["z"] + q["x"] * q["y"]), 1 - 2 * (q["y"] ** 2 + q["z"] ** 2)
+        )
+        with lock:
+            pose[:] = [p["position"]["x"], p["position"]["y"], yaw]
+        first.set()
+
+    odom.subscribe(on_odom)
+    if not first.wait(10):
+        print(json.dumps({"reached": False, "error": "no /odom within 10 s"}))
+        return 1
+
+    heading_pid = PID(kp=2.0, ki=0.1, kd=0.1, limit=1.5)
+    position_pid = PID(kp=0.8, ki=0.05, kd=0.05, limit=args.max_speed)
+    gx, gy = args.goal
+    period = 0.1  # 10 Hz
+    start = time.monotonic()
+    tick = 0
+    reached = False
+    dist = heading_err = math.inf
+    while time.monotonic() - start < args.timeout:
+        with lock:
+            x, y, yaw = pose
+        dist = math.hypot(gx - x, gy - y)
+        at_goal = dist < args.tolerance
+        if at_goal and args.heading is None:
+            heading_err = 0.0
+            reached = True
+            break
+        if at_goal:
+            heading_err = wrap(args.heading - yaw)
+            if abs(heading_err) < args.heading_tolerance:
+                reached = True
+                break
+            linear = 0.0
+        else:
+            heading_err = wrap(math.atan2(gy - y, gx - x) - yaw)
+            linear = position_pid.update(dist, period) * max(0.0, math.cos(heading_err))
+        angular = heading_pid.update(heading_err, period)
+        cmd_vel.publish({"linear": {"x": linear, "y": 0.0, "z": 0.0},
+                         "angular": {"x": 0.0, "y": 0.0, "z": angular}})  # fmt: skip
+        tick += 1
+        time.sleep(max(0.0, start + tick * period - time.monotonic()))  # absolute deadlines
+
+    cmd_vel.publish({"linear": {"x": 0.0}, "angular": {"z": 0.0}})
+    time.sleep(0.3)  # let the stop command leave before closing
+    with lock:
+        x, y, yaw = pose
+    result = {
+        "reached": reached,
+        "x": x,
+        "y": y,
+        "yaw": yaw,
+        "distance_error": math.hypot(gx - x, gy - y),
+        "heading_error": 0.0 if args.heading is None else abs(wrap(args.heading - yaw)),
+        "seconds": round(time.monotonic() - start, 2),
+    }
+    ros.terminate()
+    print(json.dumps(result), flush=True)
+    return 0 if reached else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,401 @@
+"""ROS 2 actions between clients (and in-process action servers), with ROS 2 status codes.
+
+A client serves an action with ``advertise_action``; goals from any client (``send_action_goal``)
+are forwarded to it as ``send_action_goal`` with a server-chosen id
+``action_goal:<action>:<n>`` and ``feedback: true``; its ``action_feedback`` and
+``action_result`` go back to the goal's sender under the sender's own id (protocol reference
+sections 2.10-2.15). ``cancel_action_goal`` from the sender is forwarded as
+``cancel_action_goal`` with the server id; the server's final ``action_result`` (status 5) ends
+the goal.
+
+Status codes are ``action_msgs/msg/GoalStatus``: 0 unknown, 1 accepted, 2 executing,
+3 canceling, 4 succeeded, 5 canceled, 6 aborted. Every goal is answered:
+
+* no such action, or a goal that does not fit a known action type: ``action_result`` with
+  ``result: false``, ``status: 0`` and the reason (rosbridge 2.1 hangs here, #1139);
+* the server's ``action_result`` with ``result: true``: status 4 and 5 are passed on, anything
+  else becomes 6 (as rosbridge's goal handle does);
+* the server's ``action_result`` with ``result: false``, or the server unadvertising or
+  disconnecting: ``result: false``, ``status: 6`` and the reason.
+
+Each action also gets the hidden service ``<action>/_action/cancel_goal``
+(``action_msgs/srv/CancelGoal``): an all-zero ``goal_info`` cancels every goal of the action
+(roslibjs 2.1 ``Action.cancelAllGoals``), a zero id with a stamp cancels the goals accepted up to
+that time, else the goal with that UUID.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+import uuid
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Protocol
+
+from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
+from simbridge.graph.topics import BRIDGE_NODE, Peer
+from simbridge.msgs import normalize_type
+from simbridge.protocol import OpId, json_frame, ops as o, resolve_name
+
+
+if TYPE_CHECKING:
+    from simbridge.graph.graph import Graph
+
+__all__ = [
+    "ABORTED",
+    "CANCELED",
+    "CANCELING",
+    "EXECUTING",
+    "SUCCEEDED",
+    "Action",
+    "ActionServer",
+    "ActionTable",
+    "Goal",
+]
+
+logger = logging.getLogger(__name__)
+
+UNKNOWN, ACCEPTED, EXECUTING, CANCELING, SUCCEEDED, CANCELED, ABORTED = range(7)
+
+
+class ActionServer(Protocol):
+    """An in-process action server."""
+
+    def goal(self, goal: Goal) -> None:
+        """Start executing ``goal`` (call :meth:`Goal.feedback` / :meth:`Goal.finish` later)."""
+
+    def cancel(self, goal: Goal) -> None:
+        """Cancel ``goal`` (finish it with status 5 when done)."""
+
+
+@dataclass(eq=False, slots=True)
+class Action:
+    """One action: served by a client (``provider``) or in process (``server``)."""
+
+    name: str
+    #: Canonical ``pkg/action/Type``.
+    type: str
+    #: The type as the server advertised it (sent on with each goal).
+    written_type: str
+    node: str
+    provider: Peer | None = None
+    server: ActionServer | None = None
+    #: The name as the server wrote it in ``advertise_action`` (roslibjs routes goals by it).
+    written: str = ""
+
+
+@dataclass(eq=False, slots=True)
+class Goal:
+    """A goal in flight."""
+
+    server_id: str
+    action: Action
+    caller: Peer
+    caller_id: OpId | None
+    #: The action name as the caller wrote it (echoed in replies).
+    written: str
+    want_feedback: bool
+    #: The goal message (complete when the action type is known).
+    args: Any
+    uuid: bytes
+    #: When it was accepted: (sec, nanosec).
+    stamp: tuple[int, int]
+    table: ActionTable
+    status: int = EXECUTING
+    done: bool = False
+    extra: dict[str, Any] = field(default_factory=dict)
+
+    def feedback(self, values: Any) -> None:
+        """Send feedback to the goal's sender (if it asked for feedback)."""
+        if self.done or not self.want_feedback:
+            return
+        body: dict[str, Any] = {"op": "action_feedback", "action": self.written, "values": values}
+        if self.caller_id is not None:
+            body["id"] = self.caller_id
+        self.caller.send(json_frame(body))
+
+    def finish(self, status: int, values: Any, *, result: bool = True) -> None:
+        """End the goal: send the ``action_result`` to its sender (once)."""
+        if self.done:
+            return
+        self.done = True
+        self.status = status
+        self.table.goals.pop(self.server_id, None)
+        body: dict[str, Any] = {
+            "op": "action_result",
+            "action": self.written,
+            "values": values,
+            "status": status,
+            "result": result,
+        }
+        if self.caller_id is not None:
+            body["id"] = self.caller_id
+        self.caller.send(json_frame(body))
+
+
+class ActionTable:
+    """Every action of the graph and the goals in flight."""
+
+    def __init__(self, graph: Graph) -> None:
+        #: The graph (services table, converter, clock).
+        self.graph = graph
+        #: Actions by absolute name.
+        self.actions: dict[str, Action] = {}
+        #: Goals in flight by server id.
+        self.goals: dict[str, Goal] = {}
+        self._counter = itertools.count(1)
+
+    def handlers(self) -> dict[type, Callable[[Peer, Any, float], None]]:
+        """Return the graph op handlers of the action ops."""
+        return {
+            o.AdvertiseAction: self._advertise,
+            o.UnadvertiseAction: self._unadvertise,
+            o.SendActionGoal: self._send_goal,
+            o.CancelActionGoal: self._cancel,
+            o.ActionFeedback: self._feedback,
+            o.ActionResult: self._result,
+        }
+
+    # -- declaration ------------------------------------------------------------------------
+
+    def add_server(self, name: str, type_name: str, node: str, server: ActionServer) -> Action:
+        """Declare an in-process action server."""
+        self.graph.nodes.setdefault(node, "")
+        action = Action(name, normalize_type(type_name, "action"), type_name, node, server=server)
+        self._install(action)
+        return action
+
+    def _install(self, action: Action) -> None:
+        old = self.actions.get(action.name)
+        if old is not None:
+            self._fail_goals(old, f"action {action.name} was re-advertised by another server")
+            if old.provider is not None:
+                old.provider.session.actions.pop(action.name, None)
+        self.actions[action.name] = action
+
+        def cancel_goal(request: Any) -> dict[str, Any]:
+            return self._cancel_service(action, request)
+
+        self.graph.services.add(
+            f"{action.name}/_action/cancel_goal",
+            "action_msgs/srv/CancelGoal",
+            action.node,
+            cancel_goal,
+        )
+
+    def _advertise(self, peer: Peer, op: o.AdvertiseAction, now: float) -> None:
+        name = resolve_name(op.action, "action")
+        try:
+            canonical = normalize_type(op.type, "action")
+        except TypeNotFoundError as err:
+            raise ProtocolError(f"advertise_action: {err}") from None
+        self._install(
+            Action(name, canonical, op.type, BRIDGE_NODE, provider=peer, written=op.action)
+        )
+        peer.session.actions[name] = canonical
+
+    def _unadvertise(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
+        name = resolve_name(op.action, "action")
+        if not self.remove(peer, name):
+            msg = f"unadvertise_action: action {name} is not advertised by this client"
+            raise ProtocolError(msg)
+
+    def remove(self, peer: Peer, name: str) -> bool:
+        """Remove ``peer``'s action ``name``; return whether it served it."""
+        action = self.actions.get(name)
+        if action is None or action.provider is not peer:
+            return False
+        del self.actions[name]
+        peer.session.actions.pop(name, None)
+        self.graph.services.services.pop(f"{name}/_action/cancel_goal", None)
+        self._fail_goals(action, f"action {name} was unadvertised by its server")
+        return True
+
+    def drop_peer(self, peer: Peer) -> None:
+        """Forget a client that left: its actions (goals fail) and its goals (cancelled)."""
+        for name in list(peer.session.actions):
+            self.remove(peer, name)
+        for goal in [g for g in self.goals.values() if g.caller is peer]:
+            goal.done = True
+            del self.goals[goal.server_id]
+            self._forward_cancel(goal)
+
+    def _fail_goals(self, action: Action, reason: str) -> None:
+        for goal in [g for g in self.goals.values() if g.action is action]:
+            goal.finish(ABORTED, reason, result=False)
+
+    # -- goals --------------------------------------------------------------------------------
+
+    def _fail(self, peer: Peer, op: o.SendActionGoal, reason: str) -> None:
+        body: dict[str, Any] = {
+            "op": "action_result",
+            "action": op.action,
+            "values": reason,
+            "status": UNKNOWN,
+            "result": False,
+        }
+        if op.id is not None:
+            body["id"] = op.id
+        peer.send(json_frame(body))
+
+    def _goal_message(self, action: Action, args: Any) -> Any:
+        """Return the complete goal message (known type) or ``args`` unchanged."""
+        registry = self.graph.registry
+        try:
+            goal_type = registry.action(action.type)[0]
+        except TypeNotFoundError:
+            return args if args is not None else {}
+        if args is None:
+            args = {}
+        elif isinstance(args, list):
+            names = [f.name for f in registry.spec(goal_type).fields]
+            args = dict(zip(names, args, strict=False))
+        return self.graph.converter.from_json(goal_type, args)
+
+    def _send_goal(self, peer: Peer, op: o.SendActionGoal, now: float) -> None:
+        try:
+            name = resolve_name(op.action, "action")
+        except ProtocolError as err:
+            self._fail(peer, op, str(err))
+            return
+        action = self.actions.get(name)
+        if action is None:
+            self._fail(peer, op, f"Action {name} does not exist (no server advertised it)")
+            return
+        try:
+            message = self._goal_message(action, op.args)
+        except ConversionError as err:
+            self._fail(peer, op, f"invalid goal for {action.type}: {err}")
+            return
+        server_id = f"action_goal:{name}:{next(self._counter)}"
+        goal = Goal(
+            server_id,
+            action,
+            peer,
+            op.id,
+            op.action,
+            op.feedback,
+            message,
+            uuid.uuid4().bytes,
+            self.graph.stamp(),
+            self,
+        )
+        self.goals[server_id] = goal
+        if action.server is not None:
+            action.server.goal(goal)
+            return
+        assert action.provider is not None
+        action.provider.send(
+            json_frame(
+                {
+                    "op": "send_action_goal",
+                    "id": server_id,
+                    "action": action.written or name,
+                    "action_type": action.written_type,
+                    "args": message,
+                    "feedback": True,
+                }
+            )
+        )
+
+    def _find_own(self, peer: Peer, op_id: OpId | None, name: str) -> Goal | None:
+        for goal in self.goals.values():
+            if goal.caller is peer and goal.caller_id == op_id and goal.action.name == name:
+                return goal
+        return None
+
+    def _cancel(self, peer: Peer, op: o.CancelActionGoal, now: float) -> None:
+        name = resolve_name(op.action, "action")
+        goal = self._find_own(peer, op.id, name)
+        if goal is None:
+            return  # already finished or never sent: nothing to cancel (as rosbridge)
+        self.cancel_goal(goal)
+
+    def cancel_goal(self, goal: Goal) -> None:
+        """Ask the goal's server to cancel it."""
+        if goal.done or goal.status == CANCELING:
+            return
+        goal.status = CANCELING
+        self._forward_cancel(goal)
+
+    def _forward_cancel(self, goal: Goal) -> None:
+        action = goal.action
+        if action.server is not None:
+            action.server.cancel(goal)
+        elif action.provider is not None:
+            action.provider.send(
+                json_frame(
+                    {
+                        "op": "cancel_action_goal",
+                        "id": goal.server_id,
+                        "action": action.written or action.name,
+                    }
+                )
+            )
+
+    def _served_goal(self, peer: Peer, op_id: OpId | None, what: str) -> Goal:
+        goal = self.goals.get(op_id) if isinstance(op_id, str) else None
+        if goal is None or goal.action.provider is not peer:
+            msg = f"{what} for unknown or finished goal id {op_id!r}"
+            raise ProtocolError(msg)
+        return goal
+
+    def _complete(self, goal: Goal, part: int, values: Any, what: str) -> Any:
+        """Check and complete feedback (part 2) or result (part 1) values of a known type."""
+        try:
+            name = self.graph.registry.action(goal.action.type)[part]
+        except TypeNotFoundError:
+            return values
+        try:
+            return self.graph.converter.from_json(name, {} if values is None else values)
+        except ConversionError as err:
+            msg = f"{what} for {goal.action.name}: {err}"
+            raise ProtocolError(msg) from None
+
+    def _feedback(self, peer: Peer, op: o.ActionFeedback, now: float) -> None:
+        goal = self._served_goal(peer, op.id, "action_feedback")
+        goal.feedback(self._complete(goal, 2, op.values, "action_feedback"))
+
+    def _result(self, peer: Peer, op: o.ActionResult, now: float) -> None:
+        goal = self._served_goal(peer, op.id, "action_result")
+        if op.result is False:
+            reason = op.values if op.values is not None else "goal aborted by its action server"
+            goal.finish(ABORTED, reason, result=False)
+            return
+        status = op.status if op.status in (SUCCEEDED, CANCELED) else ABORTED
+        goal.finish(status, self._complete(goal, 1, op.values, "action_result"))
+
+    # -- action_msgs/srv/CancelGoal -------------------------------------------------------------
+
+    def _cancel_service(self, action: Action, request: Any) -> dict[str, Any]:
+        info = request.get("goal_info", {}) if isinstance(request, dict) else {}
+        goal_id = info.get("goal_id", {}).get("uuid", bytes(16))
+        stamp = info.get("stamp", {"sec": 0, "nanosec": 0})
+        if isinstance(goal_id, list):
+            goal_id = bytes(goal_id)
+        if not isinstance(goal_id, bytes | bytearray) or not isinstance(stamp, dict):
+            msg = "cancel_goal: goal_info must be an action_msgs/GoalInfo"
+            raise ServiceError(msg)
+        limit = (stamp.get("sec", 0), stamp.get("nanosec", 0))
+        goals = [g for g in self.goals.values() if g.action is action]
+        if any(goal_id):
+            chosen = [g for g in goals if g.uuid == bytes(goal_id)]
+        elif limit != (0, 0):
+            chosen = [g for g in goals if g.stamp <= limit]
+        else:
+            chosen = goals
+        if any(goal_id) and not chosen:
+            return {"return_code": 2, "goals_canceling": []}
+        for goal in chosen:
+            self.cancel_goal(goal)
+        return {
+            "return_code": 0,
+            "goals_canceling": [
+                {
+                    "goal_id": {"uuid": g.uuid},
+                    "stamp": {"sec": g.stamp[0], "nanosec": g.stamp[1]},
+                }
+                for g in chosen
+            ],
+        }

@@ -1,0 +1,156 @@
+"""The standard ROS 2 parameter services (``rcl_interfaces``) of every in-process node.
+
+For a node ``/virtual_robot`` simbridge serves, as any rclcpp/rclpy node does:
+``/virtual_robot/get_parameters``, ``set_parameters``, ``set_parameters_atomically``,
+``list_parameters``, ``describe_parameters`` and ``get_parameter_types``. Values travel as
+``rcl_interfaces/msg/ParameterValue`` (``type`` selects the ``*_value`` field that counts).
+
+``set_parameters`` applies each parameter on its own and reports one result per parameter (as
+ROS 2 does); ``set_parameters_atomically`` applies all or none. A refused value changes nothing
+and its result says why.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from simbridge.errors import ServiceError
+from simbridge.graph.params import (
+    PARAMETER_BOOL,
+    PARAMETER_DOUBLE,
+    PARAMETER_DOUBLE_ARRAY,
+    PARAMETER_INTEGER,
+    PARAMETER_NOT_SET,
+    PARAMETER_STRING,
+    ParamNode,
+    param_type,
+)
+
+
+if TYPE_CHECKING:
+    from simbridge.graph.graph import Graph
+
+__all__ = ["from_parameter_value", "install_parameter_services", "to_parameter_value"]
+
+#: ParameterValue field holding each ParameterType.
+_VALUE_FIELDS = {
+    PARAMETER_BOOL: "bool_value",
+    PARAMETER_INTEGER: "integer_value",
+    PARAMETER_DOUBLE: "double_value",
+    PARAMETER_STRING: "string_value",
+    5: "byte_array_value",
+    6: "bool_array_value",
+    7: "integer_array_value",
+    PARAMETER_DOUBLE_ARRAY: "double_array_value",
+    9: "string_array_value",
+}
+
+
+def to_parameter_value(graph: Graph, value: Any) -> dict[str, Any]:
+    """Return the canonical ``rcl_interfaces/msg/ParameterValue`` of a Python value."""
+    out = graph.converter.default("rcl_interfaces/msg/ParameterValue")
+    kind = param_type(value)
+    out["type"] = kind
+    if kind == PARAMETER_DOUBLE_ARRAY:
+        out["double_array_value"] = np.asarray(value, dtype=np.float64)
+    elif kind != PARAMETER_NOT_SET:
+        out[_VALUE_FIELDS[kind]] = value
+    return out
+
+
+def from_parameter_value(value: dict[str, Any]) -> Any:
+    """Return the Python value of a canonical ParameterValue.
+
+    Raises:
+        ServiceError: the type is NOT_SET or unknown (parameters cannot be undeclared here).
+    """
+    field = _VALUE_FIELDS.get(value.get("type", 0))
+    if field is None:
+        msg = f"parameter value type {value.get('type')} is not a value (NOT_SET or unknown)"
+        raise ServiceError(msg)
+    found = value[field]
+    if isinstance(found, np.ndarray):
+        return found.tolist()
+    if isinstance(found, bytes):
+        return list(found)
+    return found
+
+
+def install_parameter_services(graph: Graph) -> None:
+    """Serve the rcl_interfaces services of each parameter node (present and future)."""
+    for node in list(graph.params.nodes.values()):
+        _install(graph, node)
+    graph.params.on_add.append(lambda node: _install(graph, node))
+
+
+def _install(graph: Graph, node: ParamNode) -> None:
+    store = graph.params
+
+    def get_parameters(req: dict[str, Any]) -> dict[str, Any]:
+        values = node.read()
+        return {"values": [to_parameter_value(graph, values.get(n)) for n in req["names"]]}
+
+    def set_one(param: dict[str, Any]) -> dict[str, Any]:
+        try:
+            store.set(node.name, {param["name"]: from_parameter_value(param["value"])})
+        except ServiceError as err:
+            return {"successful": False, "reason": str(err)}
+        return {"successful": True, "reason": ""}
+
+    def set_parameters(req: dict[str, Any]) -> dict[str, Any]:
+        return {"results": [set_one(p) for p in req["parameters"]]}
+
+    def set_atomically(req: dict[str, Any]) -> dict[str, Any]:
+        try:
+            changes = {p["name"]: from_parameter_value(p["value"]) for p in req["parameters"]}
+            store.set(node.name, changes)
+        except ServiceError as err:
+            return {"result": {"successful": False, "reason": str(err)}}
+        return {"result": {"successful": True, "reason": ""}}
+
+    def list_parameters(req: dict[str, Any]) -> dict[str, Any]:
+        prefixes = [p.rstrip(".") for p in req["prefixes"]]
+        depth = int(req["depth"])
+        names = []
+        for name in sorted(node.read()):
+            if prefixes and not any(name == p or name.startswith(p + ".") for p in prefixes):
+                continue
+            if depth:
+                base = max((p for p in prefixes if name.startswith(p + ".")), key=len, default="")
+                rest = name[len(base) + 1 :] if base else name
+                if rest.count(".") >= depth:
+                    continue
+            names.append(name)
+        groups = sorted({n.rsplit(".", 1)[0] for n in names if "." in n})
+        return {"result": {"names": names, "prefixes": groups}}
+
+    def describe_parameters(req: dict[str, Any]) -> dict[str, Any]:
+        values = node.read()
+        out = []
+        for name in req["names"]:
+            d = graph.converter.default("rcl_interfaces/msg/ParameterDescriptor")
+            d["name"] = name
+            if name in values:
+                d["type"] = param_type(values[name])
+                d["description"] = node.descriptions.get(name, "")
+                d["read_only"] = name in node.read_only
+            out.append(d)
+        return {"descriptors": out}
+
+    def get_parameter_types(req: dict[str, Any]) -> dict[str, Any]:
+        values = node.read()
+        return {"types": bytes(param_type(values.get(n)) for n in req["names"])}
+
+    for suffix, type_name, handler in (
+        ("get_parameters", "GetParameters", get_parameters),
+        ("set_parameters", "SetParameters", set_parameters),
+        ("set_parameters_atomically", "SetParametersAtomically", set_atomically),
+        ("list_parameters", "ListParameters", list_parameters),
+        ("describe_parameters", "DescribeParameters", describe_parameters),
+        ("get_parameter_types", "GetParameterTypes", get_parameter_types),
+    ):
+        graph.add_service(
+            f"{node.name}/{suffix}", f"rcl_interfaces/srv/{type_name}", node.name, handler
+        )

@@ -1,0 +1,331 @@
+// The simbridge page: wires the connection, view, teleop, plots and PID lab together.
+import { Connection, defaultUrl } from './connection.js';
+import { View, scanToWorld, markerSegments, yawOf } from './view.js';
+import { TeleopDriver, installKeyboard, installJoystick, installGamepad } from './teleop.js';
+import { TimeSeriesPlot } from './plots.js';
+import { PidLab, exampleCode } from './pid.js';
+
+const $ = (id) => document.getElementById(id);
+const TWIST = 'geometry_msgs/msg/Twist';
+const NODE = '/virtual_robot';
+
+const state = {
+  ns: '',                       // robot namespace ('' = the un-namespaced robot)
+  limits: { v: 0.5, w: 2.5 },   // from the robot's parameters when it has them
+  pose: null,
+  mounts: new Map(),            // child frame -> {x, y, yaw} (from /tf_static)
+  cmd: { v: 0, w: 0 },          // last /cmd_vel seen (any publisher)
+  meas: { v: 0, w: 0 },
+  nearest: null,
+  estopped: false,
+  robots: [''],
+  walls: 0,
+};
+const topic = (name) => (state.ns ? `/${state.ns}/${name}` : `/${name}`);
+const now = () => performance.now() / 1000;
+
+const conn = new Connection(defaultUrl());
+const view = new View($('view'));
+
+// ---- status --------------------------------------------------------------------------------
+const statusEl = $('status');
+$('url').value = conn.url;
+$('linkUrl').textContent = conn.url;
+function showState(detail) {
+  statusEl.className = `status ${detail.state}`;
+  let text = detail.state;
+  if (detail.state === 'reconnecting' && detail.retryInMs !== undefined) {
+    text = `reconnecting (try ${detail.attempt}, in ${(detail.retryInMs / 1000).toFixed(1)} s)`;
+  }
+  $('statusText').textContent = text;
+  $('linkUrl').textContent = detail.url;
+}
+conn.addEventListener('state', (e) => showState(e.detail));
+$('urlForm').addEventListener('submit', (e) => {
+  e.preventDefault();
+  const url = $('url').value.trim();
+  if (!url) return;
+  const params = new URLSearchParams(location.search);
+  params.set('url', url);
+  history.replaceState(null, '', `${location.pathname}?${params}`);
+  conn.connect(url);
+});
+
+function fmtAge(ms) {
+  if (!Number.isFinite(ms)) return '–';
+  return ms < 1000 ? `${Math.round(ms)} ms` : `${(ms / 1000).toFixed(1)} s`;
+}
+setInterval(() => {
+  const rows = conn.rates();
+  const odom = rows.find((r) => r.name === topic('odom'));
+  $('statusInfo').textContent = conn.connected && odom
+    ? `${conn.url} · odom ${odom.rate.toFixed(0)} Hz, ${fmtAge(odom.ageMs)} old`
+    : conn.url;
+  $('rates').replaceChildren(...rows.map((r) => {
+    const tr = document.createElement('tr');
+    for (const text of [r.name, r.rate.toFixed(1), fmtAge(r.ageMs)]) {
+      const td = document.createElement('td'); td.textContent = text; tr.append(td);
+    }
+    return tr;
+  }));
+  $('linkTimes').textContent = `wall ${new Date().toISOString().slice(11, 19)} UTC · last odom stamp ${state.odomStamp ?? '–'}`;
+}, 500);
+
+let toastTimer = null;
+function toast(text) {
+  const el = $('toast');
+  el.textContent = text; el.hidden = false;
+  clearTimeout(toastTimer);
+  toastTimer = setTimeout(() => { el.hidden = true; }, 4000);
+}
+
+// ---- driving -------------------------------------------------------------------------------
+function publishTwist(v, w) {
+  return conn.publish(topic('cmd_vel'), TWIST, {
+    linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w },
+  });
+}
+const driver = new TeleopDriver(publishTwist);
+const speeds = () => ({ v: Number($('speedV').value), w: Number($('speedW').value) });
+function showSpeeds() {
+  $('speedVOut').textContent = Number($('speedV').value).toFixed(2);
+  $('speedWOut').textContent = Number($('speedW').value).toFixed(2);
+}
+$('speedV').addEventListener('input', showSpeeds);
+$('speedW').addEventListener('input', showSpeeds);
+showSpeeds();
+const showCmd = (v, w) => { $('cmdV').textContent = v.toFixed(2); $('cmdW').textContent = w.toFixed(2); };
+driver.addEventListener('command', (e) => showCmd(e.detail.v, e.detail.w));
+
+const keyboard = installKeyboard(driver, speeds, () => estop());
+const joystick = installJoystick($('joystick'), $('knob'), driver, speeds, showCmd);
+const gamepad = installGamepad(driver, speeds, (text) => { $('gamepad').textContent = text; });
+
+function releaseInputs() {
+  keyboard.release();
+  joystick.release();
+  gamepad.release();
+  driver.stopAll();
+}
+window.addEventListener('blur', releaseInputs);
+window.addEventListener('pagehide', releaseInputs);
+document.addEventListener('visibilitychange', () => { if (document.hidden) releaseInputs(); });
+conn.addEventListener('lost', () => { releaseInputs(); lab.stop(false); });
+
+// ---- e-stop and reset ----------------------------------------------------------------------
+async function estop() {
+  driver.enabled = false;
+  releaseInputs();
+  lab.stop(false);
+  publishTwist(0, 0); // a zero first, then the latch (joy2twist #15)
+  if (!conn.connected) { toast('Not connected: the robot cannot be reached.'); return; }
+  try {
+    await conn.call('/estop', 'std_srvs/srv/Trigger', {});
+  } catch (err) {
+    toast(`E-stop service failed (${err.message}); sent a zero velocity instead.`);
+  }
+}
+function showEstop(latched) {
+  state.estopped = latched;
+  driver.enabled = !latched;
+  if (latched) releaseInputs();
+  document.body.classList.toggle('estopped', latched);
+  $('estopBanner').hidden = !latched;
+}
+$('estop').addEventListener('click', () => estop());
+$('release').addEventListener('click', async () => {
+  try { await conn.call('/estop/reset', 'std_srvs/srv/Trigger', {}); } catch (err) { toast(err.message); }
+});
+$('reset').addEventListener('click', async () => {
+  try {
+    await conn.call('/reset', 'std_srvs/srv/Empty', {});
+    view.clearTrail();
+    toast('World reset.');
+  } catch (err) { toast(`Reset failed: ${err.message}`); }
+});
+
+// ---- view ----------------------------------------------------------------------------------
+$('zoomIn').addEventListener('click', () => view.zoom(1.25));
+$('zoomOut').addEventListener('click', () => view.zoom(0.8));
+$('follow').addEventListener('click', () => view.setFollow(!view.follow));
+$('fit').addEventListener('click', () => view.fit());
+$('view').addEventListener('followchange', () => $('follow').setAttribute('aria-pressed', String(view.follow)));
+
+// ---- plots ---------------------------------------------------------------------------------
+const plots = {
+  v: new TimeSeriesPlot($('plotV'), [{ label: 'v cmd', color: '#94a3b8', dash: [5, 3] }, { label: 'v meas', color: '#2563eb' }], { unit: 'm/s' }),
+  w: new TimeSeriesPlot($('plotW'), [{ label: 'ω cmd', color: '#94a3b8', dash: [5, 3] }, { label: 'ω meas', color: '#ea580c' }], { unit: 'rad/s' }),
+  heading: new TimeSeriesPlot($('plotHeading'), [{ label: 'heading', color: '#15803d' }], { unit: 'deg' }),
+  range: new TimeSeriesPlot($('plotRange'), [{ label: 'nearest range', color: '#dc2626' }], { unit: 'm', min: 0 }),
+  step: new TimeSeriesPlot($('plotStep'), [{ label: 'setpoint', color: '#94a3b8', dash: [5, 3] }, { label: 'measured', color: '#2563eb', width: 2 }], { window: 10, anchored: true, maxPoints: 6000 }),
+};
+
+// ---- subscriptions -------------------------------------------------------------------------
+let robotSubs = [];
+function subscribeRobot() {
+  for (const off of robotSubs) off();
+  view.clear();
+  for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.clear();
+  state.pose = null;
+  robotSubs = [
+    conn.subscribe(topic('odom'), 'nav_msgs/msg/Odometry', (m) => {
+      const p = m.pose.pose;
+      const theta = yawOf(p.orientation);
+      state.pose = { x: p.position.x, y: p.position.y, theta };
+      state.meas = { v: m.twist.twist.linear.x, w: m.twist.twist.angular.z };
+      state.odomStamp = `${m.header.stamp.sec}.${String(m.header.stamp.nanosec).padStart(9, '0').slice(0, 3)}`;
+      view.setPose(p.position.x, p.position.y, theta);
+      $('odomLine').textContent = `x ${p.position.x.toFixed(2)}  y ${p.position.y.toFixed(2)}  θ ${(theta * 180 / Math.PI).toFixed(0)}°`;
+      const t = now();
+      plots.v.push(t, [state.cmd.v, state.meas.v]);
+      plots.w.push(t, [state.cmd.w, state.meas.w]);
+      plots.heading.push(t, [theta * 180 / Math.PI]);
+    }),
+    conn.subscribe(topic('scan'), 'sensor_msgs/msg/LaserScan', (m) => {
+      const mount = state.mounts.get(m.header.frame_id) || { x: 0, y: 0, yaw: 0 };
+      const { points, nearest } = scanToWorld(m, mount, state.pose);
+      state.nearest = Number.isFinite(nearest) ? nearest : null;
+      view.setScan(points);
+      plots.range.push(now(), [state.nearest]);
+    }),
+    conn.subscribe(topic('cmd_vel'), TWIST, (m) => {
+      state.cmd = { v: m.linear.x, w: m.angular.z };
+    }),
+  ];
+}
+conn.subscribe('/tf_static', 'tf2_msgs/msg/TFMessage', (m) => {
+  for (const tf of m.transforms) {
+    const t = tf.transform;
+    state.mounts.set(tf.child_frame_id, { x: t.translation.x, y: t.translation.y, yaw: yawOf(t.rotation) });
+  }
+});
+conn.subscribe('/walls', 'visualization_msgs/msg/Marker', (m) => {
+  const first = state.walls === 0;
+  const segs = markerSegments(m);
+  state.walls = segs.length;
+  view.setWalls(segs);
+  if (first) { view.fit(); view.setFollow(false); }
+});
+conn.subscribe('/estop/state', 'std_msgs/msg/Bool', (m) => showEstop(Boolean(m.data)));
+subscribeRobot();
+
+// robots: every /<ns>/odom (and /odom) of type nav_msgs/Odometry
+async function discoverRobots() {
+  if (!conn.connected) return;
+  try {
+    const res = await conn.call('/rosapi/topics', 'rosapi/Topics', {});
+    const found = [];
+    res.topics.forEach((name, i) => {
+      const type = res.types ? res.types[i] : '';
+      const match = /^(?:\/([^/]+))?\/odom$/.exec(name);
+      if (match && (!type || type.replace('/msg/', '/') === 'nav_msgs/Odometry')) found.push(match[1] || '');
+    });
+    found.sort();
+    if (found.join('|') === state.robots.join('|')) return;
+    state.robots = found;
+    const sel = $('robot');
+    sel.replaceChildren(...found.map((ns) => new Option(ns || '(default)', ns)));
+    if (!found.includes(state.ns)) {
+      state.ns = found.includes('') || !found.length ? '' : found[0];
+      subscribeRobot();
+    }
+    sel.value = state.ns;
+  } catch (err) { /* a server without rosapi: keep the default robot */ }
+}
+$('robot').addEventListener('change', (e) => {
+  releaseInputs();
+  lab.stop();
+  state.ns = e.target.value;
+  subscribeRobot();
+  loadLimits();
+});
+
+async function loadLimits() {
+  if (!conn.connected) return;
+  try {
+    const [v, w, radius] = await Promise.all(['robot.max_linear_velocity', 'robot.max_angular_velocity', 'robot.radius']
+      .map((p) => conn.getParam(`${NODE}:${p}`)));
+    if (typeof v === 'number' && v > 0) state.limits.v = v;
+    if (typeof w === 'number' && w > 0) state.limits.w = w;
+    if (typeof radius === 'number' && radius > 0) view.radius = radius;
+  } catch (err) { /* a real robot may have no such parameters: keep the defaults */ }
+  for (const [id, max] of [['speedV', state.limits.v], ['speedW', state.limits.w]]) {
+    const el = $(id);
+    const old = Number(el.max);
+    el.max = String(max);
+    if (Number(el.value) > max || old !== max) el.value = String(Math.min(Number(el.value), max));
+  }
+  showSpeeds();
+}
+conn.addEventListener('connected', () => { discoverRobots(); loadLimits(); });
+setInterval(() => { discoverRobots(); loadLimits(); }, 5000);
+
+// ---- PID lab -------------------------------------------------------------------------------
+const lab = new PidLab(publishTwist, () => state.limits);
+const pidInputs = () => ({
+  mode: $('pidMode').value,
+  gains: { kp: Number($('kp').value), ki: Number($('ki').value), kd: Number($('kd').value) },
+  setpoint: { theta: (Number($('spTheta').value) * Math.PI) / 180, x: Number($('spX').value), y: Number($('spY').value) },
+});
+function showExample() {
+  const { mode, gains, setpoint } = pidInputs();
+  $('example').textContent = exampleCode(mode, gains, setpoint);
+}
+$('pidMode').addEventListener('change', () => {
+  const heading = $('pidMode').value === 'heading';
+  for (const el of document.querySelectorAll('.sp-heading')) el.hidden = !heading;
+  for (const el of document.querySelectorAll('.sp-position')) el.hidden = heading;
+  showExample();
+});
+$('pidForm').addEventListener('input', showExample);
+showExample();
+const scale = () => (lab.mode === 'heading' ? 180 / Math.PI : 1);
+lab.onSample = ([t, y, ys]) => {
+  const k = scale();
+  plots.step.push(t, [ys * k, y * k]);
+  const f = lab.figures();
+  plots.step.bands = [{ lo: (lab.ys - f.band) * k, hi: (lab.ys + f.band) * k }];
+  const unit = lab.mode === 'heading' ? '°' : ' m';
+  const err = f.error === null ? '–' : `${(f.error * k).toFixed(lab.mode === 'heading' ? 1 : 3)}${unit}`;
+  $('pidFigures').textContent = `overshoot ${f.overshootPct.toFixed(1)} % · settling ${f.settlingTime === null ? '(not yet)' : `${f.settlingTime.toFixed(1)} s`} (band ±${(f.band * k).toFixed(lab.mode === 'heading' ? 1 : 3)}${unit}) · error ${err}`;
+  if (f.settlingTime !== null && !plots.step.marks.length && t - f.settlingTime > 1) {
+    plots.step.marks = [{ t: f.settlingTime, label: `settled ${f.settlingTime.toFixed(1)} s` }];
+  }
+};
+$('pidForm').addEventListener('submit', (e) => {
+  e.preventDefault();
+  if (state.estopped) { toast('Release the e-stop first.'); return; }
+  if (!state.pose) { toast('No odometry yet.'); return; }
+  releaseInputs();
+  const { mode, gains, setpoint } = pidInputs();
+  plots.step.clear();
+  plots.step.unit = mode === 'heading' ? 'deg' : 'm along the line';
+  lab.start(mode, setpoint, gains, () => state.pose);
+  $('pidFigures').textContent = 'running…';
+});
+$('pidStop').addEventListener('click', () => lab.stop());
+$('copyExample').addEventListener('click', async () => {
+  const text = $('example').textContent;
+  try { await navigator.clipboard.writeText(text); toast('Example copied.'); } catch (err) {
+    const range = document.createRange();
+    range.selectNodeContents($('example'));
+    getSelection().removeAllRanges(); getSelection().addRange(range);
+    toast('Selected: press Ctrl+C to copy.');
+  }
+});
+
+// ---- tabs ----------------------------------------------------------------------------------
+for (const tab of document.querySelectorAll('.tabs button')) {
+  tab.addEventListener('click', () => {
+    for (const other of document.querySelectorAll('.tabs button')) {
+      const on = other === tab;
+      other.setAttribute('aria-selected', String(on));
+      $(`tab-${other.dataset.tab}`).hidden = !on;
+    }
+    for (const p of Object.values(plots)) p.dirty = true;
+  });
+}
+
+// for tests and curious students: the page's parts
+window.simbridge = { conn, view, driver, lab, plots, state };
+conn.connect();

@@ -1,0 +1,243 @@
+// Top-down Canvas 2D view: grid and axes, walls, odometry trail, scan points, robot.
+// World frame = odom (REP-103: x forward/right on screen, y up on screen, angles CCW).
+
+const TRAIL_MAX = 2000;
+const TRAIL_STEP_M = 0.02;
+
+export class View {
+  constructor(canvas) {
+    this.canvas = canvas;
+    this.ctx = canvas.getContext('2d');
+    this.walls = [];            // [x1, y1, x2, y2]
+    this.pose = null;           // {x, y, theta}
+    this.radius = 0.105;
+    this.trail = [];            // [x, y]
+    this.scan = [];             // [x, y] in world
+    this.scale = 80;            // px per metre (CSS px)
+    this.center = { x: 0, y: 0 };
+    this.follow = true;
+    this.dirty = true;
+    this.frames = 0;
+    this.pointers = new Map();
+    this._installInput();
+    new ResizeObserver(() => { this.dirty = true; }).observe(canvas);
+    const loop = () => { if (this.dirty) this.draw(); requestAnimationFrame(loop); };
+    requestAnimationFrame(loop);
+  }
+
+  setWalls(segments) { this.walls = segments; this.dirty = true; }
+  setPose(x, y, theta) {
+    this.pose = { x, y, theta };
+    const last = this.trail[this.trail.length - 1];
+    if (!last || Math.hypot(x - last[0], y - last[1]) >= TRAIL_STEP_M) {
+      this.trail.push([x, y]);
+      if (this.trail.length > TRAIL_MAX) this.trail.splice(0, this.trail.length - TRAIL_MAX);
+    }
+    if (this.follow) this.center = { x, y };
+    this.dirty = true;
+  }
+  setScan(points) { this.scan = points; this.dirty = true; }
+  clearTrail() { this.trail = []; this.dirty = true; }
+  clear() { this.pose = null; this.scan = []; this.trail = []; this.dirty = true; }
+
+  /** Fit the walls (or a 4 m square) in view. */
+  fit() {
+    const xs = [], ys = [];
+    for (const [x1, y1, x2, y2] of this.walls) { xs.push(x1, x2); ys.push(y1, y2); }
+    if (!xs.length) { xs.push(-2, 2); ys.push(-2, 2); }
+    const [minX, maxX, minY, maxY] = [Math.min(...xs), Math.max(...xs), Math.min(...ys), Math.max(...ys)];
+    const { width, height } = this.canvas.getBoundingClientRect();
+    this.scale = Math.max(5, Math.min((width - 20) / Math.max(maxX - minX, 0.5), (height - 20) / Math.max(maxY - minY, 0.5)));
+    this.center = { x: (minX + maxX) / 2, y: (minY + maxY) / 2 };
+    this.follow = false;
+    this.dirty = true;
+    this.canvas.dispatchEvent(new CustomEvent('followchange'));
+  }
+
+  zoom(factor, sx, sy) {
+    const before = sx === undefined ? null : this.toWorld(sx, sy);
+    this.scale = Math.max(5, Math.min(2000, this.scale * factor));
+    if (before && !this.follow) {
+      const after = this.toWorld(sx, sy);
+      this.center.x += before.x - after.x;
+      this.center.y += before.y - after.y;
+    }
+    this.dirty = true;
+  }
+
+  setFollow(on) {
+    this.follow = on;
+    if (on && this.pose) this.center = { x: this.pose.x, y: this.pose.y };
+    this.dirty = true;
+    this.canvas.dispatchEvent(new CustomEvent('followchange'));
+  }
+
+  toWorld(sx, sy) {
+    const { width, height } = this.canvas.getBoundingClientRect();
+    return { x: this.center.x + (sx - width / 2) / this.scale, y: this.center.y - (sy - height / 2) / this.scale };
+  }
+
+  _installInput() {
+    const c = this.canvas;
+    c.addEventListener('pointerdown', (e) => {
+      c.setPointerCapture(e.pointerId);
+      this.pointers.set(e.pointerId, { x: e.offsetX, y: e.offsetY });
+    });
+    c.addEventListener('pointermove', (e) => {
+      const prev = this.pointers.get(e.pointerId);
+      if (!prev) return;
+      if (this.pointers.size === 1) {
+        const dx = e.offsetX - prev.x, dy = e.offsetY - prev.y;
+        if (dx || dy) {
+          if (this.follow) this.setFollow(false);
+          this.center.x -= dx / this.scale;
+          this.center.y += dy / this.scale;
+          this.dirty = true;
+        }
+      } else if (this.pointers.size === 2) {
+        const [a, b] = [...this.pointers.entries()];
+        const other = a[0] === e.pointerId ? b[1] : a[1];
+        const d0 = Math.hypot(prev.x - other.x, prev.y - other.y);
+        const d1 = Math.hypot(e.offsetX - other.x, e.offsetY - other.y);
+        if (d0 > 0) this.zoom(d1 / d0, (e.offsetX + other.x) / 2, (e.offsetY + other.y) / 2);
+      }
+      this.pointers.set(e.pointerId, { x: e.offsetX, y: e.offsetY });
+    });
+    const up = (e) => this.pointers.delete(e.pointerId);
+    c.addEventListener('pointerup', up);
+    c.addEventListener('pointercancel', up);
+    c.addEventListener('wheel', (e) => {
+      e.preventDefault();
+      this.zoom(Math.exp(-e.deltaY * 0.0015), e.offsetX, e.offsetY);
+    }, { passive: false });
+  }
+
+  draw() {
+    this.dirty = false;
+    this.frames += 1;
+    const c = this.canvas, ctx = this.ctx;
+    const dpr = window.devicePixelRatio || 1;
+    const { width, height } = c.getBoundingClientRect();
+    const pw = Math.max(1, Math.round(width * dpr)), ph = Math.max(1, Math.round(height * dpr));
+    if (c.width !== pw || c.height !== ph) { c.width = pw; c.height = ph; }
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+    ctx.fillStyle = '#fbfbf8';
+    ctx.fillRect(0, 0, width, height);
+    const s = this.scale;
+    // world -> CSS px: flip y so that +y is up (REP-103 seen from above)
+    ctx.save();
+    ctx.translate(width / 2, height / 2);
+    ctx.scale(s, -s);
+    ctx.translate(-this.center.x, -this.center.y);
+    const px = 1 / s;
+    this._grid(ctx, width, height, px);
+    // walls
+    ctx.strokeStyle = '#2f3140';
+    ctx.lineWidth = Math.max(0.03, 2.5 * px);
+    ctx.lineCap = 'round';
+    ctx.beginPath();
+    for (const [x1, y1, x2, y2] of this.walls) { ctx.moveTo(x1, y1); ctx.lineTo(x2, y2); }
+    ctx.stroke();
+    // trail
+    if (this.trail.length > 1) {
+      ctx.strokeStyle = 'rgba(37, 99, 235, 0.55)';
+      ctx.lineWidth = 2 * px;
+      ctx.beginPath();
+      ctx.moveTo(this.trail[0][0], this.trail[0][1]);
+      for (const [x, y] of this.trail) ctx.lineTo(x, y);
+      if (this.pose) ctx.lineTo(this.pose.x, this.pose.y);
+      ctx.stroke();
+    }
+    // scan
+    ctx.fillStyle = '#dc2626';
+    const dot = Math.max(2.5 * px, 0.012);
+    for (const [x, y] of this.scan) ctx.fillRect(x - dot / 2, y - dot / 2, dot, dot);
+    // robot
+    if (this.pose) {
+      const { x, y, theta } = this.pose;
+      ctx.translate(x, y);
+      ctx.rotate(theta);
+      ctx.fillStyle = 'rgba(22, 163, 74, 0.30)';
+      ctx.strokeStyle = '#15803d';
+      ctx.lineWidth = 2 * px;
+      ctx.beginPath();
+      ctx.arc(0, 0, this.radius, 0, 2 * Math.PI);
+      ctx.fill();
+      ctx.stroke();
+      // heading: a dark arrow from the centre past the footprint
+      ctx.strokeStyle = '#052e16';
+      ctx.lineWidth = Math.max(3 * px, 0.015);
+      ctx.beginPath();
+      ctx.moveTo(0, 0);
+      ctx.lineTo(this.radius * 1.2, 0);
+      ctx.stroke();
+      ctx.beginPath();
+      ctx.moveTo(this.radius * 1.6, 0);
+      ctx.lineTo(this.radius * 1.1, this.radius * 0.35);
+      ctx.lineTo(this.radius * 1.1, -this.radius * 0.35);
+      ctx.closePath();
+      ctx.fillStyle = '#052e16';
+      ctx.fill();
+    }
+    ctx.restore();
+    // scale bar
+    ctx.fillStyle = '#475569';
+    ctx.font = '12px system-ui, sans-serif';
+    ctx.fillText(`1 m = ${Math.round(s)} px`, 8, height - 8);
+  }
+
+  _grid(ctx, width, height, px) {
+    const half = { x: width / 2 / this.scale, y: height / 2 / this.scale };
+    const x0 = this.center.x - half.x, x1 = this.center.x + half.x;
+    const y0 = this.center.y - half.y, y1 = this.center.y + half.y;
+    let step = 1;
+    while (step * this.scale < 25) step *= 5;
+    while (step * this.scale > 250) step /= 5;
+    ctx.strokeStyle = '#e5e7eb';
+    ctx.lineWidth = px;
+    ctx.beginPath();
+    for (let x = Math.floor(x0 / step) * step; x <= x1; x += step) { ctx.moveTo(x, y0); ctx.lineTo(x, y1); }
+    for (let y = Math.floor(y0 / step) * step; y <= y1; y += step) { ctx.moveTo(x0, y); ctx.lineTo(x1, y); }
+    ctx.stroke();
+    // origin axes: x red, y green (the usual RGB = XYZ convention)
+    ctx.lineWidth = 3 * px;
+    ctx.strokeStyle = '#ef4444';
+    ctx.beginPath(); ctx.moveTo(0, 0); ctx.lineTo(0.5, 0); ctx.stroke();
+    ctx.strokeStyle = '#22c55e';
+    ctx.beginPath(); ctx.moveTo(0, 0); ctx.lineTo(0, 0.5); ctx.stroke();
+  }
+}
+
+/** Scan ranges -> world points, using the laser mount (base_link -> laser) and the robot pose. */
+export function scanToWorld(scan, mount, pose) {
+  const out = [];
+  let nearest = Infinity;
+  if (!pose) return { points: out, nearest };
+  const { ranges, angle_min: amin, angle_increment: inc, range_min: rmin, range_max: rmax } = scan;
+  const cm = Math.cos(mount.yaw), sm = Math.sin(mount.yaw);
+  const cp = Math.cos(pose.theta), sp = Math.sin(pose.theta);
+  for (let i = 0; i < ranges.length; i++) {
+    const r = ranges[i];
+    // null is how JSON carries inf/NaN: no return (REP-117); range_max also reads "nothing"
+    if (r === null || !Number.isFinite(r) || r < rmin || r >= rmax) continue;
+    if (r < nearest) nearest = r;
+    const a = amin + i * inc;
+    const lx = r * Math.cos(a), ly = r * Math.sin(a);
+    const bx = mount.x + cm * lx - sm * ly, by = mount.y + sm * lx + cm * ly;
+    out.push([pose.x + cp * bx - sp * by, pose.y + sp * bx + cp * by]);
+  }
+  return { points: out, nearest };
+}
+
+/** LINE_LIST marker points -> [x1, y1, x2, y2] segments (marker pose assumed identity). */
+export function markerSegments(marker) {
+  const pts = marker.points || [];
+  const segs = [];
+  for (let i = 0; i + 1 < pts.length; i += 2) segs.push([pts[i].x, pts[i].y, pts[i + 1].x, pts[i + 1].y]);
+  return segs;
+}
+
+/** Yaw of a geometry_msgs/Quaternion (rotation about z). */
+export function yawOf(q) {
+  return Math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z));
+}

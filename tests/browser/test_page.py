@@ -1,0 +1,308 @@
+"""The page in a real browser (headless Debian chromium): connection, view, teleop, e-stop, PID.
+
+Each test starts a real simbridge on 127.0.0.1 (free ports), opens the page with
+``?url=ws://127.0.0.1:<port>`` and checks the robot's behaviour on /odom through a separate
+rosbridge client, never through the page itself.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+import pytest
+from playwright.async_api import Page
+
+from simbridge.runner import App
+from tests.browser.conftest import OpenPage, Watcher, screenshot
+from tests.conftest import AppFactory
+from tests.helpers import http_url, wait_for, ws_url
+
+
+pytestmark = pytest.mark.e2e
+
+
+async def open_connected(open_page: OpenPage, app: App, **context: Any) -> tuple[Page, Any]:
+    page, log = await open_page(app, f"/?url={ws_url(app)}", **context)
+    await page.wait_for_function("window.simbridge && window.simbridge.conn.connected")
+    await page.wait_for_function(
+        "window.simbridge.state.pose !== null && window.simbridge.state.walls > 0"
+    )
+    return page, log
+
+
+async def canvas_colours(page: Page) -> dict[str, int]:
+    """Count pixels of the view's wall, robot, scan and grid colours."""
+    return await page.evaluate(
+        """() => {
+          const c = document.getElementById('view');
+          const d = c.getContext('2d').getImageData(0, 0, c.width, c.height).data;
+          const n = { wall: 0, robot: 0, scan: 0, other: 0 };
+          for (let i = 0; i < d.length; i += 4) {
+            const [r, g, b] = [d[i], d[i + 1], d[i + 2]];
+            if (r < 70 && g < 70 && b < 90) n.wall++;
+            else if (g > 100 && r < 60 && b < 90) n.robot++;
+            else if (r > 200 && g < 60 && b < 60) n.scan++;
+            else n.other++;
+          }
+          return n;
+        }"""
+    )
+
+
+async def test_page_loads_without_errors_and_asks_only_its_server(
+    app: App, open_page: OpenPage
+) -> None:
+    """No console error, no uncaught exception, and every request goes to this server."""
+    page, log = await open_connected(open_page, app)
+    await page.wait_for_function("window.simbridge.conn.rates().some(r => r.name === '/scan')")
+    await page.wait_for_timeout(300)  # let late requests (params, rosapi) show up in the log
+    await screenshot(page, "page-desktop")
+    assert log.errors == []
+    allowed = (http_url(app) + "/", ws_url(app))
+    assert log.foreign(allowed) == []
+    assert any(u.startswith(ws_url(app)) for u in log.urls)
+    assert await page.text_content("#statusText") == "connected"
+
+
+async def test_canvas_draws_walls_robot_and_scan(app: App, open_page: OpenPage) -> None:
+    """The view shows the world's walls, the robot footprint and the scan points."""
+    page, _ = await open_connected(open_page, app)
+    await page.wait_for_function("window.simbridge.view.scan.length > 50")
+    await page.wait_for_timeout(100)
+    counts = await canvas_colours(page)
+    await screenshot(page, "view-world")
+    assert counts["wall"] > 500, counts
+    # the footprint's fill is drawn where the robot is (sampled off its heading arrow and the
+    # origin axes), and the background where nothing is
+    colours = await page.evaluate(
+        """() => {
+          const { view } = window.simbridge;
+          const c = document.getElementById('view');
+          const dpr = c.width / c.getBoundingClientRect().width;
+          const at = (x, y) => {
+            const r = c.getBoundingClientRect();
+            const sx = (r.width / 2 + (x - view.center.x) * view.scale) * dpr;
+            const sy = (r.height / 2 - (y - view.center.y) * view.scale) * dpr;
+            return [...c.getContext('2d').getImageData(Math.round(sx), Math.round(sy), 1, 1).data];
+          };
+          const p = view.pose, k = view.radius * 0.5;
+          return { robot: at(p.x - k, p.y - k), empty: at(p.x - 0.5, p.y - 0.7) };
+        }"""
+    )
+    r, g, b, _ = colours["robot"]
+    assert g > r + 30 and g > b + 15, colours  # green footprint
+    assert colours["empty"][:3] == [251, 251, 248], colours  # the view's background
+    assert counts["scan"] > 50, counts
+    # the scan points lie on the walls: every point within 5 cm of some wall segment
+    far = await page.evaluate(
+        """() => {
+          const { view } = window.simbridge;
+          const dist = (p, [x1, y1, x2, y2]) => {
+            const dx = x2 - x1, dy = y2 - y1;
+            const u = ((p[0] - x1) * dx + (p[1] - y1) * dy) / (dx * dx + dy * dy || 1);
+            const t = Math.max(0, Math.min(1, u));
+            return Math.hypot(p[0] - x1 - t * dx, p[1] - y1 - t * dy);
+          };
+          const near = (p) => Math.min(...view.walls.map((w) => dist(p, w)));
+          return view.scan.filter((p) => near(p) > 0.05).length;
+        }"""
+    )
+    assert far == 0
+
+
+async def count_cmd_vel(watcher: Watcher) -> int:
+    return len(watcher.history.get("/cmd_vel", []))
+
+
+async def test_holding_up_moves_robot_and_releasing_sends_one_zero(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """Up held: /cmd_vel at a fixed rate, the robot drives; released: one zero, then silence."""
+    await watcher.subscribe("/cmd_vel", "geometry_msgs/msg/Twist")
+    page, log = await open_connected(open_page, app)
+    x0 = watcher.odom()["x"]  # type: ignore[index]
+    await page.keyboard.down("ArrowUp")
+    for _ in range(5):  # OS auto-repeat: further keydowns with repeat=true change nothing
+        await page.keyboard.down("ArrowUp")
+    await watcher.wait(lambda: watcher.odom()["x"] > x0 + 0.15)  # type: ignore[index]
+    assert watcher.odom()["v"] == pytest.approx(0.3)  # type: ignore[index]
+    await screenshot(page, "teleop-driving")
+    await page.keyboard.up("ArrowUp")
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+    cmds = [m for _, m in watcher.history["/cmd_vel"]]
+    assert cmds[-1]["linear"]["x"] == 0.0
+    assert all(m["linear"]["x"] == pytest.approx(0.3) for m in cmds[:-1])
+    times = [t for t, _ in watcher.history["/cmd_vel"][:-1]]
+    rate = (len(times) - 1) / (times[-1] - times[0])
+    assert 6 < rate < 14, f"published at {rate:.1f} Hz while held, expected 10"
+    n = await count_cmd_vel(watcher)
+    x1 = watcher.odom()["x"]  # type: ignore[index]
+    await page.wait_for_timeout(500)  # silence after the one zero: nothing may arrive
+    assert await count_cmd_vel(watcher) == n
+    assert watcher.odom()["x"] == x1  # type: ignore[index]
+    assert log.errors == []
+
+
+async def test_focus_loss_stops_a_held_key(app: App, open_page: OpenPage, watcher: Watcher) -> None:
+    """A key held while the window loses focus (no keyup ever comes) still ends in a zero."""
+    page, _ = await open_connected(open_page, app)
+    await page.keyboard.down("KeyA")  # turn left
+    await watcher.wait(lambda: watcher.odom()["w"] > 0)  # type: ignore[index]
+    await page.evaluate("window.dispatchEvent(new Event('blur'))")
+    await watcher.wait(lambda: watcher.odom()["w"] == 0.0)  # type: ignore[index]
+
+
+async def test_estop_halts_latches_ignores_commands_until_reset(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """Space latches the server's e-stop: halted at once; /cmd_vel from anyone is ignored."""
+    await watcher.subscribe("/estop/state", "std_msgs/msg/Bool")
+    page, _ = await open_connected(open_page, app)
+    await page.keyboard.down("KeyW")
+    await watcher.wait(lambda: watcher.odom()["v"] > 0)  # type: ignore[index]
+    await page.keyboard.press("Space")
+    await watcher.wait(lambda: watcher.latest.get("/estop/state", {}).get("data") is True)
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+    await page.wait_for_selector("#estopBanner", state="visible")
+    assert app.world.estopped
+    # another client commands the robot: ignored while latched
+    await watcher.conn.send(
+        '{"op":"publish","topic":"/cmd_vel","msg":{"linear":{"x":0.4},"angular":{"z":1.0}}}'
+    )
+    await page.keyboard.up("KeyW")
+    await page.keyboard.down("KeyW")  # and the page's own keys are disabled
+    steps = app.world.steps
+    pose = watcher.odom()
+    await wait_for(lambda: app.world.steps >= steps + 10)
+    now = watcher.odom()
+    assert (now["x"], now["y"], now["theta"]) == (pose["x"], pose["y"], pose["theta"])  # type: ignore[index]
+    await page.keyboard.up("KeyW")
+    await screenshot(page, "estop-latched")
+    # only an explicit reset releases it
+    await page.click("#release")
+    await watcher.wait(lambda: watcher.latest["/estop/state"]["data"] is False)
+    await page.wait_for_selector("#estopBanner", state="hidden")
+    await watcher.conn.send(
+        '{"op":"publish","topic":"/cmd_vel","msg":{"linear":{"x":0.2},"angular":{"z":0.0}}}'
+    )
+    await watcher.wait(lambda: watcher.odom()["v"] == pytest.approx(0.2))  # type: ignore[index]
+
+
+async def test_pid_lab_settles_a_90_degree_heading_step(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """Heading PID at 10 Hz in the page: a 90 deg step settles within +-2 deg, shown settled."""
+    page, _ = await open_connected(open_page, app)
+    await page.click("button[data-tab=pid]")
+    await page.fill("#spTheta", "90")
+    await page.fill("#kp", "3")
+    await page.fill("#ki", "0.1")
+    await page.fill("#kd", "0.05")
+    await page.click("#pidStart")
+    target = math.pi / 2
+    tolerance = math.radians(2)
+
+    def settled() -> bool:
+        o = watcher.odom()
+        return o is not None and abs(o["theta"] - target) < tolerance and abs(o["w"]) < 0.05
+
+    await watcher.wait(settled, timeout=8)
+    await page.wait_for_function(
+        "window.simbridge.lab.figures().settlingTime !== null"
+        " && window.simbridge.plots.step.marks.length > 0"
+    )
+    figures = await page.evaluate("window.simbridge.lab.figures()")
+    # a 90 deg step at <= 2.5 rad/s takes > 0.6 s; the 2 % band of 90 deg is 1.8 deg
+    assert 0.6 < figures["settlingTime"] < 6
+    assert 0 <= figures["overshootPct"] < 20
+    assert figures["band"] == pytest.approx(math.radians(1.8))
+    assert abs(figures["error"]) < tolerance
+    text = await page.text_content("#pidFigures")
+    assert "overshoot" in text and "settling" in text  # type: ignore[operator]
+    example = await page.text_content("#example")
+    assert "class PID" in example and "update(error, dt)" in example  # type: ignore[operator]
+    await screenshot(page, "pid-heading-step")
+    await page.click("#pidStop")
+    await watcher.wait(lambda: watcher.odom()["w"] == 0.0)  # type: ignore[index]
+    assert abs(watcher.odom()["theta"] - target) < tolerance  # type: ignore[index]
+
+
+async def test_phone_viewport_touch_joystick_and_estop(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """A 390x844 touch phone: e-stop in view, 44 px targets, the joystick drives and stops."""
+    page, log = await open_connected(
+        open_page,
+        app,
+        viewport={"width": 390, "height": 844},
+        device_scale_factor=3,
+        is_mobile=True,
+        has_touch=True,
+    )
+    small = await page.evaluate(
+        """() => [...document.querySelectorAll('button, select, input')]
+            .filter((el) => el.offsetParent !== null)
+            .map((el) => [el.id || el.textContent.trim(), el.getBoundingClientRect()])
+            .filter(([, r]) => r.width < 44 || r.height < 44)
+            .map(([name, r]) => `${name}: ${r.width}x${r.height}`)"""
+    )
+    assert small == []
+    box = await page.locator("#estop").bounding_box()
+    assert box is not None and box["y"] + box["height"] <= 844 and box["x"] + box["width"] <= 390
+    touch = await page.evaluate(
+        "['view', 'joystick']"
+        ".map((id) => getComputedStyle(document.getElementById(id)).touchAction)"
+    )
+    assert touch == ["none", "none"]
+    # the view is crisp: its backing store uses the device pixel ratio
+    ratio = await page.evaluate(
+        "(() => { const c = document.getElementById('view');"
+        " return c.width / c.getBoundingClientRect().width; })()"
+    )
+    assert ratio == pytest.approx(3, abs=0.05)
+    await page.locator("#joystick").scroll_into_view_if_needed()
+    pad = await page.locator("#joystick").bounding_box()
+    assert pad is not None
+    cx, cy = pad["x"] + pad["width"] / 2, pad["y"] + pad["height"] / 2
+    cdp = await page.context.new_cdp_session(page)
+
+    async def touch_event(kind: str, x: float, y: float) -> None:
+        points = [] if kind == "touchEnd" else [{"x": x, "y": y}]
+        await cdp.send("Input.dispatchTouchEvent", {"type": kind, "touchPoints": points})
+
+    await touch_event("touchStart", cx, cy)
+    await touch_event("touchMove", cx, cy - pad["height"] * 0.45)  # push up: forward
+    await watcher.wait(lambda: watcher.odom()["v"] > 0.1)  # type: ignore[index]
+    await screenshot(page, "phone-joystick")
+    await touch_event("touchEnd", cx, cy)
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+    await page.tap("#estop")
+    await wait_for(lambda: app.world.estopped, timeout=5)
+    await page.wait_for_selector("#estopBanner", state="visible")
+    await screenshot(page, "phone-estop")
+    assert log.errors == []
+
+
+async def test_page_reconnects_with_backoff_and_resubscribes(
+    make_app: AppFactory, open_page: OpenPage
+) -> None:
+    """Server gone: 'reconnecting' shows; server back on the same port: data flows again."""
+    first = await make_app()
+    port = first.ws_port
+    page, log = await open_connected(open_page, first)
+    await first.stop()
+    await page.wait_for_function("window.simbridge.conn.state === 'reconnecting'")
+    assert (await page.text_content("#statusText")).startswith("reconnecting")  # type: ignore[union-attr]
+    await screenshot(page, "reconnecting")
+    second = await make_app(port=port)
+    second.world.robots[""].place((1.0, 0.5, 0.0))  # tell the two servers' odometry apart
+    await page.wait_for_function(
+        "window.simbridge.conn.connected && window.simbridge.state.pose"
+        " && Math.abs(window.simbridge.state.pose.x - 1.0) < 1e-9",
+        timeout=20_000,
+    )
+    await page.wait_for_function("window.simbridge.view.scan.length > 0")
+    assert await page.text_content("#statusText") == "connected"
+    # the browser logs the refused connection attempts itself; the page adds nothing else
+    assert [e for e in log.errors if "WebSocket connection" not in e] == []

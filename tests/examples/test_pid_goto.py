@@ -1,0 +1,79 @@
+"""The 10 Hz PID examples drive the simulated robot to a goal position and heading.
+
+examples/pid_goto.py (roslibpy) and examples/pid_goto.mjs (roslibjs 1.4.1 and 2.1.0): their own
+measure must be within 0.05 m and 0.05 rad, and the simulator's true pose after they stop
+within 0.07 m and 0.1 rad (the stop command takes up to one control period to arrive).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import math
+import os
+import sys
+from typing import Any
+
+import pytest
+
+from simbridge.runner import App
+from tests.conftest import AppFactory
+from tests.helpers import JS_DIR, ROOT, TIMEOUT_FACTOR, ws_url
+
+
+GOAL = (1.0, 0.5)
+HEADING = 1.57
+LIBS = {
+    "roslib1": JS_DIR / "node_modules" / "roslib1" / "src" / "RosLibNode.js",
+    "roslib2": JS_DIR / "node_modules" / "roslib2" / "dist" / "RosLib.js",
+}
+
+
+async def run_example(cmd: list[str], env: dict[str, str] | None = None) -> Any:
+    proc = await asyncio.create_subprocess_exec(
+        *cmd,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd=ROOT,
+        env={**os.environ, **(env or {})},
+    )
+    try:
+        out, err = await asyncio.wait_for(proc.communicate(), 45 * TIMEOUT_FACTOR)
+    except TimeoutError:
+        proc.kill()
+        await proc.wait()
+        raise
+    lines = out.decode().strip().splitlines()
+    assert lines, f"no output (exit {proc.returncode}):\n{err.decode()[-2000:]}"
+    result = json.loads(lines[-1])
+    assert proc.returncode == 0, f"{result}\n{err.decode()[-2000:]}"
+    return result
+
+
+def goal_args(app: App) -> list[str]:
+    return ["--url", ws_url(app), "--goal", *map(str, GOAL), "--heading", str(HEADING)]
+
+
+def check(result: Any, app: App) -> None:
+    assert result["reached"] is True
+    assert result["distance_error"] < 0.05
+    assert result["heading_error"] < 0.05
+    s = app.world.robots[""].state
+    assert math.hypot(s.x - GOAL[0], s.y - GOAL[1]) < 0.07
+    assert abs(math.atan2(math.sin(s.theta - HEADING), math.cos(s.theta - HEADING))) < 0.1
+
+
+@pytest.mark.usefixtures("node_ready")
+async def test_pid_examples_reach_the_goal_in_python_and_javascript(make_app: AppFactory) -> None:
+    """All three run at once, each against its own simulator."""
+    py_app = await make_app()
+    runs = [run_example([sys.executable, "examples/pid_goto.py", *goal_args(py_app)])]
+    apps = [py_app]
+    for module in LIBS.values():
+        app = await make_app()
+        apps.append(app)
+        cmd = ["node", "examples/pid_goto.mjs", *goal_args(app)]
+        runs.append(run_example(cmd, {"ROSLIB_MODULE": str(module)}))
+    results = await asyncio.gather(*runs)
+    for result, app in zip(results, apps, strict=True):
+        check(result, app)

@@ -1,0 +1,125 @@
+from __future__ import annotations
+
+import base64
+import json
+from typing import Any
+
+import pytest
+
+from simbridge.graph import Graph, install_rosapi
+from tests.helpers import RecordingPeer
+
+
+@pytest.fixture
+def graph() -> Graph:
+    g = Graph()
+    install_rosapi(g)
+    return g
+
+
+def op(peer: RecordingPeer, graph: Graph, **body: Any) -> None:
+    graph.receive(peer, json.dumps(body), 0.0)
+
+
+def served(graph: Graph) -> tuple[RecordingPeer, RecordingPeer]:
+    server, caller = RecordingPeer(graph, "s"), RecordingPeer(graph, "c")
+    op(server, graph, op="advertise_action", action="fib", type="example_interfaces/Fibonacci")
+    return server, caller
+
+
+def test_goal_feedback_and_result_are_routed_by_id(graph: Graph) -> None:
+    """Goal completed with defaults; feedback and result reach the caller under its id."""
+    server, caller = served(graph)
+    op(
+        caller,
+        graph,
+        op="send_action_goal",
+        action="/fib",
+        action_type="x/Y",
+        args={},
+        id="g",
+        feedback=True,
+    )
+    (goal,) = server.take()
+    assert goal["op"] == "send_action_goal" and goal["args"] == {"order": 0}
+    assert goal["action"] == "fib" and goal["feedback"] is True
+    op(server, graph, op="action_feedback", action="fib", id=goal["id"], values={"sequence": [0]})
+    op(
+        server,
+        graph,
+        op="action_result",
+        action="fib",
+        id=goal["id"],
+        values={},
+        status=4,
+        result=True,
+    )
+    feedback, result = caller.take()
+    assert feedback == {
+        "op": "action_feedback",
+        "action": "/fib",
+        "values": {"sequence": [0]},
+        "id": "g",
+    }
+    assert result == {
+        "op": "action_result",
+        "action": "/fib",
+        "values": {"sequence": []},
+        "status": 4,
+        "result": True,
+        "id": "g",
+    }
+
+
+def test_failures_are_answered_with_status(graph: Graph) -> None:
+    """Unknown action and bad goal: status 0; server gone: status 6, result false."""
+    server, caller = served(graph)
+    op(caller, graph, op="send_action_goal", action="/nope", action_type="a/B", id=1)
+    op(
+        caller,
+        graph,
+        op="send_action_goal",
+        action="/fib",
+        action_type="a/B",
+        args={"order": "x"},
+        id=2,
+    )
+    missing, bad = caller.take()
+    assert (missing["status"], missing["result"], missing["id"]) == (0, False, 1)
+    assert "does not exist" in missing["values"] and "order" in bad["values"]
+    op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=3)
+    graph.remove_peer(server)
+    (gone,) = caller.take()
+    assert (gone["status"], gone["result"]) == (6, False) and "unadvertised" in gone["values"]
+
+
+def test_cancel_goal_service_cancels_all_or_one(graph: Graph) -> None:
+    """action_msgs CancelGoal: zero goal_info cancels every goal; a UUID just that goal."""
+    server, caller = served(graph)
+    for n in (1, 2):
+        op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=n)
+    server.take()
+    op(caller, graph, op="call_service", service="/fib/_action/cancel_goal", args={})
+    (reply,) = caller.take()
+    assert "id" not in reply and reply["values"]["return_code"] == 0
+    canceling = reply["values"]["goals_canceling"]
+    assert len(canceling) == 2 and len(base64.b64decode(canceling[0]["goal_id"]["uuid"])) == 16
+    assert [m["op"] for m in server.take()] == ["cancel_action_goal"] * 2
+    uuid_text = canceling[1]["goal_id"]["uuid"]
+    wrong = {"goal_info": {"goal_id": {"uuid": [1] * 16}}}
+    op(caller, graph, op="call_service", service="/fib/_action/cancel_goal", args=wrong, id="w")
+    assert caller.take()[0]["values"]["return_code"] == 2
+    one = {"goal_info": {"goal_id": {"uuid": uuid_text}}}
+    op(caller, graph, op="call_service", service="/fib/_action/cancel_goal", args=one, id="o")
+    assert len(caller.take()[0]["values"]["goals_canceling"]) == 1
+
+
+def test_caller_leaving_cancels_its_goals(graph: Graph) -> None:
+    """A disconnected caller's goals are cancelled at the server."""
+    server, caller = served(graph)
+    op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=1)
+    (goal,) = server.take()
+    graph.remove_peer(caller)
+    (cancel,) = server.take()
+    assert cancel == {"op": "cancel_action_goal", "id": goal["id"], "action": "fib"}
+    assert graph.actions.goals == {}

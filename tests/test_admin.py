@@ -1,0 +1,91 @@
+from __future__ import annotations
+
+import json
+import urllib.error
+import urllib.request
+from typing import Any
+
+import pytest
+
+from simbridge.admin import AdminRefused, check_admin_token, token_from_headers
+from simbridge.runner import App
+from tests.conftest import AppFactory
+from tests.helpers import http_url
+
+
+def test_check_admin_token_refuses_without_configured_token_missing_or_wrong() -> None:
+    with pytest.raises(AdminRefused, match="disabled") as off:
+        check_admin_token(None, "x")
+    assert off.value.status == 403
+    with pytest.raises(AdminRefused, match="required") as missing:
+        check_admin_token("s3cret", None)
+    assert missing.value.status == 401
+    with pytest.raises(AdminRefused, match="wrong"):
+        check_admin_token("s3cret", "s3cre")
+    check_admin_token("s3cret", "s3cret")
+
+
+def test_token_from_headers() -> None:
+    assert token_from_headers({"authorization": "Bearer abc"}) == "abc"
+    assert token_from_headers({"x-admin-token": "def"}) == "def"
+    assert token_from_headers({"authorization": "Basic zzz"}) is None
+
+
+def request(app: App, path: str, body: Any = None, token: str | None = None) -> tuple[int, Any]:
+    data = None if body is None else json.dumps(body).encode()
+    req = urllib.request.Request(
+        http_url(app) + path, data=data, method="GET" if data is None else "POST"
+    )
+    if token is not None:
+        req.add_header("Authorization", f"Bearer {token}")
+    try:
+        with urllib.request.urlopen(req, timeout=5) as res:
+            return res.status, json.loads(res.read())
+    except urllib.error.HTTPError as err:
+        return err.code, json.loads(err.read())
+
+
+async def test_admin_api_refuses_every_change_without_the_token(make_app: AppFactory) -> None:
+    app = await make_app(admin_token="s3cret")
+    for path, body in [
+        ("/api/admin/params", {"changes": {"robot.mass": 3.0}}),
+        ("/api/admin/motion", {"model": "dynamic"}),
+        ("/api/admin/reset", {}),
+    ]:
+        assert (await _aio(request, app, path, body))[0] == 401
+        assert (await _aio(request, app, path, body, "nope"))[0] == 403
+    assert (await _aio(request, app, "/api/admin/state"))[0] == 401
+    assert app.world.params.robot.mass == 1.5 and app.world.motion.name == "kinematic"
+
+
+async def test_admin_is_off_without_a_configured_token(app: App) -> None:
+    status, body = await _aio(request, app, "/api/admin/reset", {}, "anything")
+    assert status == 403 and "disabled" in body["error"]
+
+
+async def test_admin_api_with_the_token_changes_params_model_and_lists_clients(
+    make_app: AppFactory,
+) -> None:
+    app = await make_app(admin_token="s3cret")
+    status, body = await _aio(
+        request, app, "/api/admin/params", {"changes": {"robot.mass": 3.0}}, "s3cret"
+    )
+    assert status == 200 and body["params"]["robot.mass"] == 3.0
+    assert app.world.params.robot.mass == 3.0
+    status, body = await _aio(
+        request, app, "/api/admin/params", {"changes": {"robot.mass": -1}}, "s3cret"
+    )
+    assert status == 400 and "robot.mass" in body["error"]
+    status, body = await _aio(request, app, "/api/admin/motion", {"model": "warp"}, "s3cret")
+    assert status == 400 and "kinematic" in body["error"]
+    status, body = await _aio(request, app, "/api/admin/motion", {"model": "dynamic"}, "s3cret")
+    assert status == 200 and app.world.motion.name == "dynamic"
+    status, state = await _aio(request, app, "/api/admin/state", None, "s3cret")
+    assert status == 200 and state["motion_model"] == "dynamic"
+    assert state["clients"] == [] and "robot.inertia" in state["params"]
+
+
+async def _aio(fn: Any, *args: Any) -> Any:
+    import asyncio
+
+    return await asyncio.to_thread(fn, *args)
