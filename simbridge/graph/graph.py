@@ -24,6 +24,7 @@ from simbridge.graph.params import ParameterStore
 from simbridge.graph.services import Handler, ServiceTable, service_response, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
+from simbridge.msgs.cdr import CdrWriter
 from simbridge.protocol import ClientId, Op, Session, ops as o, resolve_name, status_frame
 
 
@@ -60,6 +61,7 @@ class Graph:
             self.converter,
             default_queue_length=self.settings.default_queue_length,
         )
+        self.topics.cdr_factory = CdrWriter(self.registry).factory  # cbor-raw
         #: Services.
         self.services = ServiceTable(default_timeout=self.settings.service_timeout)
         self.services.prepare, self.services.finish = typed_calls(self.registry, self.converter)

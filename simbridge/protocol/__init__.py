@@ -5,6 +5,8 @@ Nothing here imports asyncio or websockets: bytes and decoded objects go in, fra
 
 from __future__ import annotations
 
+from simbridge.protocol import cbor, png
+from simbridge.protocol.cbor import encode_cbor
 from simbridge.protocol.encoding import (
     Frame,
     Outgoing,
@@ -36,6 +38,7 @@ __all__ = [
     "Session",
     "Subscription",
     "decode_frame",
+    "encode_cbor",
     "encode_json",
     "json_frame",
     "parse_op",
@@ -43,3 +46,6 @@ __all__ = [
     "split_frame",
     "status_frame",
 ]
+
+cbor.register()
+png.register()

@@ -144,7 +144,7 @@ class Outgoing:
     #: Encoders by compression name; ``none`` is JSON, others are registered by extensions.
     encoders: dict[str, Encoder] = {"none": _encode_none}
 
-    __slots__ = ("_body", "_frames", "cdr", "msg", "msgtype", "stamp", "topic")
+    __slots__ = ("_body", "_frames", "cache", "cdr", "msg", "msgtype", "stamp", "topic")
 
     def __init__(
         self,
@@ -161,6 +161,8 @@ class Outgoing:
         self.cdr = cdr
         self._body: bytes | None = None
         self._frames: dict[tuple[str, str], Frame] = {}
+        #: Per-encoding caches of encoders (e.g. the CBOR body shared by every topic spelling).
+        self.cache: dict[str, bytes] = {}
 
     def json_body(self) -> bytes:
         """Return the JSON of the message itself, computed once."""

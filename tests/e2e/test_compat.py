@@ -7,6 +7,7 @@ the suite stays short; the scenario results are checked here.
 from __future__ import annotations
 
 import asyncio
+import base64
 import json
 from typing import Any
 
@@ -225,3 +226,28 @@ async def test_roslibpy_services_and_action_client(
     assert (a["canceled"]["ok"], a["canceled"]["status"]) == (True, 5)
     assert a["canceled"]["feedback"]
     assert a["missing"]["ok"] is False and "does not exist" in a["missing"]["values"]
+
+
+@pytest.mark.parametrize("lib", ["roslib1", "roslib2"])
+async def test_roslibjs_compressions_fragments_and_latching(
+    app: App, run_js: ClientRunner, lib: str
+) -> None:
+    """none, cbor, png, cbor-raw side by side on /scan; fragments; a latched late message."""
+    r = await run_js(lib, ws_url(app), "encodings")
+    scan = r["scan"]
+    for key in ("none", "cbor", "png"):
+        assert (scan[key]["frame"], scan[key]["n"]) == ("laser", 360)
+    assert scan["cbor"]["rangesTyped"] == "Float32Array"
+    assert scan["cbor"]["first"] == pytest.approx(scan["png"]["first"], rel=1e-6)
+    assert scan["cbor"]["intensities"] == []
+    assert r["odomCbor"] == {"covariance": "Float64Array", "n": 36, "frame": "base_link"}
+    data = base64.b64decode(scan["raw"]["bytes"])
+    assert data[:4] == b"\x00\x01\x00\x00"
+    decoded = app.graph.registry.store.deserialize_cdr(data, "sensor_msgs/msg/LaserScan")
+    assert decoded.header.frame_id == "laser" and len(decoded.ranges) == 360
+    assert scan["raw"]["secs"] > 1_600_000_000
+    assert r["latched"] == {"data": "kept for late subscribers"}
+    assert r["fragIn"] == {"data": "reassembled"}
+    if lib == "roslib2":
+        frag = r["fragmented"]
+        assert (frag["n"], frag["frame"]) == (360, "laser") and frag["pieces"] >= 2

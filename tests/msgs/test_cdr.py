@@ -1,0 +1,47 @@
+from __future__ import annotations
+
+import numpy as np
+
+from simbridge.msgs import Converter, TypeRegistry
+from simbridge.msgs.cdr import CdrWriter
+
+
+def test_cdr_round_trips_through_rosbags_with_the_encapsulation_header() -> None:
+    """LaserScan and Odometry canonical dicts -> CDR (00 01 00 00 ...) -> same values."""
+    registry = TypeRegistry()
+    convert = Converter(registry, lambda: (7, 8))
+    writer = CdrWriter(registry)
+    scan = convert.from_json(
+        "sensor_msgs/LaserScan", {"header": {"frame_id": "laser"}, "ranges": [1.0, 2.5]}
+    )
+    data = writer.serialize("sensor_msgs/msg/LaserScan", scan)
+    assert data[:4] == b"\x00\x01\x00\x00"
+    back = registry.store.deserialize_cdr(data, "sensor_msgs/msg/LaserScan")
+    assert back.header.frame_id == "laser" and back.header.stamp.sec == 7
+    assert np.array_equal(back.ranges, np.array([1.0, 2.5], dtype=np.float32))
+    odom = convert.default("nav_msgs/Odometry")
+    back = registry.store.deserialize_cdr(
+        writer.serialize("nav_msgs/Odometry", odom), "nav_msgs/msg/Odometry"
+    )
+    assert back.pose.covariance.shape == (36,)
+
+
+def test_cdr_of_bytes_bools_strings_and_empty_messages() -> None:
+    """uint8[] from bytes, bool[] and string[] sequences, and a field-less request."""
+    registry = TypeRegistry()
+    convert = Converter(registry, lambda: (0, 0))
+    writer = CdrWriter(registry)
+    value = convert.from_json(
+        "rcl_interfaces/msg/ParameterValue",
+        {
+            "type": 5,
+            "byte_array_value": [1, 2],
+            "bool_array_value": [True],
+            "string_array_value": ["a"],
+        },
+    )
+    data = writer.serialize("rcl_interfaces/msg/ParameterValue", value)
+    back = registry.store.deserialize_cdr(data, "rcl_interfaces/msg/ParameterValue")
+    assert list(back.byte_array_value) == [1, 2] and list(back.bool_array_value) == [True]
+    assert back.string_array_value == ["a"]
+    assert len(writer.serialize("std_srvs/srv/Empty_Request", {})) == 5
