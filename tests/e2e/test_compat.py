@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import json
+import math
 from typing import Any
 
 import pytest
@@ -251,3 +252,18 @@ async def test_roslibjs_compressions_fragments_and_latching(
     if lib == "roslib2":
         frag = r["fragmented"]
         assert (frag["n"], frag["frame"]) == (360, "laser") and frag["pieces"] >= 2
+
+
+@parametrize_clients
+async def test_tf_clients_get_live_transforms_from_the_republisher(app: App, client: Any) -> None:
+    """TFClient (service), ROS2TFClient (action), roslibpy TFClient: odom->base_link, ->laser."""
+    r = await client(ws_url(app), "tf_clients")
+    mx, my, myaw = app.world.params.lidar.mount
+    first = r["first"]
+    assert first["base_link"]["rotation"]["w"] == pytest.approx(1.0, abs=0.05)
+    laser = first["laser"]["translation"]
+    assert (laser["x"], laser["y"]) == (pytest.approx(mx, abs=0.05), pytest.approx(my, abs=0.05))
+    assert first["laser"]["rotation"]["z"] == pytest.approx(math.sin(myaw / 2), abs=0.05)
+    turned = r["turned"]["base_link"]["rotation"]
+    assert turned["z"] > 0.1 and turned["z"] ** 2 + turned["w"] ** 2 == pytest.approx(1.0)
+    assert r["counts"]["base_link"] >= 2
