@@ -41,6 +41,7 @@ format:
 	$(BIN)/ruff check --fix simbridge tests bench examples
 
 bench: deps
+	$(BIN)/pip install --quiet -e '.[test,bench]'
 	$(BIN)/python -m bench
 
 clean:

@@ -1,0 +1,122 @@
+"""Fan-out: N clients subscribed to /odom (20 Hz) and /scan (10 Hz), simbridge vs the floor.
+
+In the same run, the same load-generator processes (two, separate from the server) connect N
+clients first to a simbridge server process and then to a bare websockets broadcaster process
+sending the same bytes at the same rates (``bench/broadcaster.py``, the physical floor). For
+each: server CPU (its own user + system seconds per second), publish-to-receive latency
+(receive wall time minus the message's header stamp, set at publish), and losses: a message
+any client received must reach every client, and the server must drop nothing
+(``dropped_frames`` of /healthz).
+
+Targets (issue 6): 100 clients: p99 <= 20 ms, nothing lost, CPU <= 1.3x the broadcaster's;
+500 clients: nothing lost.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+import urllib.request
+from typing import Any
+
+from bench.procs import (
+    collect,
+    cpu_seconds,
+    load_average,
+    losses,
+    percentile,
+    server,
+    start_loadgens,
+)
+
+
+TOPICS = ["/odom", "/scan"]
+
+
+def phase(kind: str, n: int, seconds: float, processes: int = 2) -> dict[str, Any]:
+    """Run ``n`` clients against one server kind for ``seconds``; return the figures."""
+    with server(kind) as (proc, port):
+        clients = [{"subscribe": TOPICS} for _ in range(n)]
+        start = time.time() + 3.0 + n / 60.0
+        end = start + seconds
+        procs = start_loadgens(f"ws://127.0.0.1:{port}", clients, processes, start, end)
+        time.sleep(max(0.0, start - time.time()))
+        cpu0 = cpu_seconds(proc)
+        time.sleep(max(0.0, end - time.time()))
+        cpu1 = cpu_seconds(proc)
+        rss = proc.memory_info().rss
+        load = load_average()
+        dropped = None
+        if kind == "simbridge":
+            with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=5) as r:
+                dropped = json.load(r).get("dropped_frames")
+        results = collect(procs, timeout=seconds + 60)
+    latencies = [x for r in results for x in r.get("latencies", [])]
+    expected, missing, errors = losses(results, TOPICS)
+    return {
+        "kind": kind,
+        "n": n,
+        "cpu": (cpu1 - cpu0) / seconds,
+        "p50": percentile(latencies, 0.5) * 1e3,
+        "p99": percentile(latencies, 0.99) * 1e3,
+        "max": max(latencies, default=float("nan")) * 1e3,
+        "received": len(latencies),
+        "expected": expected,
+        "missing": missing,
+        "errors": errors,
+        "dropped": dropped,
+        "rss_mb": rss / 1e6,
+        "load": load,
+    }
+
+
+def row(r: dict[str, Any]) -> str:
+    return (
+        f"{r['kind']:<11} {r['n']:>4} {r['cpu'] * 100:>6.1f}% {r['p50']:>7.2f} {r['p99']:>7.2f} "
+        f"{r['max']:>7.1f} {r['received']:>8} {r['missing']:>7} "
+        f"{'-' if r['dropped'] is None else r['dropped']:>7} {r['errors']:>6} "
+        f"{r['rss_mb']:>6.0f}  {r['load']}"
+    )
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = argv or []
+    seconds = float(args[0]) if args else 20.0
+    print(f"fanout: clients subscribed to /odom + /scan, {seconds:g} s measured per row")
+    print(
+        f"{'server':<11} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
+        f"{'received':>8} {'missing':>7} {'dropped':>7} {'errors':>6} {'RSS MB':>6}"
+    )
+    out: dict[tuple[str, int], dict[str, Any]] = {}
+    for n in (100, 500):
+        for kind in ("simbridge", "broadcaster"):
+            r = phase(kind, n, seconds)
+            out[(kind, n)] = r
+            print(row(r), flush=True)
+    s100, b100 = out[("simbridge", 100)], out[("broadcaster", 100)]
+    s500 = out[("simbridge", 500)]
+    ratio = s100["cpu"] / b100["cpu"]
+    checks = [
+        ("100 clients: p99 <= 20 ms", s100["p99"] <= 20.0, f"{s100['p99']:.2f} ms"),
+        (
+            "100 clients: nothing lost",
+            s100["missing"] == 0 and not s100["dropped"] and not s100["errors"],
+            f"{s100['missing']} missing, {s100['dropped']} dropped",
+        ),
+        ("100 clients: CPU <= 1.3x the broadcaster", ratio <= 1.3, f"{ratio:.2f}x"),
+        (
+            "500 clients: nothing lost",
+            s500["missing"] == 0 and not s500["dropped"] and not s500["errors"],
+            f"{s500['missing']} missing, {s500['dropped']} dropped, {s500['errors']} errors",
+        ),
+    ]
+    ok = True
+    for what, passed, figure in checks:
+        ok &= passed
+        print(f"target: {what}: {'PASS' if passed else 'MISS'} ({figure})")
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
