@@ -83,7 +83,7 @@ async def test_every_rosapi_service_and_parameter_interface(app: App, client: An
     odom_text = raw["typedefs_full_text"][raw["topics"].index("/odom")]
     assert odom_text.startswith("std_msgs/Header header\n")
     assert "\n" + "=" * 80 + "\nMSG: geometry_msgs/PoseWithCovariance\n" in odom_text
-    assert r["actionServers"] == []
+    assert r["actionServers"] == ["/tf2_web_republisher"]
     if lib == "roslib2":
         assert r["publishers"] == ["/virtual_robot"]
     else:
@@ -143,7 +143,7 @@ async def test_roslibjs_services_and_actions_between_clients(
         return
     assert s["asyncFail"] == {"ok": False, "error": "Error: no can do"}
     a = r["actions"]
-    assert a["actionServers"] == ["/fibonacci"]
+    assert a["actionServers"] == ["/fibonacci", "/tf2_web_republisher"]
     ok = a["succeeded"]
     assert ok["ok"] is True and ok["result"] == {"sequence": [0, 1, 1, 2, 3, 5, 8]}
     assert ok["feedback"][-1] == {"sequence": [0, 1, 1, 2, 3, 5, 8]} and len(ok["feedback"]) == 5
