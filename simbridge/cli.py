@@ -240,6 +240,18 @@ def _cmd_param(argv: Sequence[str]) -> int:
     return param_main(argv)
 
 
+def _cmd_record(argv: Sequence[str]) -> int:
+    from simbridge.record import record_main
+
+    return record_main(argv)
+
+
+def _cmd_replay(argv: Sequence[str]) -> int:
+    from simbridge.record import replay_main
+
+    return replay_main(argv)
+
+
 #: Sub-commands: name -> (one-line help, function(argv) -> exit code).
 COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "check-config": ("validate a world and a parameter file, then exit", _cmd_check_config),
@@ -247,6 +259,8 @@ COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "topic": ("list|echo|hz|pub topics of any rosbridge URL (as `ros2 topic`)", _cmd_topic),
     "service": ("list|call services of any rosbridge URL (as `ros2 service`)", _cmd_service),
     "param": ("list|get|set parameters through rosapi (as `ros2 param`)", _cmd_param),
+    "record": ("record topics of any rosbridge URL into a rosbag2 MCAP bag", _cmd_record),
+    "replay": ("replay a bag's /cmd_vel into a server or a headless simulation", _cmd_replay),
 }
 
 

@@ -1,0 +1,58 @@
+# simbridge: a rosbridge v2 server with a built-in robot simulation, as a container.
+#
+#   docker build -t simbridge .
+#   docker run --rm -p 9090:9090 simbridge           # ws://HOST:9090/ (page on http://HOST:9090/)
+#
+# Multi-arch (a Raspberry Pi 4B/5 with a 64-bit OS, and an x86-64 class server):
+#   docker buildx build --platform linux/amd64,linux/arm64 -t REGISTRY/simbridge:TAG --push .
+# 32-bit ARM (armv7, 32-bit Raspberry Pi OS) is NOT supported: numpy and PyYAML publish no
+# armv7 wheels, so pip would compile them (hours under emulation). Use a 64-bit OS on the Pi.
+#
+# Every dependency installs from a binary wheel (no compiler in the image). Any Debian-based image
+# with Python >= 3.11 and its venv module works as the base (the tests build from a local one):
+#   docker build --build-arg BASE_IMAGE=my-debian-python .
+ARG BASE_IMAGE=python:3.12-slim-bookworm
+FROM ${BASE_IMAGE}
+
+ENV PYTHONDONTWRITEBYTECODE=1 \
+    PYTHONUNBUFFERED=1 \
+    PIP_DISABLE_PIP_VERSION_CHECK=1 \
+    PIP_NO_CACHE_DIR=1 \
+    PATH=/opt/simbridge/bin:$PATH
+
+# A virtual environment keeps the install off the base image's Python (Debian's is "externally
+# managed", PEP 668) and works the same on python:*-slim.
+RUN python3 -m venv /opt/simbridge
+
+# Dependencies first, from pyproject.toml alone: this layer stays cached while the code changes.
+COPY pyproject.toml /tmp/simbridge/
+RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('/tmp/simbridge/pyproject.toml', 'rb'))['project']['dependencies']))" \
+        > /tmp/requirements.txt \
+    && pip install --no-cache-dir --only-binary=:all: -r /tmp/requirements.txt \
+    && rm -f /tmp/requirements.txt
+
+# The package itself: the code, its page and its default configuration (bundled in the wheel).
+COPY README.md /tmp/simbridge/
+COPY simbridge /tmp/simbridge/simbridge
+COPY static /tmp/simbridge/static
+COPY config /tmp/simbridge/config
+RUN pip install --no-cache-dir --only-binary=:all: --no-deps /tmp/simbridge \
+    && rm -rf /tmp/simbridge \
+    && simbridge check-config
+
+# Run unprivileged. The process needs no files of its own: settings come from the image, from
+# SIMBRIDGE_* variables, or from a read-only mount (docker-compose.yml mounts config/).
+RUN useradd --uid 10001 --user-group --no-create-home --home-dir /nonexistent \
+        --shell /usr/sbin/nologin simbridge
+USER simbridge:simbridge
+WORKDIR /tmp
+
+# 9090: rosbridge WebSocket (it also answers /healthz and serves the page); 8080: page + /healthz.
+EXPOSE 9090 8080
+
+# No curl in slim images: the server's own probe (GET /healthz on $SIMBRIDGE_PORT, exit 0 or 1).
+HEALTHCHECK --interval=10s --timeout=5s --start-period=30s --retries=3 \
+    CMD ["simbridge", "healthcheck"]
+
+# Exec form: simbridge is PID 1 and receives docker stop's SIGTERM (clean shutdown, no 10 s wait).
+CMD ["simbridge", "--host", "0.0.0.0"]

@@ -1,0 +1,346 @@
+"""The Docker side of the deployment tests: an engine, local images, and compose projects.
+
+Nothing here pulls from a registry: the base image is made with debootstrap (Debian bookworm
+minbase + Python) and ``docker import``; the project image is the repository's Dockerfile built
+FROM it (``--build-arg BASE_IMAGE``); the web-interface image is Debian's nginx on the same base.
+Everything is cached: a second run finds the engine running and the base images present, and
+rebuilds the project image from Docker's layer cache.
+
+Several test runs may share this machine and its engine at once: image creation is serialised by
+a file lock, each run uses its own compose project and free 127.0.0.1 ports, and a run that died
+leaves containers that the next run removes (its project name carries its process id).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import fcntl
+import glob
+import hashlib
+import json
+import os
+import re
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator, Sequence
+from pathlib import Path
+from typing import Any
+
+
+ROOT = Path(__file__).resolve().parent.parent.parent
+HERE = Path(__file__).resolve().parent
+COMPOSE_FILE = ROOT / "docker-compose.yml"
+COMPOSE_TEST_FILE = HERE / "compose.test.yml"
+NGINX_DOCKERFILE = HERE / "nginx.Dockerfile"
+
+#: Bump the suffix when the recipe changes, so cached images are made again.
+BASE_IMAGE = "simbridge-test-base:bookworm-1"
+NGINX_IMAGE = "simbridge-test-nginx:bookworm-1"
+BASE_PACKAGES = ["python3", "python3-venv", "ca-certificates"]
+DEBIAN_MIRROR = os.environ.get("SIMBRIDGE_TEST_DEBIAN_MIRROR", "http://deb.debian.org/debian")
+#: Label of the project images the tests build (dangling ones are pruned).
+TEST_LABEL = "org.simbridge.test=1"
+LOCK_PATH = Path(tempfile.gettempdir()) / "simbridge-test-docker.lock"
+DOCKERD_LOG = Path(tempfile.gettempdir()) / "simbridge-test-dockerd.log"
+PROJECT_PREFIX = "sbtest"
+
+#: The two compose front ends the course's commands must work with.
+COMPOSE_COMMANDS = {"docker-compose": ["docker-compose"], "docker compose": ["docker", "compose"]}
+
+
+def log(text: str) -> None:
+    """Print a progress line (shown with ``pytest -s``; kept short)."""
+    print(f"[docker] {text}", file=sys.stderr, flush=True)
+
+
+def run(
+    cmd: Sequence[str],
+    *,
+    timeout: float = 120,
+    check: bool = True,
+    env: dict[str, str] | None = None,
+    input_data: bytes | None = None,
+) -> subprocess.CompletedProcess[str]:
+    """Run a command; on failure raise with its output (the reason a test failed)."""
+    proc = subprocess.run(
+        list(cmd),
+        capture_output=True,
+        timeout=timeout,
+        env=env,
+        input=input_data,
+        check=False,
+    )
+    out = proc.stdout.decode(errors="replace")
+    err = proc.stderr.decode(errors="replace")
+    if check and proc.returncode != 0:
+        msg = f"{' '.join(cmd)} exited {proc.returncode}:\n{out[-3000:]}\n{err[-3000:]}"
+        raise RuntimeError(msg)
+    return subprocess.CompletedProcess(proc.args, proc.returncode, out, err)
+
+
+@contextlib.contextmanager
+def machine_lock() -> Iterator[None]:
+    """Hold the machine-wide lock of the Docker test setup (engine start, base images)."""
+    with LOCK_PATH.open("a") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX)
+        try:
+            yield
+        finally:
+            fcntl.flock(handle, fcntl.LOCK_UN)
+
+
+def engine_running() -> bool:
+    """Whether a Docker engine answers."""
+    try:
+        return run(["docker", "info"], timeout=30, check=False).returncode == 0
+    except subprocess.TimeoutExpired:
+        return False
+
+
+def start_engine(timeout: float = 60) -> str | None:
+    """Start dockerd if none runs and this process can; return why not, or None when running.
+
+    dockerd is started detached (it outlives the tests, so the next run starts at once); its log
+    is ``$TMPDIR/simbridge-test-dockerd.log``.
+    """
+    if shutil.which("docker") is None:
+        return "the docker client is not installed (`make deps` installs docker.io as root)"
+    if engine_running():
+        return None
+    with machine_lock():
+        if engine_running():
+            return None
+        dockerd = shutil.which("dockerd")
+        if dockerd is None:
+            return "no Docker engine runs and dockerd is not installed (apt-get install docker.io)"
+        if os.geteuid() != 0:
+            return "no Docker engine runs and only root can start dockerd here"
+        log(f"starting dockerd (log: {DOCKERD_LOG})")
+        with DOCKERD_LOG.open("ab") as out:
+            proc = subprocess.Popen(
+                [dockerd],
+                stdin=subprocess.DEVNULL,
+                stdout=out,
+                stderr=out,
+                start_new_session=True,
+            )
+        deadline = time.monotonic() + timeout
+        while time.monotonic() < deadline:
+            if engine_running():
+                return None
+            if proc.poll() is not None:
+                break
+            time.sleep(0.5)
+        tail = DOCKERD_LOG.read_text(errors="replace").strip().splitlines()[-5:]
+        if proc.poll() is None:
+            proc.terminate()
+        return "dockerd did not start: " + " | ".join(tail)
+
+
+def image_exists(tag: str) -> bool:
+    """Whether the engine has an image with this tag."""
+    return run(["docker", "image", "inspect", tag], check=False).returncode == 0
+
+
+def ensure_base_image() -> None:
+    """Make the local base image (debootstrap, then ``docker import``) unless it exists.
+
+    Debian bookworm minbase with Python 3.11 and its venv module: what the Dockerfile needs of a
+    base. The machine's extra CA certificates go in, so that pip and apt work where outgoing
+    TLS is inspected.
+    """
+    if image_exists(BASE_IMAGE):
+        return
+    with machine_lock():
+        if image_exists(BASE_IMAGE):
+            return
+        if shutil.which("debootstrap") is None:
+            msg = "debootstrap is not installed (`make deps` installs it as root)"
+            raise RuntimeError(msg)
+        started = time.monotonic()
+        with tempfile.TemporaryDirectory(prefix="simbridge-rootfs-", dir="/var/tmp") as tmp:
+            rootfs = Path(tmp) / "rootfs"
+            cmd = ["debootstrap", "--variant=minbase", f"--include={','.join(BASE_PACKAGES)}"]
+            run([*cmd, "bookworm", str(rootfs), DEBIAN_MIRROR], timeout=900)
+            log(f"debootstrap: {time.monotonic() - started:.0f} s")
+            for deb in (rootfs / "var/cache/apt/archives").glob("*.deb"):
+                deb.unlink()
+            shutil.rmtree(rootfs / "var/lib/apt/lists", ignore_errors=True)
+            (rootfs / "var/lib/apt/lists/partial").mkdir(parents=True)
+            certs = sorted(glob.glob("/usr/local/share/ca-certificates/*.crt"))
+            for cert in certs:
+                shutil.copy(cert, rootfs / "usr/local/share/ca-certificates")
+            if certs:
+                run(["chroot", str(rootfs), "update-ca-certificates"])
+            tar = subprocess.Popen(["tar", "-C", str(rootfs), "-c", "."], stdout=subprocess.PIPE)
+            assert tar.stdout is not None
+            imported = subprocess.run(
+                ["docker", "import", "--change", 'CMD ["/bin/bash"]', "-", BASE_IMAGE],
+                stdin=tar.stdout,
+                capture_output=True,
+                timeout=300,
+                check=False,
+            )
+            tar.stdout.close()
+            if tar.wait() != 0 or imported.returncode != 0:
+                msg = f"docker import failed: {imported.stderr.decode(errors='replace')}"
+                raise RuntimeError(msg)
+        log(f"base image {BASE_IMAGE}: {time.monotonic() - started:.0f} s")
+
+
+def project_image_tag() -> str:
+    """The project image of this checkout (several checkouts may share the engine)."""
+    return "simbridge-test:" + hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]
+
+
+def build_images() -> str:
+    """Build the project image (always; layers cached) and the nginx image (once), in parallel.
+
+    Returns the project image's tag.
+    """
+    tag = project_image_tag()
+    build = ["docker", "build", "--network", "host", "--build-arg", f"BASE_IMAGE={BASE_IMAGE}"]
+    jobs: list[tuple[str, subprocess.Popen[bytes], tempfile._TemporaryFileWrapper[bytes]]] = []
+    started = time.monotonic()
+
+    def spawn(name: str, cmd: list[str], stdin: bytes | None = None) -> None:
+        out = tempfile.NamedTemporaryFile(prefix="simbridge-build-")  # noqa: SIM115
+        proc = subprocess.Popen(
+            cmd, stdin=subprocess.PIPE, stdout=out, stderr=subprocess.STDOUT, cwd=ROOT
+        )
+        assert proc.stdin is not None
+        if stdin is not None:
+            proc.stdin.write(stdin)
+        proc.stdin.close()
+        jobs.append((name, proc, out))
+
+    with machine_lock():
+        nginx_needed = not image_exists(NGINX_IMAGE)
+        if nginx_needed:
+            # a Dockerfile on stdin: no build context at all
+            spawn("nginx image", [*build, "-t", NGINX_IMAGE, "-"], NGINX_DOCKERFILE.read_bytes())
+        spawn("project image", [*build, "--label", TEST_LABEL, "-t", tag, str(ROOT)])
+        failures = []
+        for name, proc, out in jobs:
+            try:
+                code = proc.wait(timeout=600)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                code = -1
+            out.seek(0)
+            text = out.read().decode(errors="replace")
+            out.close()
+            if code != 0:
+                failures.append(f"{name} build failed ({code}):\n{text[-4000:]}")
+    if failures:
+        raise RuntimeError("\n".join(failures))
+    log(f"images built in {time.monotonic() - started:.1f} s")
+    # the previous build of this checkout, now untagged
+    run(["docker", "image", "prune", "-f", "--filter", f"label={TEST_LABEL}"], check=False)
+    return tag
+
+
+def free_port() -> int:
+    """A TCP port free on 127.0.0.1 right now."""
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def reap_stale_projects() -> None:
+    """Remove containers and networks of test projects whose test process is gone."""
+    fmt = '{{.ID}}\t{{.Label "com.docker.compose.project"}}'
+    label = "label=com.docker.compose.project"
+    containers = run(["docker", "ps", "-a", "--filter", label, "--format", fmt]).stdout
+    networks = run(["docker", "network", "ls", "--filter", label, "--format", fmt]).stdout
+    stale_containers, stale_networks = [], []
+    for lines, stale in ((containers, stale_containers), (networks, stale_networks)):
+        for line in lines.splitlines():
+            ident, _, project = line.partition("\t")
+            found = re.fullmatch(rf"{PROJECT_PREFIX}(\d+)[a-z0-9]*", project)
+            if found and not _alive(int(found.group(1))):
+                stale.append(ident)
+    if stale_containers:
+        run(["docker", "rm", "-f", *stale_containers], check=False)
+    if stale_networks:
+        run(["docker", "network", "rm", *stale_networks], check=False)
+
+
+def _alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    return True
+
+
+class Stack:
+    """One compose project of docker-compose.yml + tests/deploy/compose.test.yml."""
+
+    def __init__(self, compose: Sequence[str], image: str, suffix: str) -> None:
+        #: The compose command: ``docker-compose`` or ``docker compose``.
+        self.compose = list(compose)
+        #: Compose project name (carries this process id, see :func:`reap_stale_projects`).
+        self.project = f"{PROJECT_PREFIX}{os.getpid()}{suffix}"
+        #: Host ports on 127.0.0.1: the bridge's 9090 and nginx's 8080.
+        self.ws_port = free_port()
+        self.web_port = free_port()
+        self.env = dict(os.environ)
+        self.env.update(
+            SIMBRIDGE_TEST_IMAGE=image,
+            NGINX_IMAGE=NGINX_IMAGE,
+            WS_PUBLISH=f"127.0.0.1:{self.ws_port}",
+            WEB_PUBLISH=f"127.0.0.1:{self.web_port}",
+        )
+
+    def command(self, *args: str) -> list[str]:
+        """The full compose command line for ``args``."""
+        files = ["-f", str(COMPOSE_FILE), "-f", str(COMPOSE_TEST_FILE)]
+        return [*self.compose, "-p", self.project, *files, *args]
+
+    def __call__(
+        self, *args: str, timeout: float = 180, check: bool = True
+    ) -> subprocess.CompletedProcess[str]:
+        """Run a compose sub-command (``up -d``, ``ps``, ``logs``, ``down`` ...)."""
+        return run(self.command(*args), timeout=timeout, check=check, env=self.env)
+
+    def containers(self) -> dict[str, str]:
+        """Service name -> container id, for this project's containers."""
+        fmt = '{{.ID}}\t{{.Label "com.docker.compose.service"}}'
+        label = f"label=com.docker.compose.project={self.project}"
+        out = run(["docker", "ps", "-a", "--no-trunc", "--format", fmt, "--filter", label]).stdout
+        return {svc: ident for ident, _, svc in (ln.partition("\t") for ln in out.splitlines())}
+
+    def inspect(self, service: str) -> dict[str, Any]:
+        """``docker inspect`` of a service's container."""
+        ident = self.containers()[service]
+        return dict(json.loads(run(["docker", "inspect", ident]).stdout)[0])
+
+    def health(self) -> dict[str, str]:
+        """Service name -> health status (``starting``, ``healthy``, ``unhealthy``)."""
+        out = {}
+        for service, ident in self.containers().items():
+            state = run(
+                ["docker", "inspect", "-f", "{{.State.Status}} {{.State.Health.Status}}", ident]
+            ).stdout.split()
+            out[service] = state[1] if state[0] == "running" else state[0]
+        return out
+
+    def wait_healthy(self, services: Sequence[str], timeout: float = 120) -> dict[str, str]:
+        """Wait until every service is healthy; raise with their logs if not in time."""
+        deadline = time.monotonic() + timeout
+        health: dict[str, str] = {}
+        while time.monotonic() < deadline:
+            health = self.health()
+            if all(health.get(s) == "healthy" for s in services):
+                return health
+            time.sleep(0.25)
+        logs = self("logs", "--no-color", "--tail", "30", check=False).stdout
+        msg = f"not healthy after {timeout} s: {health}\n{logs}"
+        raise TimeoutError(msg)
