@@ -29,8 +29,9 @@ Consequences a test or a student can check:
   ``T_omega = 2 r I / (k b^2)``.
 
 Integration: each step ``dt`` is split into substeps of at most :data:`MAX_SUBSTEP` seconds;
-per substep the velocities are updated first (and never carried past their target, so the loop
-cannot oscillate numerically however small ``m`` or ``I``), then the pose by the kinematic
+per substep the velocities are updated first (never carried past their target, so the loop
+cannot oscillate numerically however small ``m`` or ``I``; within :data:`SNAP` of it they take
+the target exactly, so a stopped robot reports 0), then the pose by the kinematic
 equations at the new velocities (semi-implicit Euler). The reported twist is the body velocity.
 """
 
@@ -52,10 +53,14 @@ def _clamp(x: float, limit: float) -> float:
     return max(-limit, min(limit, x))
 
 
+#: Velocity error (m/s, rad/s) below which the loop has reached its target.
+SNAP = 1e-6
+
+
 def _toward(value: float, rate: float, target: float, h: float) -> float:
-    """Return ``value + rate * h`` without passing ``target``."""
+    """Return ``value + rate * h`` without passing ``target`` (and snapped to it when close)."""
     new = value + rate * h
-    if (value - target) * (new - target) < 0.0:
+    if (value - target) * (new - target) < 0.0 or abs(new - target) < SNAP:
         return target
     return new
 

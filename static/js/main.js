@@ -60,6 +60,7 @@ setInterval(() => {
   const odom = rows.find((r) => r.name === topic('odom'));
   $('statusInfo').textContent = conn.connected && odom
     ? `${conn.url} · odom ${odom.rate.toFixed(0)} Hz, ${fmtAge(odom.ageMs)} old`
+      + (state.simTime !== undefined ? ` · sim ${state.simTime.toFixed(1)} s` : '')
     : conn.url;
   $('rates').replaceChildren(...rows.map((r) => {
     const tr = document.createElement('tr');
@@ -68,7 +69,8 @@ setInterval(() => {
     }
     return tr;
   }));
-  $('linkTimes').textContent = `wall ${new Date().toISOString().slice(11, 19)} UTC · last odom stamp ${state.odomStamp ?? '–'}`;
+  const sim = state.simTime !== undefined ? `sim time ${state.simTime.toFixed(2)} s · ` : '';
+  $('linkTimes').textContent = `${sim}wall ${new Date().toISOString().slice(11, 19)} UTC · last odom stamp ${state.odomStamp ?? '–'}`;
 }, 500);
 
 let toastTimer = null;
@@ -206,6 +208,9 @@ conn.subscribe('/walls', 'visualization_msgs/msg/Marker', (m) => {
   view.setWalls(segs);
   if (first) { view.fit(); view.setFollow(false); }
 });
+conn.subscribe('/clock', 'rosgraph_msgs/msg/Clock', (m) => {
+  state.simTime = m.clock.sec + m.clock.nanosec * 1e-9;
+}, { throttle_rate: 200 });
 conn.subscribe('/estop/state', 'std_msgs/msg/Bool', (m) => showEstop(Boolean(m.data)));
 subscribeRobot();
 
