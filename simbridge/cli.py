@@ -259,6 +259,12 @@ def _cmd_replay(argv: Sequence[str]) -> int:
     return replay_main(argv)
 
 
+def _cmd_compare(argv: Sequence[str]) -> int:
+    from simbridge.compare import compare_main
+
+    return compare_main(argv)
+
+
 #: Sub-commands: name -> (one-line help, function(argv) -> exit code).
 COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "check-config": ("validate a world and a parameter file, then exit", _cmd_check_config),
@@ -268,6 +274,7 @@ COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "param": ("list|get|set parameters through rosapi (as `ros2 param`)", _cmd_param),
     "record": ("record topics of any rosbridge URL into a rosbag2 MCAP bag", _cmd_record),
     "replay": ("replay a bag's /cmd_vel into a server or a headless simulation", _cmd_replay),
+    "compare": ("compare the odometry of a simulated and a real run (RMSE, drift)", _cmd_compare),
 }
 
 

@@ -1,0 +1,79 @@
+"""The validation workflow end to end, with the simulator standing in for the real robot.
+
+examples/velocity_sequence.py drives a real server while `simbridge record` records it; `simbridge
+replay --headless` simulates the recorded commands; `simbridge compare` finds the two runs equal
+to within the server's command timing (commands take effect at its next 50 ms tick).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import signal
+import sys
+from pathlib import Path
+
+from simbridge.runner import App
+from tests.helpers import ROOT, TIMEOUT_FACTOR, ws_url
+
+
+async def run(*cmd: str) -> tuple[int, str, str]:
+    proc = await asyncio.create_subprocess_exec(
+        *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, cwd=ROOT
+    )
+    return await finish(proc)
+
+
+async def finish(proc: asyncio.subprocess.Process) -> tuple[int, str, str]:
+    try:
+        out, err = await asyncio.wait_for(proc.communicate(), 30 * TIMEOUT_FACTOR)
+    except TimeoutError:
+        proc.kill()
+        await proc.wait()
+        raise
+    assert proc.returncode is not None
+    return proc.returncode, out.decode(), err.decode()
+
+
+async def test_sequence_recorded_on_the_server_matches_its_headless_replay(
+    app: App, tmp_path: Path
+) -> None:
+    sequence = tmp_path / "seq.yaml"
+    sequence.write_text(
+        "- [0.5, 0.0, 0.0]\n- [1.5, 0.2, 0.0]\n- [1.5, 0.0, 0.6]\n- [1.0, 0.2, 0.3]\n"
+    )
+    py = sys.executable
+    recorder = await asyncio.create_subprocess_exec(
+        *(py, "-m", "simbridge", "record", "--url", ws_url(app)),
+        *("-o", str(tmp_path / "real"), "/odom", "/cmd_vel"),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd=ROOT,
+    )
+    assert recorder.stderr is not None
+    line = await asyncio.wait_for(recorder.stderr.readline(), 10 * TIMEOUT_FACTOR)
+    assert b"recording to" in line, line  # subscribed: the sequence may start
+    code, out, err = await run(
+        py, "examples/velocity_sequence.py", "--url", ws_url(app), "--sequence", str(sequence)
+    )
+    assert code == 0, err
+    assert json.loads(out.splitlines()[-1])["messages"] == 46
+    await asyncio.sleep(0.5)  # the stopped robot's last /odom
+    recorder.send_signal(signal.SIGINT)
+    code, _out, err = await finish(recorder)
+    assert code == 0, err
+    code, _out, err = await run(
+        py, "-m", "simbridge", "replay", str(tmp_path / "real"), "--headless",
+        "-o", str(tmp_path / "sim"),
+    )  # fmt: skip
+    assert code == 0, err
+    code, out, err = await run(
+        py, "-m", "simbridge", "compare", str(tmp_path / "sim"), str(tmp_path / "real"), "--json"
+    )
+    assert code == 0, err
+    m = json.loads(out)
+    print(m)
+    assert m["duration_s"] > 4.0
+    assert m["real_distance_m"] > 0.45
+    assert m["position_rmse_m"] < 0.03, m
+    assert m["heading_rmse_rad"] < 0.06, m
