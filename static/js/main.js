@@ -4,6 +4,7 @@ import { View, scanToWorld, markerSegments, yawOf } from './view.js';
 import { TeleopDriver, installKeyboard, installJoystick, installGamepad } from './teleop.js';
 import { TimeSeriesPlot } from './plots.js';
 import { PidLab, exampleCode } from './pid.js';
+import { spawnNear } from './spawn.js';
 
 const $ = (id) => document.getElementById(id);
 const TWIST = 'geometry_msgs/msg/Twist';
@@ -205,6 +206,7 @@ conn.subscribe('/walls', 'visualization_msgs/msg/Marker', (m) => {
   const first = state.walls === 0;
   const segs = markerSegments(m);
   state.walls = segs.length;
+  state.wallSegments = segs;
   view.setWalls(segs);
   if (first) { view.fit(); view.setFollow(false); }
 });
@@ -241,6 +243,14 @@ async function discoverRobots() {
       const match = /^(?:\/([^/]+))?\/odom$/.exec(name);
       if (match && (!type || type.replace('/msg/', '/') === 'nav_msgs/Odometry')) found.push(match[1] || '');
     });
+    if (found.includes('') && found.length > 1) {
+      // '/odom' may only be our own subscription (a world of named robots): keep it only if
+      // something publishes it.
+      try {
+        const pubs = await conn.call('/rosapi/publishers', 'rosapi/Publishers', { topic: '/odom' });
+        if (!pubs.publishers || !pubs.publishers.length) found.splice(found.indexOf(''), 1);
+      } catch (err) { /* a rosapi without publishers: keep it */ }
+    }
     found.sort();
     if (found.join('|') === state.robots.join('|')) return;
     state.robots = found;
@@ -255,6 +265,31 @@ async function discoverRobots() {
     sel.value = state.ns;
   } catch (err) { /* a server without rosapi: keep the default robot */ }
 }
+// spawn: a robot of one's own, selected at once
+function selectRobot(ns) {
+  releaseInputs();
+  lab.stop();
+  state.ns = ns;
+  $('robot').value = ns;
+  subscribeRobot();
+  loadLimits();
+}
+$('spawnForm').addEventListener('submit', async (e) => {
+  e.preventDefault();
+  if (!conn.connected) { toast('Not connected: cannot spawn a robot.'); return; }
+  const input = $('spawnName');
+  try {
+    const name = await spawnNear(conn, input.value.trim(), state.pose, state.wallSegments || []);
+    input.value = '';
+    await discoverRobots();
+    if (!state.robots.includes(name)) {
+      state.robots = [...state.robots, name].sort();
+      $('robot').append(new Option(name, name));
+    }
+    selectRobot(name);
+    toast(`Spawned robot '${name}': you are driving it.`);
+  } catch (err) { toast(`Spawn failed: ${err.message}`); }
+});
 $('robot').addEventListener('change', (e) => {
   releaseInputs();
   lab.stop();
