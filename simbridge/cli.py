@@ -13,16 +13,20 @@ import asyncio
 import errno
 import os
 import signal
+import ssl
 import sys
 import urllib.error
 import urllib.request
 from collections.abc import Callable, Sequence
+from pathlib import Path
+from typing import Any
 
 from simbridge import __version__
 from simbridge.config import (
     ServerSettings,
     default_params_path,
     default_world_path,
+    load_client_tokens,
     load_params,
     load_world,
 )
@@ -66,6 +70,131 @@ def _add_config_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _positive(kind: type[int] | type[float]) -> Callable[[str], float]:
+    def parse(text: str) -> float:
+        try:
+            value = kind(text)
+        except ValueError:
+            msg = f"'{text}' is not a number"
+            raise argparse.ArgumentTypeError(msg) from None
+        if not value > 0:
+            msg = f"{value} must be greater than 0"
+            raise argparse.ArgumentTypeError(msg)
+        return value
+
+    return parse
+
+
+def _add_security_options(parser: argparse.ArgumentParser) -> None:
+    """Options of docs/security.md: tokens, TLS, origins and limits."""
+    group = parser.add_argument_group("security and limits (see docs/security.md)")
+    group.add_argument(
+        "--client-tokens",
+        metavar="FILE",
+        default=_env("CLIENT_TOKENS", None),
+        help="YAML file 'tokens: {TOKEN: ROBOT}': clients must connect with ?token=TOKEN and "
+        "may command only their robot (see config/classroom_tokens.example.yaml) "
+        "[SIMBRIDGE_CLIENT_TOKENS]",
+    )
+    group.add_argument(
+        "--auth-secret-file",
+        metavar="FILE",
+        default=_env("AUTH_SECRET_FILE", None),
+        help="file holding a rosauth secret (one line): clients may authenticate with the "
+        "rosbridge 'auth' op [SIMBRIDGE_AUTH_SECRET_FILE]",
+    )
+    group.add_argument(
+        "--allowed-origins",
+        metavar="LIST",
+        default=_env("ALLOWED_ORIGINS", None),
+        help="comma-separated Origins whose pages may connect, e.g. https://pi.local:8080 "
+        "(default: any) [SIMBRIDGE_ALLOWED_ORIGINS]",
+    )
+    group.add_argument(
+        "--certfile",
+        metavar="PEM",
+        default=_env("CERTFILE", None),
+        help="TLS certificate chain: serve wss:// and https:// [SIMBRIDGE_CERTFILE]",
+    )
+    group.add_argument(
+        "--keyfile",
+        metavar="PEM",
+        default=_env("KEYFILE", None),
+        help="TLS private key (default: in the certfile) [SIMBRIDGE_KEYFILE]",
+    )
+    group.add_argument(
+        "--max-clients",
+        type=_positive(int),
+        default=int(_env("MAX_CLIENTS", "200") or 200),
+        help="WebSocket clients at most (default: 200) [SIMBRIDGE_MAX_CLIENTS]",
+    )
+    group.add_argument(
+        "--max-message-size",
+        type=_positive(int),
+        default=int(_env("MAX_MESSAGE_SIZE", "10000000") or 10_000_000),
+        help="largest incoming message, bytes (default: 10000000) [SIMBRIDGE_MAX_MESSAGE_SIZE]",
+    )
+    group.add_argument(
+        "--stall-timeout",
+        type=_positive(float),
+        default=float(_env("STALL_TIMEOUT", "30") or 30),
+        help="disconnect a client that reads nothing for this many seconds while messages "
+        "wait for it (default: 30) [SIMBRIDGE_STALL_TIMEOUT]",
+    )
+    group.add_argument(
+        "--ping-interval",
+        type=_positive(float),
+        default=float(_env("PING_INTERVAL", "20") or 20),
+        help="keepalive ping every this many seconds; a peer that does not answer within "
+        "as long is dropped (default: 20) [SIMBRIDGE_PING_INTERVAL]",
+    )
+
+
+def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Return the ServerSettings fields of the security options (files read and checked).
+
+    Raises:
+        ConfigError: a file is missing or malformed, or the TLS options are incomplete.
+    """
+    out: dict[str, Any] = {
+        "admin_token": args.admin_token or None,
+        "max_clients": args.max_clients,
+        "max_message_size": args.max_message_size,
+        "stall_timeout": args.stall_timeout,
+        "ping_interval": args.ping_interval,
+        "ping_timeout": args.ping_interval,
+    }
+    if args.client_tokens:
+        out["client_tokens"] = load_client_tokens(args.client_tokens)
+    if args.auth_secret_file:
+        try:
+            secret = Path(args.auth_secret_file).read_text(encoding="utf-8").strip()
+        except OSError as err:
+            msg = f"auth secret file '{args.auth_secret_file}': cannot be read ({err.strerror})"
+            raise ConfigError(msg) from None
+        if len(secret) < 16:
+            msg = f"auth secret file '{args.auth_secret_file}': the secret needs 16+ characters"
+            raise ConfigError(msg)
+        out["auth_secret"] = secret
+    if args.allowed_origins:
+        out["allowed_origins"] = tuple(
+            o.strip().rstrip("/") for o in args.allowed_origins.split(",") if o.strip()
+        )
+    if args.keyfile and not args.certfile:
+        msg = "--keyfile needs --certfile (the certificate chain)"
+        raise ConfigError(msg)
+    if args.certfile:
+        from simbridge.server import tls_context  # imported late: `--help` stays fast
+
+        try:
+            tls_context(args.certfile, args.keyfile)
+        except (OSError, ssl.SSLError) as err:
+            msg = f"TLS: cannot load --certfile/--keyfile: {err}"
+            raise ConfigError(msg) from None
+        out["certfile"], out["keyfile"] = args.certfile, args.keyfile
+    return out
+
+
 def _run_parser() -> argparse.ArgumentParser:
     commands = "\n".join(f"  {name:<14} {text}" for name, (text, _) in COMMANDS.items())
     parser = argparse.ArgumentParser(
@@ -105,6 +234,7 @@ def _run_parser() -> argparse.ArgumentParser:
         "/healthz and the page)",
     )
     _add_config_options(parser)
+    _add_security_options(parser)
     parser.add_argument(
         "--admin-token",
         metavar="TOKEN",
@@ -196,14 +326,14 @@ async def _serve(
 def _cmd_run(argv: Sequence[str]) -> int:
     args = _run_parser().parse_args(argv)
     setup_logging(args.log_level)
-    settings = ServerSettings(
-        host=args.host,
-        port=args.port,
-        http_port=None if args.no_http else args.http_port,
-        admin_token=args.admin_token or None,
-        use_sim_time=args.use_sim_time,
-    )
     try:
+        settings = ServerSettings(
+            host=args.host,
+            port=args.port,
+            http_port=None if args.no_http else args.http_port,
+            use_sim_time=args.use_sim_time,
+            **_security_settings(args),
+        )
         # validate before binding anything, so a bad file fails fast and clearly
         load_world(args.world)
         load_params(args.params)

@@ -29,11 +29,13 @@ __all__ = [
     "Params",
     "RobotParams",
     "RobotSpec",
+    "SafetyParams",
     "ServerSettings",
     "SimParams",
     "WorldSpec",
     "default_params_path",
     "default_world_path",
+    "load_client_tokens",
     "load_params",
     "load_world",
     "resource_dir",
@@ -132,17 +134,33 @@ class SimParams(_Strict):
     rate: float = Field(20.0, gt=0, le=1000, description="kinematics and /odom rate, Hz")
 
 
+class SafetyParams(_Strict):
+    """Server-side safety of the robots (``config/classroom_params.yaml`` turns it on)."""
+
+    cmd_vel_timeout: float = Field(
+        0.0,
+        ge=0,
+        le=3600,
+        description="stop a robot after this many seconds without /cmd_vel (0 = off: the "
+        "robot keeps its last command, as the course describes)",
+    )
+    stop_on_disconnect: bool = Field(
+        False, description="stop a robot when the client that last commanded it disconnects"
+    )
+
+
 class Params(_Strict):
     """The whole parameter file (``config/pi4b_params.yaml``)."""
 
     robot: RobotParams = Field(default_factory=RobotParams)
     lidar: LidarParams = Field(default_factory=LidarParams)
     sim: SimParams = Field(default_factory=SimParams)
+    safety: SafetyParams = Field(default_factory=SafetyParams)
 
     def flat(self) -> dict[str, Any]:
         """Return every setting under its dotted name (``robot.mass``): ROS 2 parameters."""
         out: dict[str, Any] = {}
-        for section in ("robot", "lidar", "sim"):
+        for section in type(self).model_fields:
             for key, value in getattr(self, section).model_dump().items():
                 out[f"{section}.{key}"] = list(value) if isinstance(value, tuple) else value
         return out
@@ -374,6 +392,40 @@ class ServerSettings:
     #: Stamp headers with simulated time (``/clock``) instead of the wall clock.
     use_sim_time: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
+    # -- reliability and security (docs/security.md); admin_token above also guards the
+    # administrative ROS services (when it is None they are open: a laptop on its own) --
+    #: Connected WebSocket clients at most; one more is refused with HTTP 503.
+    max_clients: int = 200
+    #: Subscribed topic spellings per client at most.
+    max_subscriptions: int = 200
+    #: Advertised topics, services and actions per client at most.
+    max_advertisements: int = 100
+    #: Sustained ``publish`` ops per second per client, and the burst allowed above it.
+    publish_rate: float = 200.0
+    publish_burst: int = 400
+    #: Sustained incoming WebSocket messages per second per client, and the burst.
+    message_rate: float = 1000.0
+    message_burst: int = 2000
+    #: Seconds a client may go without reading while messages wait for it; then it is
+    #: disconnected (None: never).
+    stall_timeout: float | None = 30.0
+    #: Client tokens (query parameter ``?token=``): token -> scope. A scope is ``"*"`` (any
+    #: topic) or a robot name (publish only under ``/<name>/``). Empty: no client tokens.
+    client_tokens: dict[str, str] = field(default_factory=dict)
+    #: rosauth shared secret for the ``auth`` op (None: the op is refused).
+    auth_secret: str | None = None
+    #: Seconds of clock difference an ``auth`` op's ``t`` may have (rosauth's allowed_time_delta).
+    auth_time_delta: float = 5.0
+    #: Allowed ``Origin`` headers of WebSocket upgrades (None: any; browsers only send one).
+    allowed_origins: tuple[str, ...] | None = None
+    #: TLS certificate chain and private key (PEM): serve wss:// and https://.
+    certfile: str | None = None
+    keyfile: str | None = None
+
+    @property
+    def auth_required(self) -> bool:
+        """Whether clients must authenticate (a client token or a rosauth MAC)."""
+        return bool(self.client_tokens) or self.auth_secret is not None
 
 
 def _format_errors(err: ValidationError) -> str:
@@ -440,3 +492,44 @@ def load_world(path: Path | str | None = None) -> WorldSpec:
     except ValidationError as err:
         msg = f"world file '{p}': {_format_errors(err)}"
         raise ConfigError(msg) from None
+
+
+def load_client_tokens(path: Path | str) -> dict[str, str]:
+    """Load a client-token file: ``tokens: {TOKEN: SCOPE}``.
+
+    A scope is a robot name (publish only under ``/<robot>/``), ``"*"`` (every topic) or
+    ``"admin"`` (every topic and administrative services).
+
+    Raises:
+        ConfigError: the file is missing or malformed, or a token is too short to be secret.
+    """
+    p = Path(path)
+    data = _read_yaml(p, "client tokens")
+    tokens = data.get("tokens")
+    extra = sorted(set(data) - {"tokens"})
+    if extra:
+        msg = f"client tokens file '{p}': {extra[0]}: unknown key (expected only 'tokens')"
+        raise ConfigError(msg)
+    if not isinstance(tokens, dict) or not tokens:
+        msg = f"client tokens file '{p}': tokens: must be a mapping TOKEN: SCOPE (robot name)"
+        raise ConfigError(msg)
+    out: dict[str, str] = {}
+    for token, scope in tokens.items():
+        shown = str(token)[:4] + "..."
+        if not isinstance(token, str) or len(token) < 8:
+            msg = (
+                f"client tokens file '{p}': tokens: {shown}: a token must be a quoted string "
+                "of at least 8 characters"
+            )
+            raise ConfigError(msg)
+        if not isinstance(scope, str) or not scope or not _SCOPE.match(scope):
+            msg = (
+                f"client tokens file '{p}': tokens.{shown}: scope {scope!r} must be a robot "
+                "name, '*' or 'admin'"
+            )
+            raise ConfigError(msg)
+        out[token] = scope
+    return out
+
+
+_SCOPE = re.compile(r"^(\*|[A-Za-z_][A-Za-z0-9_]*)$")

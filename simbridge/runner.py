@@ -32,7 +32,8 @@ from simbridge.graph import Graph, RobotBridge, install_rosapi
 from simbridge.graph.estop import EStop
 from simbridge.graph.simclock import SimClock
 from simbridge.graph.walls import WallsPublisher
-from simbridge.server import BridgeServer
+from simbridge.security import install_security
+from simbridge.server import BridgeServer, tls_context
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
 
@@ -129,6 +130,9 @@ class App:
         self._started = time.monotonic()
         #: Set once the servers listen and the loop runs.
         self.ready = asyncio.Event()
+        # last, so that it guards whatever the lines above installed (docs/security.md)
+        #: Access control and limits of client ops; the robots' safety watchdog.
+        self.guard, self.safety = install_security(self)
 
     # -- facts ----------------------------------------------------------------------------
 
@@ -162,8 +166,10 @@ class App:
     async def start(self) -> None:
         """Start the servers and the simulation loop."""
         await self.server.start()
-        if self.settings.http_port is not None:
-            self._http = await serve_http(self.web, self.settings.host, self.settings.http_port)
+        s = self.settings
+        if s.http_port is not None:
+            tls = tls_context(s.certfile, s.keyfile) if s.certfile else None
+            self._http = await serve_http(self.web, s.host, s.http_port, ssl=tls)
         loop = asyncio.get_running_loop()
         self.bridge.publish_static(loop.time())
         self.walls.publish(loop.time())

@@ -6,6 +6,12 @@ written to the socket at once while the client keeps up, without a task switch o
 mark, further frames wait in its bounded :class:`~simbridge.protocol.SendQueue` (drop-oldest per
 subscription, byte budget per client), drained by the client's own writer task. A slow or
 stalled client therefore never delays the simulation loop or any other client.
+
+Hostile or broken clients are bounded here (``docs/security.md``): upgrades from a foreign
+``Origin``, over ``max_clients`` or with a wrong ``?token=`` are refused with an HTTP status
+before the handshake; incoming messages are rate limited per client (excess ones are dropped
+with one ``status`` a second); a client that reads nothing for ``stall_timeout`` seconds while
+messages wait for it is disconnected; keepalive pings evict dead peers.
 """
 
 from __future__ import annotations
@@ -14,6 +20,7 @@ import asyncio
 import contextlib
 import http
 import logging
+import ssl
 from collections.abc import Hashable
 from typing import Any
 
@@ -21,9 +28,11 @@ from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
+from websockets.typing import Origin
 
 from simbridge.config import ServerSettings
 from simbridge.graph import Graph
+from simbridge.graph.guard import TokenBucket, token_access
 from simbridge.protocol import Frame, SendQueue, Session, status_frame
 from simbridge.web import HttpRequest, WebApp, parse_target
 
@@ -34,6 +43,15 @@ logger = logging.getLogger(__name__)
 
 #: Socket write-buffer size above which frames are queued instead of written (bytes).
 WRITE_HIGH_WATER = 64 * 1024
+#: Incoming messages handled back to back before the handler lets other tasks run.
+BATCH = 16
+
+
+def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
+    """Return a server TLS context for a PEM certificate chain and key (wss://, https://)."""
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    context.load_cert_chain(certfile, keyfile)
+    return context
 
 
 class Client:
@@ -58,6 +76,25 @@ class Client:
         self.frames_sent = 0
         #: The client was told that frames were dropped for it.
         self.told_dropped = False
+        #: When the writer last completed a write (monotonic seconds): stall detection.
+        self.last_progress = asyncio.get_running_loop().time()
+        #: Incoming-message rate limit.
+        self.messages = TokenBucket(settings.message_rate, settings.message_burst)
+        #: When the client was last told its messages are dropped for the rate (seconds).
+        self.told_rate = -1e9
+
+    def close_soon(self, code: int, reason: str) -> None:
+        """Close the connection after what is queued (e.g. a failed ``auth``)."""
+        if not self.closed:
+            task = asyncio.get_running_loop().create_task(self.ws.close(code, reason))
+            _background.add(task)
+            task.add_done_callback(_background.discard)
+
+    def abort(self) -> None:
+        """Drop the connection at once (the peer reads nothing: no close handshake)."""
+        self.closed = True
+        self.queue.clear()
+        self.ws.transport.abort()
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         """Write a frame now if the socket keeps up, else queue it (drop-oldest)."""
@@ -89,6 +126,12 @@ class Client:
             while (frame := self.queue.pop()) is not None:
                 await self.ws.send(frame.data, text=frame.text)
                 self.frames_sent += 1
+                self.last_progress = asyncio.get_running_loop().time()
+            self.told_dropped = False  # caught up: tell again if it falls behind again
+
+
+#: Tasks that must not be garbage-collected before they finish.
+_background: set[asyncio.Task[None]] = set()
 
 
 class BridgeServer:
@@ -107,6 +150,10 @@ class BridgeServer:
         self.clients: set[Client] = set()
         #: Connections accepted since start.
         self.connections_total = 0
+        #: Upgrades refused (origin, token, max_clients) and clients evicted for stalling.
+        self.refused_total = 0
+        self.stalled_total = 0
+        self._watcher: asyncio.Task[None] | None = None
 
     @property
     def port(self) -> int:
@@ -117,6 +164,10 @@ class BridgeServer:
     async def start(self) -> None:
         """Start listening."""
         s = self.settings
+        # non-browser clients (roslibpy, Node) send no Origin; the allow-list is for pages
+        origins: list[Origin | None] | None = None
+        if s.allowed_origins is not None:
+            origins = [*(Origin(o) for o in s.allowed_origins), None]
         self.server = await serve(
             self._handler,
             s.host,
@@ -127,17 +178,25 @@ class BridgeServer:
             ping_timeout=s.ping_timeout,
             compression=None,  # per-client deflate would defeat encode-once
             server_header="simbridge",
+            origins=origins,
+            ssl=tls_context(s.certfile, s.keyfile) if s.certfile else None,
         )
+        if s.stall_timeout is not None:
+            self._watcher = asyncio.create_task(self._watch_stalls(s.stall_timeout))
 
     async def close(self) -> None:
         """Close every connection and stop listening."""
+        if self._watcher is not None:
+            self._watcher.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._watcher
         if self.server is not None:
             self.server.close()
             await self.server.wait_closed()
 
     def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         if request.headers.get("Upgrade", "").lower() == "websocket":
-            return None
+            return self._admit(connection, request)
         if self.web is None:
             return connection.respond(426, "this is a rosbridge WebSocket endpoint\n")
         path, query = parse_target(request.path)
@@ -150,9 +209,62 @@ class BridgeServer:
         reason = http.HTTPStatus(answer.status).phrase
         return Response(answer.status, reason, out, answer.body)
 
+    def _admit(self, connection: ServerConnection, request: Request) -> Response | None:
+        """Refuse an upgrade over ``max_clients`` or with a token that grants nothing."""
+        s = self.settings
+        if len(self.clients) >= s.max_clients:
+            self.refused_total += 1
+            logger.warning("refused a client: %d clients connected (max_clients)", s.max_clients)
+            return connection.respond(
+                503, f"simbridge is full: {s.max_clients} clients connected; try again later\n"
+            )
+        token = _query_token(request.path)
+        if token is not None and token_access(s, token) is None:
+            self.refused_total += 1
+            logger.warning("refused a client: invalid token")
+            return connection.respond(401, "invalid token\n")
+        return None
+
+    async def _watch_stalls(self, timeout: float) -> None:
+        """Disconnect clients that have read nothing for ``timeout`` s while frames wait."""
+        loop = asyncio.get_running_loop()
+        while True:
+            await asyncio.sleep(min(1.0, timeout / 4))
+            now = loop.time()
+            for client in list(self.clients):
+                if client.closed or not client.queue:
+                    continue
+                if now - client.last_progress > timeout:
+                    self.stalled_total += 1
+                    logger.warning(
+                        "%s read nothing for %.0f s (stall_timeout): disconnecting it",
+                        client.label,
+                        now - client.last_progress,
+                    )
+                    client.abort()
+
+    def _rate_limited(self, client: Client, now: float) -> bool:
+        if client.messages.take(now):
+            return False
+        if now - client.told_rate >= 1.0:
+            client.told_rate = now
+            logger.info("%s sends too fast: dropping messages", client.label)
+            if client.session.wants_status("error"):
+                s = self.settings
+                client.send(
+                    status_frame(
+                        "error",
+                        f"too many messages: more than {s.message_rate:g} per second (the "
+                        f"server's message_rate, burst {s.message_burst}); messages were dropped",
+                    )
+                )
+        return True
+
     async def _handler(self, ws: ServerConnection) -> None:
         graph = self.graph
         session = graph.new_session()
+        if ws.request is not None:
+            session.extra["token"] = _query_token(ws.request.path)
         client = Client(ws, session, self.settings)
         self.clients.add(client)
         self.connections_total += 1
@@ -160,13 +272,20 @@ class BridgeServer:
         writer = asyncio.create_task(client.write_loop(), name=f"writer-{session.client_id}")
         logger.info("%s connected", client.label)
         loop = asyncio.get_running_loop()
+        handled = 0
         try:
             async for message in ws:
+                now = loop.time()
+                if self._rate_limited(client, now):
+                    continue
                 try:
-                    graph.receive(client, message, loop.time())
+                    graph.receive(client, message, now)
                 except Exception as err:  # a bug must not cost the client its connection
                     logger.exception("%s: internal error", client.label)
                     client.send(status_frame("error", f"internal error: {err}"))
+                handled += 1
+                if handled % BATCH == 0:
+                    await asyncio.sleep(0)  # a flood must not hold the loop: let ticks run
         except ConnectionClosed:
             pass
         finally:
@@ -186,4 +305,13 @@ class BridgeServer:
             "connections_total": self.connections_total,
             "queued_frames": sum(len(c.queue) for c in self.clients),
             "dropped_frames": sum(c.queue.dropped for c in self.clients),
+            "refused_total": self.refused_total,
+            "stalled_total": self.stalled_total,
         }
+
+
+def _query_token(target: str) -> str | None:
+    """Return the ``token`` query parameter of a request target, if any."""
+    _path, query = parse_target(target)
+    values = query.get("token")
+    return values[0] if values else None

@@ -20,6 +20,7 @@ import os
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from ssl import SSLContext
 from typing import Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
@@ -218,10 +219,12 @@ async def _serve_connection(
             writer.close()
 
 
-async def serve_http(app: WebApp, host: str, port: int) -> asyncio.Server:
-    """Start the HTTP server; return it (``server.sockets`` tells the bound port)."""
+async def serve_http(
+    app: WebApp, host: str, port: int, *, ssl: SSLContext | None = None
+) -> asyncio.Server:
+    """Start the HTTP server (HTTPS with ``ssl``); return it (``sockets`` tells the port)."""
 
     async def handler(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         await _serve_connection(app, reader, writer)
 
-    return await asyncio.start_server(handler, host, port, limit=_MAX_HEAD)
+    return await asyncio.start_server(handler, host, port, limit=_MAX_HEAD, ssl=ssl)

@@ -7,7 +7,9 @@ import os
 import socket
 import urllib.request
 
+import pytest
 from websockets.asyncio.client import connect
+from websockets.exceptions import InvalidStatus
 
 from simbridge.runner import App
 from tests.conftest import AppFactory
@@ -144,3 +146,118 @@ async def test_disconnect_cleans_up_the_client(app: App) -> None:
     assert "/mine" not in app.graph.topics.topics
     assert "/my_srv" not in app.graph.services.services
     assert not app.graph.topics.topics["/odom"].subscriptions
+
+
+async def test_clients_over_max_clients_are_refused_with_503(make_app: AppFactory) -> None:
+    app = await make_app(max_clients=2)
+    async with connect(ws_url(app)), connect(ws_url(app)):
+        with pytest.raises(InvalidStatus) as info:
+            async with connect(ws_url(app)):
+                pass
+        assert info.value.response.status_code == 503
+        assert b"full" in info.value.response.body
+    await wait_for(lambda: not app.server.clients)
+    async with connect(ws_url(app)) as ws:  # room again
+        await send_json(ws, {"op": "call_service", "service": "/rosapi/topics", "id": 1})
+        assert (await recv_until(ws, lambda m: m.get("id") == 1))["result"] is True
+    assert app.server.refused_total == 1
+
+
+async def test_a_stalled_client_is_told_once_then_disconnected_after_stall_timeout(
+    make_app: AppFactory,
+) -> None:
+    """A client that reads nothing loses old messages, then is dropped; the others go on."""
+    app = await make_app(max_queue_bytes=200_000, stall_timeout=1.0)
+    sub = {"op": "subscribe", "topic": "/blob", "type": "std_msgs/String"}
+    stalled = await stalled_client(app.ws_port, sub)
+    try:
+        await _flood_while_stalled(app, "x" * 100_000)
+        victim = next(c for c in app.server.clients if c.session.subscriptions.get("/blob"))
+        assert victim.told_dropped
+        warnings = [f for f in victim.queue._fifo if f.frame and b'"warning"' in f.frame.data]
+        assert len(warnings) <= 1  # told once, not once per dropped message
+        await wait_for(lambda: victim not in app.server.clients, timeout=10)
+        assert app.server.stalled_total == 1
+        assert "/blob" not in app.graph.topics.topics  # the victim's subscription is gone too
+    finally:
+        stalled.close()
+
+
+async def test_keepalive_pings_evict_a_dead_peer(make_app: AppFactory) -> None:
+    """A peer that never answers pings (gone without a FIN) is dropped after the timeout."""
+    app = await make_app(ping_interval=0.2, ping_timeout=0.2)
+    dead = await stalled_client(app.ws_port, {"op": "subscribe", "topic": "/rosout"})
+    try:
+        await wait_for(lambda: len(app.server.clients) == 1)
+        await wait_for(lambda: not app.server.clients, timeout=15)
+    finally:
+        dead.close()
+
+
+async def test_message_flood_is_rate_limited_told_once_and_the_client_carries_on(
+    make_app: AppFactory,
+) -> None:
+    app = await make_app(message_rate=20.0, message_burst=10)
+    async with connect(ws_url(app)) as ws:
+        for k in range(200):
+            await send_json(ws, {"op": "set_level", "level": "error", "id": k})
+        told = await recv_until(ws, lambda m: m.get("op") == "status")
+        assert "too many messages" in told["msg"] and "message_rate" in told["msg"]
+        await asyncio.sleep(0.6)  # a sustained 20/s is allowed again
+        await send_json(ws, {"op": "call_service", "service": "/rosapi/topics", "id": "ok"})
+        reply = await recv_until(ws, lambda m: m.get("op") == "service_response")
+        assert reply["result"] is True
+
+
+async def test_cmd_vel_flood_does_not_stall_the_loop_or_other_clients(app: App) -> None:
+    """One client floods /cmd_vel as fast as it can; another still gets /odom at 20 Hz."""
+    async with connect(ws_url(app)) as flooder, connect(ws_url(app)) as watcher:
+        await send_json(watcher, {"op": "subscribe", "topic": "/odom"})
+        await recv_until(watcher, lambda m: m.get("topic") == "/odom")
+        frame = json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": {"linear": {"x": 0.0}}})
+        stop = asyncio.Event()
+
+        async def flood() -> int:
+            sent = 0
+            while not stop.is_set():
+                await flooder.send(frame)
+                sent += 1
+                if sent % 64 == 0:
+                    await asyncio.sleep(0)
+            return sent
+
+        task = asyncio.create_task(flood())
+        loop = asyncio.get_running_loop()
+        start = loop.time()
+        ticks = app.stats.ticks
+        for _ in range(40):
+            await recv_until(watcher, lambda m: m.get("topic") == "/odom")
+        elapsed = loop.time() - start
+        stop.set()
+        sent = await task
+        assert sent > 1000, sent
+        assert app.stats.ticks - ticks >= 38
+        assert elapsed < 2.0 * 1.5, elapsed  # 40 messages at 20 Hz: 2 s, with slack for load
+
+
+async def test_abrupt_disconnect_of_a_provider_fails_its_pending_calls(app: App) -> None:
+    """A provider that vanishes mid-call: the caller gets result false, nothing lingers."""
+    provider = await stalled_client(
+        app.ws_port, {"op": "advertise_service", "service": "/slow", "type": "std_srvs/Trigger"}
+    )
+    try:
+        await wait_for(lambda: "/slow" in app.graph.services.services)
+        async with connect(ws_url(app)) as caller:
+            await send_json(caller, {"op": "call_service", "service": "/slow", "id": "c1"})
+            await wait_for(lambda: bool(app.graph.services.pending))
+            provider.setsockopt(
+                socket.SOL_SOCKET, socket.SO_LINGER, b"\x01\x00\x00\x00\x00\x00\x00\x00"
+            )
+            provider.close()  # RST: no close frame
+            reply = await recv_until(caller, lambda m: m.get("op") == "service_response")
+            assert reply["id"] == "c1" and reply["result"] is False
+            assert "/slow" in reply["values"]
+    finally:
+        provider.close()
+    await wait_for(lambda: len(app.server.clients) == 0, timeout=5)
+    assert "/slow" not in app.graph.services.services and not app.graph.services.pending

@@ -21,6 +21,7 @@ run-time services (spawn, kill, teleport) are in :mod:`simbridge.graph.fleet`.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -82,6 +83,8 @@ class RobotBridge:
             "/tf_static", "tf2_msgs/msg/TFMessage", ROBOT_NODE, latch=True
         )
         self.robots: dict[str, _RobotTopics] = {}
+        #: Called with the name of each robot removed, after its topics are gone (extensions).
+        self.on_robot_removed: list[Callable[[str], None]] = []
         for robot in world.robots.values():
             self.add_robot(robot)
         graph.add_service("/reset", "std_srvs/srv/Empty", ROBOT_NODE, self._reset)
@@ -134,6 +137,8 @@ class RobotBridge:
         topics.unsubscribe_internal(rt.cmd_vel.name, rt.on_cmd_vel)
         remove_robot_services(self, rt.robot)
         self._touching.discard(name)
+        for callback in self.on_robot_removed:
+            callback(name)
 
     def _on_cmd_vel(self, name: str, msg: Any) -> None:
         v = msg["linear"]["x"]

@@ -86,6 +86,13 @@ class Graph:
         }
         #: Called with each peer that leaves, after the graph cleaned up (extensions).
         self.on_disconnect: list[Callable[[Peer], None]] = []
+        #: Called with each peer that connects, before its first op (extensions).
+        self.on_connect: list[Callable[[Peer], None]] = []
+        #: Checks run before every op: ``(peer, op, now) -> carry it out?``. A gate that says
+        #: no has answered the client itself; one that raises SimbridgeError is reported.
+        self.gates: list[Callable[[Peer, Op, float], bool]] = []
+        #: Services that need admin rights (see :mod:`simbridge.graph.guard`).
+        self.admin_services: set[str] = set()
         #: Actions (client-served and in-process) and the goals in flight.
         self.actions = ActionTable(self)
         self.handlers.update(self.actions.handlers())
@@ -103,6 +110,8 @@ class Graph:
     def add_peer(self, peer: Peer) -> None:
         """Register a connected client."""
         self.peers.add(peer)
+        for callback in self.on_connect:
+            callback(peer)
 
     def remove_peer(self, peer: Peer) -> None:
         """Forget a client and everything it owned (subscriptions, publishers, services)."""
@@ -124,6 +133,9 @@ class Graph:
         """Carry out one op; a :class:`SimbridgeError` becomes a ``status`` to the sender."""
         handler = self.handlers.get(type(op))
         try:
+            for gate in self.gates:
+                if not gate(peer, op, now):
+                    return
             if handler is None:
                 name = type(op).__name__
                 msg = f"operation {name} is not supported by this server yet"

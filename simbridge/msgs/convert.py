@@ -25,6 +25,7 @@ from __future__ import annotations
 import base64
 import binascii
 import math
+import sys
 from collections.abc import Callable
 from typing import Any
 
@@ -67,6 +68,8 @@ INT_RANGES: dict[str, tuple[int, int]] = {
 
 _BYTES_BASES = frozenset({"uint8", "char", "byte"})
 _FLOATS = frozenset({"float32", "float64"})
+#: Largest finite double: a JSON integer above it cannot become a float.
+_FLOAT_MAX = sys.float_info.max
 _TIME_TYPES = frozenset({"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"})
 _HEADER = "std_msgs/msg/Header"
 
@@ -194,6 +197,10 @@ class Converter:
             msg = f"{root} field {path}[{i}] must be a {want}, got {_jtype(v)} {v!r}"
             raise ConversionError(msg)
         if floats:
+            for i, v in enumerate(value):
+                if type(v) is int and abs(v) > _FLOAT_MAX:
+                    msg = f"{root} field {path}[{i}] = {v} is out of range for {base}"
+                    raise ConversionError(msg)
             return np.array([math.nan if v is None else v for v in value], dtype=dtype)
         lo, hi = INT_RANGES[base]
         for i, v in enumerate(value):
@@ -232,7 +239,12 @@ class Converter:
         if base in _FLOATS:
             if value is None:
                 return math.nan
-            if type(value) is int or type(value) is float:
+            if type(value) is float:
+                return value
+            if type(value) is int:
+                if abs(value) > _FLOAT_MAX:  # float() would raise OverflowError
+                    msg = f"{root} field {path} = {value} is out of range for {base}"
+                    raise ConversionError(msg)
                 return float(value)
         elif base == "bool":
             if isinstance(value, bool):

@@ -33,6 +33,8 @@ __all__ = [
 ]
 
 _OPTS = orjson.OPT_SERIALIZE_NUMPY
+#: JSON values one frame may carry (concatenated ops); more is refused, not parsed.
+MAX_OPS_PER_FRAME = 100
 
 
 class Frame(NamedTuple):
@@ -85,6 +87,9 @@ def _decode_lenient(text: str) -> list[Any]:
             pos += 1
         if pos >= end:
             return out
+        if len(out) >= MAX_OPS_PER_FRAME:
+            msg = f"more than {MAX_OPS_PER_FRAME} JSON values in one frame"
+            raise ValueError(msg)
         value, pos = decoder.raw_decode(text, pos)
         out.append(value)
 

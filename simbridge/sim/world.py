@@ -6,6 +6,7 @@ no I/O. The runner calls :meth:`World.step` at the fixed rate ``params.sim.rate`
 
 from __future__ import annotations
 
+import logging
 import math
 from dataclasses import dataclass, field
 from typing import Protocol
@@ -20,6 +21,11 @@ from simbridge.sim.lidar import FloatArray, beam_angles, raycast_batch, segments
 
 
 __all__ = ["KinematicModel", "MotionModel", "Robot", "World"]
+
+logger = logging.getLogger(__name__)
+
+#: Command magnitude (m/s or rad/s) refused outright rather than clamped to the limits.
+ABSURD_VELOCITY = 1000.0
 
 
 class MotionModel(Protocol):
@@ -94,6 +100,8 @@ class World:
         self.motion: MotionModel = KinematicModel()
         #: Simulated seconds since start (or the last reset).
         self.time = 0.0
+        #: Robot updates that raised (each robot was reset).
+        self.failures = 0
         #: Steps since start (or the last reset).
         self.steps = 0
         #: Emergency stop latched: commands are ignored and every robot is held still until
@@ -118,11 +126,18 @@ class World:
         While the emergency stop is latched the command is dropped and ``(0, 0)`` returned.
 
         Raises:
-            ValueError: a value is not finite (NaN or infinity never reaches the state).
+            ValueError: a value is not finite (NaN or infinity never reaches the state) or is
+                absurd (above :data:`ABSURD_VELOCITY`: a unit or overflow bug, not a wish).
             KeyError: no robot of that name.
         """
         if not (math.isfinite(v) and math.isfinite(omega)):
             msg = f"velocity command must be finite, got linear {v}, angular {omega}"
+            raise ValueError(msg)
+        if abs(v) > ABSURD_VELOCITY or abs(omega) > ABSURD_VELOCITY:
+            msg = (
+                f"velocity command linear {v:g}, angular {omega:g} is absurd (above "
+                f"{ABSURD_VELOCITY:g}); commands within the limits are clamped to them"
+            )
             raise ValueError(msg)
         robot = self.robots[name]
         if self.estopped:
@@ -138,23 +153,36 @@ class World:
         resolve_moves` cuts it at the first contact (sliding along walls). A robot whose move
         was cut gets the speed it actually achieved along its heading, and the contact is
         listed in :attr:`contacts` for this step.
+
+        A robot whose update raises, or leaves a non-finite state, is logged and put back at
+        its start pose, stopped; the other robots and the loop go on.
         """
         dt = self.dt
         limits = self.params.robot
         robots = list(self.robots.values())
         p0 = [(r.state.x, r.state.y) for r in robots]
-        for robot in robots:
+        for i, robot in enumerate(robots):
             if self.estopped:
                 robot.cmd_v = robot.cmd_omega = 0.0
                 robot.state.v = robot.state.omega = 0.0
                 continue
-            v, omega = clamp_command(
-                robot.cmd_v,
-                robot.cmd_omega,
-                limits.max_linear_velocity,
-                limits.max_angular_velocity,
-            )
-            self.motion.step(robot.state, v, omega, dt, limits)
+            try:
+                v, omega = clamp_command(
+                    robot.cmd_v,
+                    robot.cmd_omega,
+                    limits.max_linear_velocity,
+                    limits.max_angular_velocity,
+                )
+                self.motion.step(robot.state, v, omega, dt, limits)
+                s = robot.state
+                if not all(map(math.isfinite, (s.x, s.y, s.theta, s.v, s.omega))):
+                    msg = f"non-finite state {s}"
+                    raise FloatingPointError(msg)
+            except Exception:
+                logger.exception("robot '%s' failed to update: reset to its start pose", robot.name)
+                robot.place(robot.start)
+                p0[i] = (robot.state.x, robot.state.y)  # a reset is a jump, not a move to cut
+                self.failures += 1
         self.contacts = []
         if robots and (len(robots) > 1 or self.segments.shape[0]):
             start = np.array(p0, dtype=np.float64).reshape(-1, 2)

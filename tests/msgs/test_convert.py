@@ -130,3 +130,13 @@ def test_default_message_has_every_field(conv: Converter) -> None:
     msg = conv.default("nav_msgs/msg/Odometry")
     assert msg["header"]["stamp"] == {"sec": 0, "nanosec": 0}
     assert msg["pose"]["pose"]["orientation"]["w"] == 0.0
+
+
+def test_integer_too_large_for_a_double_is_a_conversion_error(conv: Converter) -> None:
+    """A JSON integer past the float range is refused, not an OverflowError (found by fuzzing)."""
+    with pytest.raises(ConversionError, match="out of range for float64"):
+        conv.from_json("geometry_msgs/msg/Twist", {"linear": {"x": 10**400}})
+    with pytest.raises(ConversionError, match=r"covariance\[1\] = .* out of range"):
+        conv.from_json(
+            "geometry_msgs/msg/PoseWithCovariance", {"covariance": [0] + [10**400] + [0] * 34}
+        )

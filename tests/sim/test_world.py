@@ -1,12 +1,14 @@
 from __future__ import annotations
 
 import math
+from typing import Any
 
 import numpy as np
 import pytest
 
 from simbridge.config import Params, WorldSpec, load_params, load_world
 from simbridge.sim import World
+from simbridge.sim.world import KinematicModel, Robot
 
 
 def test_world_keeps_the_last_command_between_steps() -> None:
@@ -93,6 +95,47 @@ def test_noise_is_seeded_and_repeatable() -> None:
     a.reset()
     np.testing.assert_array_equal(first, a.scan(""))
     assert not np.array_equal(first, World(load_world(None), Params()).scan(""))
+
+
+def test_a_robot_whose_update_raises_is_reset_and_the_others_go_on() -> None:
+    """World.step isolates robots: the failing one is logged and reset, the rest move."""
+    world = World(load_world(None), Params())
+    world.robots["r2"] = Robot("r2", (1.0, 1.0, 0.0))
+    world.robots["r2"].place((1.0, 1.0, 0.0))
+    for robot in world.robots.values():
+        robot.cmd_v = 0.2
+
+    class Flaky:
+        name = "flaky"
+
+        def step(self, state: Any, v: float, omega: float, dt: float, params: Any) -> None:
+            if state.y == 1.0 and state.x > 1.05:
+                raise ZeroDivisionError("a bug in the model")
+            KinematicModel().step(state, v, omega, dt, params)
+
+    world.motion = Flaky()
+    for _ in range(20):
+        world.step()
+    assert world.failures >= 1
+    assert world.robots["r2"].state.x <= 1.05 and world.robots["r2"].cmd_v == 0.0
+    assert world.robots[""].state.x > 0.15  # the healthy robot kept driving
+    assert world.steps == 20
+
+
+def test_a_non_finite_state_is_treated_as_a_failure_and_reset() -> None:
+    world = World(load_world(None), Params())
+    world.robots[""].state.x = math.inf
+    world.step()
+    assert world.robots[""].state.x == world.robots[""].start[0] and world.failures == 1
+
+
+@pytest.mark.parametrize(("v", "omega"), [(1e308, 0.0), (0.0, -2e3), (1001.0, 1.0)])
+def test_absurd_command_is_refused_not_clamped(v: float, omega: float) -> None:
+    world = World(load_world(None), Params())
+    world.command("", 0.1, 0.0)
+    with pytest.raises(ValueError, match="absurd"):
+        world.command("", v, omega)
+    assert world.robots[""].cmd_v == 0.1
 
 
 BOX = {"walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]]}

@@ -1,0 +1,381 @@
+"""Who may do what on the bridge: authentication, scopes, per-client limits, admin services.
+
+A :class:`Guard` sits in front of :meth:`Graph.dispatch <simbridge.graph.Graph.dispatch>` as a
+gate: every op of a client passes it before it is carried out. It refuses, with a ``status``
+error to that client only (a failed ``service_response`` for ``call_service``):
+
+* every op but ``auth`` from a client that has not authenticated, when authentication is on
+  (``client_tokens`` or ``auth_secret``; see ``docs/security.md``);
+* publishing, advertising (topics, services, actions) outside the client's scope: a client
+  whose token maps to robot ``r1`` may publish only under ``/r1/``, and may not call services
+  or send goals under another robot's namespace;
+* calls to administrative services (:attr:`Graph.admin_services`) unless the client presented
+  the admin token (when one is set);
+* advertising a service that the server itself provides (it would hijack it for everyone);
+* more subscriptions or advertisements than the per-client limits, and publishes above the
+  per-client rate (a token bucket). Rate refusals are told at most once a second.
+
+Authentication, either way:
+
+* a token as the query parameter of the WebSocket URL (``ws://host:9090/?token=T``), checked
+  before the upgrade (see :func:`token_access`);
+* the rosbridge ``auth`` op with a rosauth MAC: the lowercase hex SHA-512 of
+  ``secret + client + dest + rand + t + level + end`` (``t`` and ``end`` as decimal seconds),
+  accepted when ``|t - now| < auth_time_delta`` and ``end > now`` (rosauth's
+  ``ros_mac_authentication``). Its ``level`` is the scope (``"admin"`` gives admin rights and
+  every topic). A failed ``auth`` closes the connection, as ROS 1 rosbridge does.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import hmac
+import logging
+import math
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Any
+
+from simbridge.config import ServerSettings
+from simbridge.errors import ProtocolError
+from simbridge.graph.graph import Graph
+from simbridge.graph.services import service_response
+from simbridge.graph.topics import Peer
+from simbridge.protocol import Op, ops as o, resolve_name, status_frame
+
+
+__all__ = [
+    "ADMIN_SCOPE",
+    "DEFAULT_ADMIN_SERVICES",
+    "MIN_FRAGMENT_SIZE",
+    "Access",
+    "Guard",
+    "TokenBucket",
+    "rosauth_mac",
+    "token_access",
+]
+
+logger = logging.getLogger(__name__)
+
+#: The scope that reaches every topic (what an unauthenticated server gives everyone).
+ANY_SCOPE = "*"
+#: The rosauth ``level`` (and token scope) of an administrator.
+ADMIN_SCOPE = "admin"
+#: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
+MIN_FRAGMENT_SIZE = 256
+#: Services that change the world or the server for everyone.
+DEFAULT_ADMIN_SERVICES = frozenset(
+    {
+        "/reset",
+        "/rosapi/set_param",
+        "/rosapi/delete_param",
+        "/estop/reset",
+        "/spawn",
+        "/kill",
+        "/sim/pause",
+        "/sim/step",
+        "/sim/set_real_time_factor",
+    }
+)
+#: Name endings of administrative services of any node (ROS 2 parameter services).
+ADMIN_SUFFIXES = ("/set_parameters", "/set_parameters_atomically")
+
+
+@dataclass(slots=True)
+class TokenBucket:
+    """``rate`` events per second sustained, ``burst`` at once (monotonic seconds)."""
+
+    rate: float
+    burst: float
+    tokens: float = math.nan
+    last: float = -math.inf
+
+    def take(self, now: float) -> bool:
+        """Spend one token if there is one; return whether the event may go on."""
+        if math.isnan(self.tokens):
+            self.tokens = self.burst
+        elif now > self.last:
+            self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
+        self.last = max(self.last, now)
+        if self.tokens >= 1.0:
+            self.tokens -= 1.0
+            return True
+        return False
+
+
+@dataclass(slots=True)
+class Access:
+    """What one client may do (kept in ``session.extra["access"]``)."""
+
+    authenticated: bool
+    #: ``"*"`` (any topic) or a robot name (its namespace only).
+    scope: str
+    admin: bool
+    publishes: TokenBucket
+    #: When each kind of rate-limited refusal was last told (monotonic seconds).
+    told: dict[str, float] = field(default_factory=dict)
+
+
+def rosauth_mac(
+    secret: str, client: str, dest: str, rand: str, t: int, level: str, end: int
+) -> str:
+    """Return the rosauth MAC of an ``auth`` op: hex SHA-512 of the fields concatenated."""
+    text = f"{secret}{client}{dest}{rand}{t}{level}{end}"
+    return hashlib.sha512(text.encode("utf-8")).hexdigest()
+
+
+def token_access(settings: ServerSettings, token: str | None) -> tuple[str, bool] | None:
+    """Return ``(scope, admin)`` granted by a connection token, or ``None`` if it grants none.
+
+    The admin token grants every topic and admin rights; a client token its mapped scope.
+    """
+    if not token:
+        return None
+    admin = settings.admin_token
+    if admin and hmac.compare_digest(token.encode(), admin.encode()):
+        return ANY_SCOPE, True
+    for known, scope in settings.client_tokens.items():
+        if hmac.compare_digest(token.encode(), known.encode()):
+            return (ANY_SCOPE, True) if scope == ADMIN_SCOPE else (scope, False)
+    return None
+
+
+def in_namespace(scope: str, name: str) -> bool:
+    """Return whether the absolute name ``name`` lies in the scope's namespace."""
+    return scope == ANY_SCOPE or name == f"/{scope}" or name.startswith(f"/{scope}/")
+
+
+class Guard:
+    """The gate in front of the graph (install once per :class:`Graph`)."""
+
+    def __init__(
+        self,
+        graph: Graph,
+        settings: ServerSettings,
+        *,
+        robots: Callable[[], Iterable[str]] = lambda: (),
+        wall_time: Callable[[], float] | None = None,
+    ) -> None:
+        #: The graph guarded.
+        self.graph = graph
+        #: Limits and secrets.
+        self.settings = settings
+        #: Names of the robots (their namespaces are off limits to other robots' clients).
+        self.robots = robots
+        self._wall_time = wall_time or (lambda: graph.wall_clock_ns() / 1e9)
+        graph.admin_services.update(DEFAULT_ADMIN_SERVICES)
+        graph.gates.append(self.gate)
+        graph.on_connect.append(self.connect)
+        graph.handlers[o.Auth] = self._auth
+
+    # -- access ----------------------------------------------------------------------------
+
+    def connect(self, peer: Peer) -> None:
+        """Give a new client its access from its connection token (``session.extra``)."""
+        s = self.settings
+        token = peer.session.extra.get("token")
+        granted = token_access(s, token if isinstance(token, str) else None)
+        if granted is not None:
+            scope, admin = granted
+            authenticated = True
+        else:
+            scope, admin = ANY_SCOPE, False
+            authenticated = not s.auth_required
+        # without an admin token, administration is open to whoever may use every topic
+        admin = admin or (s.admin_token is None and scope == ANY_SCOPE)
+        peer.session.extra["access"] = Access(
+            authenticated, scope, admin, TokenBucket(s.publish_rate, s.publish_burst)
+        )
+
+    def access(self, peer: Peer) -> Access:
+        """Return the access of ``peer`` (set up on connect)."""
+        access = peer.session.extra.get("access")
+        if not isinstance(access, Access):
+            self.connect(peer)
+            access = peer.session.extra["access"]
+        assert isinstance(access, Access)
+        return access
+
+    # -- the gate -------------------------------------------------------------------------
+
+    def gate(self, peer: Peer, op: Op, now: float) -> bool:
+        """Return whether ``op`` may be carried out; refuse it (and tell the client) if not.
+
+        Raises:
+            ProtocolError: the op is refused (the graph tells the client).
+        """
+        access = self.access(peer)
+        if not access.authenticated and not isinstance(op, o.Auth):
+            msg = (
+                "not authenticated: this server requires a token; connect with "
+                "ws://HOST:PORT/?token=YOUR_TOKEN or send an auth op first"
+            )
+            if isinstance(op, o.CallService):
+                peer.send(service_response(op.service, msg, result=False, op_id=op.id))
+                return False
+            raise ProtocolError(msg)
+        size = getattr(op, "fragment_size", None)
+        if size is not None and size < MIN_FRAGMENT_SIZE:
+            msg = (
+                f"fragment_size {size} is too small: at least {MIN_FRAGMENT_SIZE} bytes "
+                "(tiny fragments multiply the server's work)"
+            )
+            raise ProtocolError(msg)
+        check = self._checks.get(type(op))
+        return True if check is None else check(self, peer, access, op, now)
+
+    def _tell_rarely(self, peer: Peer, access: Access, kind: str, text: str, now: float) -> None:
+        if now - access.told.get(kind, -math.inf) >= 1.0:
+            access.told[kind] = now
+            logger.info("%s: %s", peer.label, text)
+            if peer.session.wants_status("error"):
+                peer.send(status_frame("error", text))
+
+    def _owned(self, peer: Peer) -> int:
+        s = peer.session
+        return len(s.advertisements) + len(s.services) + len(s.actions)
+
+    def _may_own(self, peer: Peer, access: Access, what: str, name: str, new: bool) -> None:
+        if not in_namespace(access.scope, name):
+            msg = (
+                f"{what} {name}: not allowed; this connection may only use names under "
+                f"/{access.scope}/ (its robot)"
+            )
+            raise ProtocolError(msg)
+        limit = self.settings.max_advertisements
+        if new and self._owned(peer) >= limit:
+            msg = (
+                f"{what} {name}: refused, this client already advertises {limit} topics, "
+                "services and actions (the server's max_advertisements); unadvertise some first"
+            )
+            raise ProtocolError(msg)
+
+    def _may_reach(self, access: Access, name: str) -> bool:
+        """Whether a call or goal to ``name`` stays out of other robots' namespaces."""
+        if access.scope == ANY_SCOPE:
+            return True
+        return not any(
+            robot and robot != access.scope and in_namespace(robot, name) for robot in self.robots()
+        )
+
+    def _publish(self, peer: Peer, access: Access, op: o.Publish, now: float) -> bool:
+        name = resolve_name(op.topic)
+        if not access.publishes.take(now):
+            s = self.settings
+            text = (
+                f"publish {name}: dropped, more than {s.publish_rate:g} publishes per second "
+                f"(the server's publish_rate, burst {s.publish_burst}); slow down"
+            )
+            self._tell_rarely(peer, access, "publish_rate", text, now)
+            return False
+        self._may_own(peer, access, "publish", name, name not in peer.session.advertisements)
+        return True
+
+    def _advertise(self, peer: Peer, access: Access, op: o.Advertise, now: float) -> bool:
+        name = resolve_name(op.topic)
+        self._may_own(peer, access, "advertise", name, name not in peer.session.advertisements)
+        return True
+
+    def _subscribe(self, peer: Peer, access: Access, op: o.Subscribe, now: float) -> bool:
+        limit = self.settings.max_subscriptions
+        subs = peer.session.subscriptions
+        if op.topic not in subs and len(subs) >= limit:
+            msg = (
+                f"subscribe {op.topic}: refused, this client already has {limit} subscriptions "
+                "(the server's max_subscriptions); unsubscribe from some first"
+            )
+            raise ProtocolError(msg)
+        return True
+
+    def _advertise_service(
+        self, peer: Peer, access: Access, op: o.AdvertiseService, now: float
+    ) -> bool:
+        name = resolve_name(op.service, "service")
+        existing = self.graph.services.services.get(name)
+        if existing is not None and existing.handler is not None:
+            msg = (
+                f"advertise_service {name}: refused, the server provides this service itself; "
+                "choose another name"
+            )
+            raise ProtocolError(msg)
+        self._may_own(peer, access, "advertise_service", name, name not in peer.session.services)
+        return True
+
+    def _advertise_action(
+        self, peer: Peer, access: Access, op: o.AdvertiseAction, now: float
+    ) -> bool:
+        name = resolve_name(op.action, "action")
+        self._may_own(peer, access, "advertise_action", name, name not in peer.session.actions)
+        return True
+
+    def _call_service(self, peer: Peer, access: Access, op: o.CallService, now: float) -> bool:
+        try:
+            name = resolve_name(op.service, "service")
+        except ProtocolError:
+            return True  # the graph answers the bad name
+        reason = None
+        admin_only = name in self.graph.admin_services or name.endswith(ADMIN_SUFFIXES)
+        if admin_only and not access.admin:
+            reason = (
+                f"service {name} is administrative: connect with the admin token "
+                "(?token=ADMIN_TOKEN) to call it"
+            )
+        elif not self._may_reach(access, name):
+            reason = f"service {name} belongs to another robot; this connection may not call it"
+        if reason is None:
+            return True
+        logger.info("%s: %s", peer.label, reason)
+        peer.send(service_response(op.service, reason, result=False, op_id=op.id))
+        return False
+
+    def _send_action_goal(
+        self, peer: Peer, access: Access, op: o.SendActionGoal, now: float
+    ) -> bool:
+        name = resolve_name(op.action, "action")
+        if not self._may_reach(access, name):
+            msg = f"action {name} belongs to another robot; this connection may not use it"
+            raise ProtocolError(msg)
+        return True
+
+    _checks: dict[type, Callable[[Any, Peer, Access, Any, float], bool]] = {
+        o.Publish: _publish,
+        o.Advertise: _advertise,
+        o.Subscribe: _subscribe,
+        o.AdvertiseService: _advertise_service,
+        o.AdvertiseAction: _advertise_action,
+        o.CallService: _call_service,
+        o.SendActionGoal: _send_action_goal,
+    }
+
+    # -- the auth op ---------------------------------------------------------------------
+
+    def _auth(self, peer: Peer, op: o.Auth, now: float) -> None:
+        access = self.access(peer)
+        secret = self.settings.auth_secret
+        if secret is None:
+            msg = "auth: this server takes no rosauth MAC; connect with ?token=YOUR_TOKEN"
+            raise ProtocolError(msg)
+        wall = self._wall_time()
+        delta = self.settings.auth_time_delta
+        expected = rosauth_mac(secret, op.client, op.dest, op.rand, op.t, op.level, op.end)
+        fresh = abs(op.t - wall) < delta and op.end > wall
+        if not (fresh and hmac.compare_digest(expected, op.mac.lower())):
+            why = "expired or clock skew" if not fresh else "wrong MAC"
+            logger.warning("%s failed authentication (%s)", peer.label, why)
+            if peer.session.wants_status("error"):
+                peer.send(status_frame("error", f"auth: authentication failed ({why})"))
+            close = getattr(peer, "close_soon", None)
+            if callable(close):
+                close(1008, "authentication failed")
+            return
+        access.authenticated = True
+        if op.level == ADMIN_SCOPE:
+            access.scope, access.admin = ANY_SCOPE, True
+        elif op.level and op.level in set(self.robots()):
+            access.scope, access.admin = op.level, False
+        else:  # "user" and other rosauth levels: every topic, admin only without admin token
+            access.scope = ANY_SCOPE
+            access.admin = self.settings.admin_token is None
+        logger.info("%s authenticated (scope %s)", peer.label, access.scope)
+        if peer.session.wants_status("info"):
+            peer.send(status_frame("info", f"auth: authenticated, scope {access.scope}"))

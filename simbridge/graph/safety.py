@@ -1,0 +1,118 @@
+"""Server-side safety of the robots: the ``/cmd_vel`` watchdog and stop-on-disconnect.
+
+Both are parameters of ``/virtual_robot`` (section ``safety`` of the parameter file), off by
+default: the course describes a robot that keeps its last command. ``config/classroom_params.yaml``
+turns them on.
+
+* ``safety.cmd_vel_timeout`` > 0: a robot that is moving and has received no ``/cmd_vel`` for
+  that many seconds is stopped (turtlesim does the same after 1 s), whatever its client does.
+* ``safety.stop_on_disconnect``: when the client that last commanded a robot disconnects
+  (cleanly or not), that robot is stopped.
+
+Commands are observed as an in-process subscriber (of node ``/virtual_robot``) of each robot's
+``cmd_vel`` topic, resolved to the tick they arrive in; robots added to or removed from the
+world are followed at the next tick.
+"""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from simbridge.graph.bridge import ROBOT_NODE
+from simbridge.graph.graph import Graph
+from simbridge.graph.topics import InternalCallback, Peer
+from simbridge.sim import World
+
+
+__all__ = ["Safety"]
+
+
+def _finite_command(msg: Any) -> bool:
+    try:
+        return math.isfinite(msg["linear"]["x"]) and math.isfinite(msg["angular"]["z"])
+    except (KeyError, TypeError):
+        return False
+
+
+class Safety:
+    """Stops robots whose commands went stale or whose commanding client left."""
+
+    def __init__(self, graph: Graph, world: World) -> None:
+        #: Where the commands are observed.
+        self.graph = graph
+        #: The robots.
+        self.world = world
+        #: Monotonic time of each robot's last valid command.
+        self.last_command: dict[str, float] = {}
+        #: The client whose command each robot follows.
+        self.commander: dict[str, Peer] = {}
+        #: Robots stopped by the watchdog or a disconnect so far.
+        self.stops = 0
+        self._fresh: set[str] = set()
+        self._callbacks: dict[str, tuple[str, InternalCallback]] = {}
+        self._follow_robots()
+        graph.on_disconnect.append(self.disconnected)
+
+    def forget(self, name: str) -> None:
+        """Stop watching a robot that left the world (its ``cmd_vel`` topic may go)."""
+        entry = self._callbacks.pop(name, None)
+        if entry is not None:
+            self.graph.topics.unsubscribe_internal(*entry)
+        self.last_command.pop(name, None)
+        self.commander.pop(name, None)
+
+    def _follow_robots(self) -> None:
+        """Watch the ``cmd_vel`` of robots added to the world; forget removed ones."""
+        for name in [n for n in self._callbacks if n not in self.world.robots]:
+            self.forget(name)
+        for name, robot in self.world.robots.items():
+            if name in self._callbacks:
+                continue
+
+            def on_cmd_vel(msg: Any, source: Peer | None, name: str = name) -> None:
+                if not _finite_command(msg):
+                    return  # refused by the robot; it does not count as a command
+                self._fresh.add(name)
+                if source is not None:
+                    self.commander[name] = source
+
+            topic = robot.topic("cmd_vel")
+            # the robot's own node: the watchdog is part of its driver, as in turtlesim
+            self.graph.subscribe(topic, "geometry_msgs/msg/Twist", ROBOT_NODE, on_cmd_vel)
+            self._callbacks[name] = (topic, on_cmd_vel)
+
+    def tick(self, now: float) -> None:
+        """Stamp this tick's commands and stop robots whose command is stale."""
+        if self._callbacks.keys() != self.world.robots.keys():
+            self._follow_robots()
+        for name in self._fresh:
+            self.last_command[name] = now
+        self._fresh.clear()
+        timeout = self.world.params.safety.cmd_vel_timeout
+        if timeout <= 0:
+            return
+        for name, robot in self.world.robots.items():
+            if not (robot.cmd_v or robot.cmd_omega):
+                continue
+            last = self.last_command.setdefault(name, now)  # commanded some other way: start now
+            if now - last > timeout:
+                self._stop(name, f"no /cmd_vel for {timeout:g} s (safety.cmd_vel_timeout)")
+
+    def disconnected(self, peer: Peer) -> None:
+        """Stop the robots that ``peer`` commanded, when ``safety.stop_on_disconnect`` is on."""
+        mine = [name for name, p in self.commander.items() if p is peer]
+        for name in mine:
+            del self.commander[name]
+        if not self.world.params.safety.stop_on_disconnect:
+            return
+        for name in mine:
+            robot = self.world.robots.get(name)
+            if robot is not None and (robot.cmd_v or robot.cmd_omega):
+                self._stop(name, f"its commanding {peer.label} disconnected")
+
+    def _stop(self, name: str, why: str) -> None:
+        self.world.command(name, 0.0, 0.0)
+        self.stops += 1
+        shown = name or "the robot"
+        self.graph.log("warn", f"safety: stopped {shown}: {why}")
