@@ -19,16 +19,17 @@ export function defaultUrl(loc = window.location) {
 
 /** Per-topic message statistics. */
 class TopicStats {
-  constructor() { this.times = []; this.last = 0; this.count = 0; this.first = 0; }
+  constructor() { this.times = []; this.last = 0; this.count = 0; }
   hit(now) {
-    if (!this.count) this.first = now;
     this.last = now; this.count += 1; this.times.push(now);
     while (this.times.length && now - this.times[0] > RATE_WINDOW_MS) this.times.shift();
   }
   rate(now) {
     while (this.times.length && now - this.times[0] > RATE_WINDOW_MS) this.times.shift();
-    const span = Math.min(RATE_WINDOW_MS, now - this.first);
-    return span > 0 ? (this.times.length * 1000) / Math.max(span, 250) : 0;
+    // n messages span n - 1 periods; dividing by the time since the first of them also lets
+    // the rate fall as soon as messages stop
+    const n = this.times.length;
+    return n >= 2 ? ((n - 1) * 1000) / Math.max(now - this.times[0], 1) : 0;
   }
 }
 

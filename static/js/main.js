@@ -214,6 +214,22 @@ conn.subscribe('/clock', 'rosgraph_msgs/msg/Clock', (m) => {
 conn.subscribe('/estop/state', 'std_msgs/msg/Bool', (m) => showEstop(Boolean(m.data)));
 subscribeRobot();
 
+// the other robots, drawn in grey (10 Hz is plenty for that)
+const otherSubs = new Map();
+function subscribeOthers() {
+  for (const [ns, off] of otherSubs) {
+    if (ns === state.ns || !state.robots.includes(ns)) { off(); otherSubs.delete(ns); view.setOther(ns, null); }
+  }
+  for (const ns of state.robots) {
+    if (ns === state.ns || otherSubs.has(ns)) continue;
+    const name = ns ? `/${ns}/odom` : '/odom';
+    otherSubs.set(ns, conn.subscribe(name, 'nav_msgs/msg/Odometry', (m) => {
+      const p = m.pose.pose;
+      if (ns !== state.ns) view.setOther(ns, { x: p.position.x, y: p.position.y, theta: yawOf(p.orientation) });
+    }, { throttle_rate: 100, queue_length: 1 }));
+  }
+}
+
 // robots: every /<ns>/odom (and /odom) of type nav_msgs/Odometry
 async function discoverRobots() {
   if (!conn.connected) return;
@@ -228,11 +244,13 @@ async function discoverRobots() {
     found.sort();
     if (found.join('|') === state.robots.join('|')) return;
     state.robots = found;
+    subscribeOthers();
     const sel = $('robot');
     sel.replaceChildren(...found.map((ns) => new Option(ns || '(default)', ns)));
     if (!found.includes(state.ns)) {
       state.ns = found.includes('') || !found.length ? '' : found[0];
       subscribeRobot();
+      subscribeOthers();
     }
     sel.value = state.ns;
   } catch (err) { /* a server without rosapi: keep the default robot */ }
@@ -242,6 +260,7 @@ $('robot').addEventListener('change', (e) => {
   lab.stop();
   state.ns = e.target.value;
   subscribeRobot();
+  subscribeOthers();
   loadLimits();
 });
 
@@ -263,7 +282,7 @@ async function loadLimits() {
   showSpeeds();
 }
 conn.addEventListener('connected', () => { discoverRobots(); loadLimits(); });
-setInterval(() => { discoverRobots(); loadLimits(); }, 5000);
+setInterval(() => { discoverRobots(); loadLimits(); }, 3000);
 
 // ---- PID lab -------------------------------------------------------------------------------
 const lab = new PidLab(publishTwist, () => state.limits);

@@ -10,6 +10,7 @@ export class View {
     this.ctx = canvas.getContext('2d');
     this.walls = [];            // [x1, y1, x2, y2]
     this.pose = null;           // {x, y, theta}
+    this.others = new Map();    // other robots: name -> {x, y, theta}
     this.radius = 0.105;
     this.trail = [];            // [x, y]
     this.scan = [];             // [x, y] in world
@@ -38,7 +39,11 @@ export class View {
   }
   setScan(points) { this.scan = points; this.dirty = true; }
   clearTrail() { this.trail = []; this.dirty = true; }
-  clear() { this.pose = null; this.scan = []; this.trail = []; this.dirty = true; }
+  clear() { this.pose = null; this.scan = []; this.trail = []; this.others.clear(); this.dirty = true; }
+  setOther(name, pose) {
+    if (pose) this.others.set(name, pose); else this.others.delete(name);
+    this.dirty = true;
+  }
 
   /** Fit the walls (or a 4 m square) in view. */
   fit() {
@@ -152,6 +157,27 @@ export class View {
     ctx.fillStyle = '#dc2626';
     const dot = Math.max(2.5 * px, 0.012);
     for (const [x, y] of this.scan) ctx.fillRect(x - dot / 2, y - dot / 2, dot, dot);
+    // other robots: grey footprints with their names
+    for (const [name, o] of this.others) {
+      ctx.save();
+      ctx.translate(o.x, o.y);
+      ctx.fillStyle = 'rgba(100, 116, 139, 0.35)';
+      ctx.strokeStyle = '#475569';
+      ctx.lineWidth = 2 * px;
+      ctx.beginPath();
+      ctx.arc(0, 0, this.radius, 0, 2 * Math.PI);
+      ctx.fill();
+      ctx.stroke();
+      ctx.beginPath();
+      ctx.moveTo(0, 0);
+      ctx.lineTo(this.radius * Math.cos(o.theta), this.radius * Math.sin(o.theta));
+      ctx.stroke();
+      ctx.scale(px, -px);
+      ctx.fillStyle = '#334155';
+      ctx.font = '11px system-ui, sans-serif';
+      ctx.fillText(name || '(default)', this.radius * s + 3, -this.radius * s - 3);
+      ctx.restore();
+    }
     // robot
     if (this.pose) {
       const { x, y, theta } = this.pose;

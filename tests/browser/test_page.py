@@ -7,6 +7,7 @@ rosbridge client, never through the page itself.
 
 from __future__ import annotations
 
+import json
 import math
 from typing import Any
 
@@ -306,3 +307,154 @@ async def test_page_reconnects_with_backoff_and_resubscribes(
     assert await page.text_content("#statusText") == "connected"
     # the browser logs the refused connection attempts itself; the page adds nothing else
     assert [e for e in log.errors if "WebSocket connection" not in e] == []
+
+
+async def test_hidden_tab_and_page_hide_each_end_in_a_zero(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    page, _ = await open_connected(open_page, app)
+    await page.keyboard.down("ArrowLeft")
+    await watcher.wait(lambda: watcher.odom()["w"] > 0)  # type: ignore[index]
+    await page.evaluate(
+        "Object.defineProperty(document, 'hidden', { value: true, configurable: true });"
+        "document.dispatchEvent(new Event('visibilitychange'))"
+    )
+    await watcher.wait(lambda: watcher.odom()["w"] == 0.0)  # type: ignore[index]
+    await page.keyboard.up("ArrowLeft")
+    await page.evaluate("delete document.hidden")
+    await page.keyboard.down("ArrowDown")
+    await watcher.wait(lambda: watcher.odom()["v"] < 0)  # type: ignore[index]
+    await page.evaluate("window.dispatchEvent(new Event('pagehide'))")
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+
+
+async def test_gamepad_drives_only_while_the_deadman_is_held(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """A (simulated) standard gamepad: stick alone does nothing; LB + stick drives; LB up stops."""
+    page, _ = await open_connected(open_page, app)
+    await page.evaluate(
+        """() => {
+          const button = () => ({ pressed: false, value: 0 });
+          window.fakePad = { id: 'test pad', axes: [0, 0, 0, 0],
+                             buttons: Array.from({ length: 16 }, button) };
+          navigator.getGamepads = () => [window.fakePad];
+          window.dispatchEvent(new Event('gamepadconnected'));
+        }"""
+    )
+    await page.evaluate("window.fakePad.axes[1] = -1")  # stick forward, no deadman
+    await page.wait_for_function(
+        "document.getElementById('gamepad').textContent.includes('hold LB/RB')"
+    )
+    assert watcher.odom()["v"] == 0.0  # type: ignore[index]
+    await page.evaluate("window.fakePad.buttons[4].pressed = true")
+    await watcher.wait(lambda: watcher.odom()["v"] > 0.2)  # type: ignore[index]
+    await page.evaluate("window.fakePad.buttons[4].pressed = false")
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+
+
+async def test_plots_status_rates_and_view_pan_zoom_follow(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """Plots fill with commanded and measured values; status shows rates; the view pans/zooms."""
+    page, _ = await open_connected(open_page, app)
+    await page.click("button[data-tab=plots]")
+    await page.keyboard.down("KeyD")  # turn right
+    await watcher.wait(lambda: watcher.odom()["w"] < -1.0)  # type: ignore[index]
+    await page.wait_for_function(
+        "window.simbridge.plots.w.latest(0) === -1.5 && window.simbridge.plots.w.latest(1) === -1.5"
+    )
+    await page.keyboard.up("KeyD")
+    await page.wait_for_function("window.simbridge.plots.range.latest(0) > 0.1")
+    await page.wait_for_function("window.simbridge.plots.w.latest(1) === 0")
+    odom_rate = await page.evaluate(
+        "window.simbridge.conn.rates().find((r) => r.name === '/odom').rate"
+    )
+    assert 12 < odom_rate < 25  # published at 20 Hz
+    assert "Hz" in (await page.text_content("#statusInfo") or "")
+    await screenshot(page, "plots")
+    # pan: dragging the view turns follow off and moves the centre
+    view = page.locator("#view")
+    box = await view.bounding_box()
+    assert box is not None
+    before = await page.evaluate("({...window.simbridge.view.center})")
+    await page.mouse.move(box["x"] + 200, box["y"] + 200)
+    await page.mouse.down()
+    await page.mouse.move(box["x"] + 300, box["y"] + 250, steps=5)
+    await page.mouse.up()
+    after = await page.evaluate("({...window.simbridge.view.center})")
+    scale = await page.evaluate("window.simbridge.view.scale")
+    assert after["x"] == pytest.approx(before["x"] - 100 / scale, abs=1e-6)
+    assert after["y"] == pytest.approx(before["y"] + 50 / scale, abs=1e-6)
+    await page.mouse.wheel(0, -300)
+    await page.wait_for_function(f"window.simbridge.view.scale > {scale * 1.2}")
+    await page.click("#follow")
+    assert await page.get_attribute("#follow", "aria-pressed") == "true"
+    pose = await page.evaluate("window.simbridge.state.pose")
+    centre = await page.evaluate("window.simbridge.view.center")
+    assert (centre["x"], centre["y"]) == pytest.approx((pose["x"], pose["y"]))
+
+
+async def test_robot_selector_lists_namespaced_robots_and_drives_the_chosen_one(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    page, _ = await open_connected(open_page, app)
+    spawn = {
+        "op": "call_service",
+        "service": "/spawn",
+        "args": {"x": 1.0, "y": -1.0, "theta": 0.0, "name": "r1"},
+    }
+    await watcher.conn.send(json.dumps(spawn))
+    await watcher.subscribe("/r1/odom", "nav_msgs/msg/Odometry")
+    await page.wait_for_function(
+        "[...document.getElementById('robot').options].some((o) => o.value === 'r1')",
+        timeout=10_000,
+    )
+    assert await page.input_value("#robot") == ""  # the default robot stays selected
+    await page.select_option("#robot", "r1")
+    await page.wait_for_function(
+        "window.simbridge.state.pose && Math.abs(window.simbridge.state.pose.x - 1.0) < 1e-6"
+    )
+    await page.focus("#view")
+    await page.keyboard.down("ArrowUp")
+    await watcher.wait(
+        lambda: (
+            watcher.latest.get("/r1/odom", {})
+            .get("twist", {})
+            .get("twist", {})
+            .get("linear", {})
+            .get("x", 0)
+            > 0
+        )
+    )
+    assert watcher.odom()["v"] == 0.0  # type: ignore[index]  # the default robot stays put
+    await page.wait_for_function("window.simbridge.view.others.has('')")  # drawn in grey
+    await page.keyboard.up("ArrowUp")
+    await watcher.wait(lambda: watcher.latest["/r1/odom"]["twist"]["twist"]["linear"]["x"] == 0)
+    await screenshot(page, "robot-r1")
+
+
+async def test_pid_lab_position_mode_reaches_a_goal_1_m_ahead(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """Position control: goal 1 m ahead is reached within 2 cm and held, then Stop sends zero."""
+    page, _ = await open_connected(open_page, app)
+    await page.click("button[data-tab=pid]")
+    await page.select_option("#pidMode", "position")
+    await page.fill("#spX", "1.0")
+    await page.fill("#spY", "0.0")
+    await page.fill("#kp", "1.5")
+    await page.fill("#ki", "0")
+    await page.fill("#kd", "0")
+    assert "goal = { x: 1.00, y: 0.00 }" in (await page.text_content("#example") or "")
+    await page.click("#pidStart")
+
+    def arrived() -> bool:
+        o = watcher.odom()
+        return o is not None and math.hypot(o["x"] - 1.0, o["y"]) < 0.02 and abs(o["v"]) < 0.02
+
+    await watcher.wait(arrived, timeout=10)
+    await page.wait_for_function("window.simbridge.lab.figures().settlingTime !== null")
+    await screenshot(page, "pid-position-step")
+    await page.click("#pidStop")
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
