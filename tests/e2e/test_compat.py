@@ -252,6 +252,7 @@ async def test_roslibjs_compressions_fragments_and_latching(
     if lib == "roslib2":
         frag = r["fragmented"]
         assert (frag["n"], frag["frame"]) == (360, "laser") and frag["pieces"] >= 2
+        assert r["fragmentedService"] == {"result": True, "hasOdom": True}
 
 
 @parametrize_clients

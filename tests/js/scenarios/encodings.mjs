@@ -67,6 +67,16 @@ export default async function encodings(ROSLIB, ros, args, lib, ctx) {
       fragRos.callOnConnection({ op: 'subscribe', id: 'frag', topic: '/scan', type: 'sensor_msgs/msg/LaserScan', fragment_size: 1000 });
       const whole = await firstMessage(fragTopic, ms);
       out.fragmented = { n: whole.ranges.length, frame: whole.header.frame_id, pieces: fragments.length };
+      // a service response in fragments too (fragment_size on call_service)
+      const reply = await withTimeout(
+        new Promise((resolve) => {
+          fragRos.once('svc_frag', resolve);
+          fragRos.callOnConnection({ op: 'call_service', id: 'svc_frag', service: '/rosapi/topics', args: {}, fragment_size: 256 });
+        }),
+        ms,
+        'fragmented service response',
+      );
+      out.fragmentedService = { result: reply.result, hasOdom: reply.values.topics.includes('/odom') };
       fragRos.close();
     }
     // fragments in: a raw client sends a publish split into 3 fragments
