@@ -55,6 +55,12 @@ export default async function encodings(ROSLIB, ros, args, lib, ctx) {
     latched.publish({ data: 'kept for late subscribers' });
     await new Promise((r) => setTimeout(r, 100)); // let the publish reach the server first
     out.latched = await firstMessage(topic(conns.cbor, '/latched_note', 'std_msgs/msg/String', 'cbor'), ms);
+    // a type simbridge does not know passes through between clients unchanged
+    const custom = { a: 1, nested: { b: 'x', list: [1.5, null] } };
+    const customGot = firstMessage(topic(conns.cbor, '/custom_thing', 'my_pkg/msg/Thing', 'none'), ms);
+    await new Promise((r) => setTimeout(r, 100));
+    topic(ros, '/custom_thing', 'my_pkg/msg/Thing', 'none').publish(custom);
+    out.passThrough = await customGot;
     // fragments out: roslib 2.x reassembles them (1.4.1 cannot)
     if (lib === 'roslib2') {
       const fragments = [];
