@@ -23,6 +23,12 @@ SCALE = {
     "classroom": "30 robots driven by 30 clients for 60 s: latency, /odom rate, CPU, RSS",
 }
 
+#: The deployment benchmark (issue 5; root with Docker: ``python -m bench docker``, ~3 minutes,
+#: not in the default run): image size, container RSS and CPU vs simbridge run natively.
+DEPLOY = {
+    "docker": "the ros2-web-bridge container: image size, RSS idle / 10 clients, CPU % vs native",
+}
+
 
 def main(argv: list[str]) -> int:
     names = argv or [*QUICK, *SCALE]

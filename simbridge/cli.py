@@ -19,19 +19,18 @@ import urllib.error
 import urllib.request
 from collections.abc import Callable, Sequence
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from simbridge import __version__
-from simbridge.config import (
-    ServerSettings,
-    default_params_path,
-    default_world_path,
-    load_client_tokens,
-    load_params,
-    load_world,
-)
 from simbridge.errors import ConfigError
 from simbridge.logs import setup_logging
+
+
+if TYPE_CHECKING:
+    from simbridge.config import ServerSettings
+
+# simbridge.config (pydantic, PyYAML) is imported where it is used: `simbridge healthcheck`, a
+# container's HEALTHCHECK every few seconds, then costs a bare interpreter (it matters on a Pi).
 
 
 __all__ = ["COMMANDS", "main"]
@@ -54,6 +53,8 @@ def _port(text: str) -> int:
 
 
 def _add_config_options(parser: argparse.ArgumentParser) -> None:
+    from simbridge.config import default_params_path, default_world_path
+
     parser.add_argument(
         "--world",
         metavar="FILE",
@@ -156,6 +157,8 @@ def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
     Raises:
         ConfigError: a file is missing or malformed, or the TLS options are incomplete.
     """
+    from simbridge.config import load_client_tokens
+
     out: dict[str, Any] = {
         "admin_token": args.admin_token or None,
         "max_clients": args.max_clients,
@@ -289,6 +292,8 @@ async def _serve(settings: ServerSettings, world: str | None, params: str | None
 
 
 def _cmd_run(argv: Sequence[str]) -> int:
+    from simbridge.config import ServerSettings, load_params, load_world
+
     args = _run_parser().parse_args(argv)
     setup_logging(args.log_level)
     try:
@@ -309,6 +314,8 @@ def _cmd_run(argv: Sequence[str]) -> int:
 
 
 def _cmd_check_config(argv: Sequence[str]) -> int:
+    from simbridge.config import load_params, load_world
+
     parser = argparse.ArgumentParser(
         prog="simbridge check-config",
         description="Validate a world and a parameter file, as the server does at startup.",

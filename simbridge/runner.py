@@ -31,6 +31,7 @@ from simbridge.config import (
 from simbridge.graph import Graph, RobotBridge, install_rosapi
 from simbridge.graph.estop import EStop
 from simbridge.graph.simclock import SimClock
+from simbridge.graph.tfrepublisher import install_tf_republisher
 from simbridge.graph.walls import WallsPublisher
 from simbridge.security import install_security
 from simbridge.server import BridgeServer, tls_context
@@ -125,6 +126,9 @@ class App:
         self.stats = LoopStats()
         #: Hooks run after each tick's publishing, with ``now`` (extensions).
         self.tick_hooks: list[Callable[[float], None]] = []
+        #: tf2_web_republisher for web TF clients (/republish_tfs, /tf2_web_republisher).
+        self.tf_republisher = install_tf_republisher(self.graph)
+        self.tick_hooks.append(self.tf_republisher.tick)
         self._http: asyncio.Server | None = None
         self._loop_task: asyncio.Task[None] | None = None
         self._started = time.monotonic()

@@ -146,3 +146,17 @@ async def test_environment_overrides_the_defaults() -> None:
     finally:
         proc.terminate()
         await proc.wait()
+
+
+def test_healthcheck_stays_light_without_pydantic_or_numpy() -> None:
+    """`simbridge healthcheck` (a container's HEALTHCHECK) imports no config or simulation code."""
+    code = (
+        "import sys; from simbridge.cli import main; "
+        "rc = main(['healthcheck', '--url', 'http://127.0.0.1:1/healthz', '--timeout', '1']); "
+        "print(sorted(m for m in ('pydantic', 'yaml', 'numpy', 'websockets') if m in sys.modules))"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=30, check=False
+    )
+    assert proc.stdout.strip() == "[]", proc.stdout + proc.stderr
+    assert "unhealthy" in proc.stderr

@@ -590,7 +590,46 @@ def services_actions(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return out
 
 
+def tf_clients(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """roslibpy.tf.TFClient (service mode); same result keys as scenarios/tf_clients.mjs."""
+    from roslibpy.tf import TFClient
+
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    tf = TFClient(
+        ros, fixed_frame="odom", angular_threshold=0.01, translation_threshold=0.001, rate=20
+    )
+    latest: dict[str, Any] = {}
+    counts = {"base_link": 0, "laser": 0}
+
+    def keep(name: str) -> Callable[[Any], None]:
+        def callback(transform: Any) -> None:
+            latest[name] = {
+                "translation": dict(transform["translation"]),
+                "rotation": dict(transform["rotation"]),
+            }
+            counts[name] += 1
+
+        return callback
+
+    tf.subscribe("base_link", keep("base_link"))
+    tf.subscribe("/laser", keep("laser"))
+    wait_for(lambda: "base_link" in latest and "laser" in latest, timeout_s, "first transforms")
+    first = dict(latest)
+    cmd = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/msg/Twist")
+    deadline = time.monotonic() + timeout_s
+    while latest["base_link"]["rotation"]["z"] <= 0.1:
+        if time.monotonic() > deadline:
+            raise TimeoutError("base_link did not turn")
+        cmd.publish(roslibpy.Message({"angular": {"z": 1.0}}))
+        time.sleep(0.05)
+    cmd.publish(roslibpy.Message({}))
+    turned = dict(latest)
+    tf.dispose()
+    return {"first": first, "turned": turned, "counts": counts}
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
+    "tf_clients": tf_clients,
     "services_actions": services_actions,
     "rosapi_all": rosapi_all,
     "topics": topics,

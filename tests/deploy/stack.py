@@ -283,9 +283,13 @@ def _alive(pid: int) -> bool:
 class Stack:
     """One compose project of docker-compose.yml + tests/deploy/compose.test.yml."""
 
-    def __init__(self, compose: Sequence[str], image: str, suffix: str) -> None:
+    def __init__(
+        self, compose: Sequence[str], image: str, suffix: str, extra: Sequence[Path] = ()
+    ) -> None:
         #: The compose command: ``docker-compose`` or ``docker compose``.
         self.compose = list(compose)
+        #: Compose files after the test override (e.g. the benchmark's).
+        self.files = [COMPOSE_FILE, COMPOSE_TEST_FILE, *extra]
         #: Compose project name (carries this process id, see :func:`reap_stale_projects`).
         self.project = f"{PROJECT_PREFIX}{os.getpid()}{suffix}"
         #: Host ports on 127.0.0.1: the bridge's 9090 and nginx's 8080.
@@ -301,7 +305,7 @@ class Stack:
 
     def command(self, *args: str) -> list[str]:
         """The full compose command line for ``args``."""
-        files = ["-f", str(COMPOSE_FILE), "-f", str(COMPOSE_TEST_FILE)]
+        files = [arg for path in self.files for arg in ("-f", str(path))]
         return [*self.compose, "-p", self.project, *files, *args]
 
     def __call__(

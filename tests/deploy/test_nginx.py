@@ -179,3 +179,44 @@ async def test_nginx_answers_404_outside_static(nginx: Nginx) -> None:
     status, _, body = await asyncio.to_thread(get, f"{nginx.http}/../config/pi4b_params.yaml")
     assert status in (400, 404)
     assert b"robot" not in body
+
+
+async def test_page_from_nginx_uses_port_9090_by_default_and_ws_when_told(nginx: Nginx) -> None:
+    """In chromium, the page nginx serves asks ws://HOST:9090 by default; ?url= its /ws works.
+
+    Only the WebSocket traffic is checked (not the page's markup, which has its own tests).
+    """
+    from playwright.async_api import WebSocket, async_playwright
+
+    from tests.browser.conftest import CHROMIUM, FLAGS
+
+    assert shutil.which(CHROMIUM), "chromium is missing: run `make deps` (apt-get install chromium)"
+    async with async_playwright() as pw:
+        browser = await pw.chromium.launch(executable_path=CHROMIUM, args=FLAGS, headless=True)
+        try:
+            sockets: list[WebSocket] = []
+            frames: list[str] = []
+
+            def on_socket(ws: WebSocket) -> None:
+                sockets.append(ws)
+                ws.on("framereceived", lambda data: frames.append(str(data)))
+
+            page = await browser.new_page()
+            page.on("websocket", on_socket)
+            await page.goto(f"{nginx.http}/")
+            async with asyncio.timeout(10 * TIMEOUT_FACTOR):
+                while not sockets:
+                    await asyncio.sleep(0.05)
+            assert sockets[0].url.rstrip("/") == "ws://127.0.0.1:9090"
+            await page.close()
+
+            sockets.clear()
+            page = await browser.new_page()
+            page.on("websocket", on_socket)
+            await page.goto(f"{nginx.http}/?url={nginx.ws}")
+            async with asyncio.timeout(10 * TIMEOUT_FACTOR):
+                while not any('"/odom"' in f for f in frames):
+                    await asyncio.sleep(0.05)
+            assert sockets[0].url == nginx.ws
+        finally:
+            await browser.close()

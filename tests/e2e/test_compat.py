@@ -9,6 +9,7 @@ from __future__ import annotations
 import asyncio
 import base64
 import json
+import math
 from typing import Any
 
 import pytest
@@ -82,7 +83,7 @@ async def test_every_rosapi_service_and_parameter_interface(app: App, client: An
     odom_text = raw["typedefs_full_text"][raw["topics"].index("/odom")]
     assert odom_text.startswith("std_msgs/Header header\n")
     assert "\n" + "=" * 80 + "\nMSG: geometry_msgs/PoseWithCovariance\n" in odom_text
-    assert r["actionServers"] == []
+    assert r["actionServers"] == ["/tf2_web_republisher"]
     if lib == "roslib2":
         assert r["publishers"] == ["/virtual_robot"]
     else:
@@ -142,7 +143,7 @@ async def test_roslibjs_services_and_actions_between_clients(
         return
     assert s["asyncFail"] == {"ok": False, "error": "Error: no can do"}
     a = r["actions"]
-    assert a["actionServers"] == ["/fibonacci"]
+    assert a["actionServers"] == ["/fibonacci", "/tf2_web_republisher"]
     ok = a["succeeded"]
     assert ok["ok"] is True and ok["result"] == {"sequence": [0, 1, 1, 2, 3, 5, 8]}
     assert ok["feedback"][-1] == {"sequence": [0, 1, 1, 2, 3, 5, 8]} and len(ok["feedback"]) == 5
@@ -251,3 +252,18 @@ async def test_roslibjs_compressions_fragments_and_latching(
     if lib == "roslib2":
         frag = r["fragmented"]
         assert (frag["n"], frag["frame"]) == (360, "laser") and frag["pieces"] >= 2
+
+
+@parametrize_clients
+async def test_tf_clients_get_live_transforms_from_the_republisher(app: App, client: Any) -> None:
+    """TFClient (service), ROS2TFClient (action), roslibpy TFClient: odom->base_link, ->laser."""
+    r = await client(ws_url(app), "tf_clients")
+    mx, my, myaw = app.world.params.lidar.mount
+    first = r["first"]
+    assert first["base_link"]["rotation"]["w"] == pytest.approx(1.0, abs=0.05)
+    laser = first["laser"]["translation"]
+    assert (laser["x"], laser["y"]) == (pytest.approx(mx, abs=0.05), pytest.approx(my, abs=0.05))
+    assert first["laser"]["rotation"]["z"] == pytest.approx(math.sin(myaw / 2), abs=0.05)
+    turned = r["turned"]["base_link"]["rotation"]
+    assert turned["z"] > 0.1 and turned["z"] ** 2 + turned["w"] ** 2 == pytest.approx(1.0)
+    assert r["counts"]["base_link"] >= 2

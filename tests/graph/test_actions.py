@@ -123,3 +123,16 @@ def test_caller_leaving_cancels_its_goals(graph: Graph) -> None:
     (cancel,) = server.take()
     assert cancel == {"op": "cancel_action_goal", "id": goal["id"], "action": "fib"}
     assert graph.actions.goals == {}
+
+
+def test_unadvertise_action_fails_goals_and_removes_cancel_goal(graph: Graph) -> None:
+    """unadvertise_action: goals in flight fail (status 6), the hidden service goes away."""
+    server, caller = served(graph)
+    op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=1)
+    op(server, graph, op="unadvertise_action", action="fib")
+    (result,) = caller.take()
+    assert (result["status"], result["result"]) == (6, False)
+    assert "/fib" not in graph.actions.actions
+    assert "/fib/_action/cancel_goal" not in graph.services.services
+    op(server, graph, op="unadvertise_action", action="fib")
+    assert "not advertised" in server.take()[-1]["msg"]

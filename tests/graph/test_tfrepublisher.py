@@ -1,0 +1,101 @@
+from __future__ import annotations
+
+import json
+import math
+from typing import Any
+
+import pytest
+
+from simbridge.graph import Graph
+from simbridge.graph.tfrepublisher import TfBuffer, TfRepublisher
+from tests.helpers import RecordingPeer
+
+
+def tf(parent: str, child: str, x: float, yaw: float) -> dict[str, Any]:
+    return {
+        "header": {"frame_id": parent},
+        "child_frame_id": child,
+        "transform": {
+            "translation": {"x": x, "y": 0.0, "z": 0.0},
+            "rotation": {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2), "w": math.cos(yaw / 2)},
+        },
+    }
+
+
+def test_buffer_composes_through_the_common_ancestor() -> None:
+    """odom->base (x 1, yaw 90 deg), base->laser (x 0.5): laser in odom is (1, 0.5)."""
+    buffer = TfBuffer()
+    buffer.add({"transforms": [tf("odom", "base_link", 1.0, math.pi / 2)]})
+    buffer.add({"transforms": [tf("/base_link", "laser", 0.5, 0.0)]})
+    (x, y, _z), q = buffer.lookup("odom", "/laser")  # type: ignore[misc]
+    assert (x, y) == (pytest.approx(1.0), pytest.approx(0.5))
+    assert q[2] == pytest.approx(math.sin(math.pi / 4))
+    (x, y, _z), _q = buffer.lookup("laser", "odom")  # type: ignore[misc]
+    assert (x, y) == (pytest.approx(-0.5), pytest.approx(1.0))
+    assert buffer.lookup("odom", "elsewhere") is None
+
+
+def call(graph: Graph, peer: RecordingPeer, **body: Any) -> None:
+    graph.receive(peer, json.dumps(body), 0.0)
+
+
+def test_republish_service_feeds_a_topic_and_drops_it_after_the_timeout() -> None:
+    """/republish_tfs names a TFArray topic; unchanged transforms are not re-sent."""
+    graph = Graph()
+    repub = TfRepublisher(graph)
+    tf_topic = graph.advertise("/tf", "tf2_msgs/msg/TFMessage", "/sim")
+    client = RecordingPeer(graph)
+    call(
+        graph,
+        client,
+        op="call_service",
+        service="/republish_tfs",
+        id=1,
+        args={
+            "source_frames": ["base_link"],
+            "target_frame": "odom",
+            "rate": 10.0,
+            "timeout": {"secs": 1, "nsecs": 0},
+        },
+    )
+    name = client.take()[0]["values"]["topic_name"]
+    call(graph, client, op="subscribe", topic=name, type="tf2_web_republisher/TFArray")
+    graph.publish(tf_topic, {"transforms": [tf("odom", "base_link", 2.0, 0.0)]}, 0.0)
+    repub.tick(0.0)
+    (msg,) = client.take()
+    assert msg["msg"]["transforms"][0]["transform"]["translation"]["x"] == 2.0
+    repub.tick(0.2)
+    assert client.take() == []  # nothing moved
+    call(graph, client, op="unsubscribe", topic=name)
+    repub.tick(0.3)
+    repub.tick(1.4)
+    assert name not in graph.topics.topics and repub.requests == []
+    assert graph.topics.topics["/tf"].internal == []  # stops following /tf when idle
+
+
+def test_action_goal_gets_feedback_until_cancelled() -> None:
+    """TFSubscription goal: feedback with the transforms; cancel ends it with status 5."""
+    graph = Graph()
+    repub = TfRepublisher(graph)
+    tf_topic = graph.advertise("/tf", "tf2_msgs/msg/TFMessage", "/sim")
+    client = RecordingPeer(graph)
+    goal = {"source_frames": ["base_link"], "target_frame": "odom", "rate": 10.0}
+    call(
+        graph,
+        client,
+        op="send_action_goal",
+        action="/tf2_web_republisher",
+        action_type="tf2_web_republisher_interfaces/TFSubscription",
+        args=goal,
+        id="g",
+        feedback=True,
+    )
+    graph.publish(tf_topic, {"transforms": [tf("odom", "base_link", 2.0, 0.0)]}, 0.0)
+    repub.tick(0.0)
+    (feedback,) = client.take()
+    assert feedback["op"] == "action_feedback" and feedback["id"] == "g"
+    assert feedback["values"]["transforms"][0]["child_frame_id"] == "base_link"
+    call(graph, client, op="cancel_action_goal", action="/tf2_web_republisher", id="g")
+    (result,) = client.take()
+    assert (result["op"], result["status"], result["result"]) == ("action_result", 5, True)
+    assert repub.requests == []
