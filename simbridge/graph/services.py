@@ -27,7 +27,7 @@ from typing import Any
 from simbridge.errors import ConversionError, ServiceError, TypeNotFoundError
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, short_type
-from simbridge.protocol import Frame, OpId, json_frame
+from simbridge.protocol import Frame, OpId, json_frame, split_frame
 from simbridge.protocol.ops import CallService, ServiceResponse
 
 
@@ -156,6 +156,7 @@ class ServiceTable:
         #: Validates and completes provider responses of known service types (set by the graph).
         self.finish: Finish | None = None
         self._counter = itertools.count(1)
+        self._fragments = itertools.count(1)
 
     def add(self, name: str, type_name: str, node: str, handler: Handler) -> Service:
         """Register an in-process service (replacing any previous one of that name)."""
@@ -189,10 +190,11 @@ class ServiceTable:
         """Answer a ``call_service`` (at once, or once the provider replies or time runs out)."""
         service = self.services.get(name)
         if service is None:
-            peer.send(
+            self.reply(
+                peer,
                 service_response(
                     op.service, f"Service {name} does not exist", result=False, op_id=op.id
-                )
+                ),
             )
             return
         request: Any = op.args
@@ -200,7 +202,7 @@ class ServiceTable:
             try:
                 prepared = self.prepare(service.type, op.args)
             except ServiceError as err:
-                peer.send(service_response(op.service, str(err), result=False, op_id=op.id))
+                self.reply(peer, service_response(op.service, str(err), result=False, op_id=op.id))
                 return
             if prepared is not None:
                 request = prepared
@@ -213,7 +215,7 @@ class ServiceTable:
             except Exception as err:  # a handler bug must not break the connection
                 logger.exception("service %s failed", name)
                 values, ok = f"service {name} failed: {err}", False
-            peer.send(service_response(op.service, values, result=ok, op_id=op.id))
+            self.reply(peer, service_response(op.service, values, result=ok, op_id=op.id))
             return
         provider = service.provider
         assert provider is not None
@@ -227,6 +229,15 @@ class ServiceTable:
                 {"op": "call_service", "id": server_id, "service": service.written, "args": args}
             )
         )
+
+    def reply(self, peer: Peer, frame: Frame) -> None:
+        """Send a response, in ``fragment`` pieces when the client asked for a fragment size."""
+        size = peer.session.fragment_size
+        if size is None or len(frame.data) <= size:
+            peer.send(frame)
+            return
+        for piece in split_frame(frame, size, f"service_response:{next(self._fragments)}"):
+            peer.send(piece)
 
     def respond(self, peer: Peer, op: ServiceResponse) -> str | None:
         """Route a provider's ``service_response`` to its caller; return an error text or None."""
@@ -251,7 +262,9 @@ class ServiceTable:
                 values = self.finish(call.service.type, values)
             except ServiceError as err:
                 ok, values = False, f"service provider sent an invalid response: {err}"
-        call.caller.send(service_response(call.written, values, result=ok, op_id=call.caller_id))
+        self.reply(
+            call.caller, service_response(call.written, values, result=ok, op_id=call.caller_id)
+        )
         return None
 
     def expire(self, now: float) -> None:
@@ -259,13 +272,14 @@ class ServiceTable:
         late = [c for c in self.pending.values() if c.deadline <= now]
         for call in late:
             del self.pending[call.server_id]
-            call.caller.send(
+            self.reply(
+                call.caller,
                 service_response(
                     call.written,
                     f"service {call.service.name} timed out waiting for its provider",
                     result=False,
                     op_id=call.caller_id,
-                )
+                ),
             )
 
     def drop_peer(self, peer: Peer) -> None:
@@ -278,6 +292,7 @@ class ServiceTable:
     def _fail_pending(self, service: Service, reason: str) -> None:
         for call in [c for c in self.pending.values() if c.service is service]:
             del self.pending[call.server_id]
-            call.caller.send(
-                service_response(call.written, reason, result=False, op_id=call.caller_id)
+            self.reply(
+                call.caller,
+                service_response(call.written, reason, result=False, op_id=call.caller_id),
             )

@@ -128,6 +128,7 @@ class _Request:
     topic: Topic | None = None
     timeout: float = 10.0
     last_subscribed: float = -math.inf
+    listened: bool = False
 
 
 def _moved(old: Pose, new: Pose, trans: float, angle: float) -> bool:
@@ -236,12 +237,19 @@ class TfRepublisher:
             if now < request.next_due:
                 continue
             request.next_due = max(request.next_due + request.period, now)
+            if request.topic is not None:
+                listening = bool(request.topic.subscriptions)
+                if listening and not request.listened:
+                    request.sent.clear()  # a (new) subscriber gets every transform once
+                request.listened = listening
+                if not listening:
+                    continue
             transforms = self._changed(request)
             if not transforms:
                 continue
             if request.goal is not None:
                 request.goal.feedback({"transforms": transforms})
-            elif request.topic is not None and request.topic.subscriptions:
+            elif request.topic is not None:
                 self.graph.publish(request.topic, {"transforms": transforms}, now)
 
     def _expired(self, request: _Request, now: float) -> bool:

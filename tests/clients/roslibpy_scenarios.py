@@ -587,6 +587,11 @@ def services_actions(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     if not got.wait(timeout_s):
         raise TimeoutError("goal to a missing action got no result")
     a["missing"] = state
+    # latching: advertise with latch, publish once, then subscribe
+    pub = roslibpy.Topic(ros, "/latched_note", "std_msgs/msg/String", latch=True)
+    pub.publish(roslibpy.Message({"data": "kept for late subscribers"}))
+    wait_for(lambda: "/latched_note" in ros.get_topics(), timeout_s, "the latched topic to exist")
+    out["latched"] = first_message(roslibpy, ros, "/latched_note", "std_msgs/msg/String", timeout_s)
     return out
 
 

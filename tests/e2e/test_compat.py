@@ -227,6 +227,7 @@ async def test_roslibpy_services_and_action_client(
     assert (a["canceled"]["ok"], a["canceled"]["status"]) == (True, 5)
     assert a["canceled"]["feedback"]
     assert a["missing"]["ok"] is False and "does not exist" in a["missing"]["values"]
+    assert r["latched"] == {"data": "kept for late subscribers"}
 
 
 @pytest.mark.parametrize("lib", ["roslib1", "roslib2"])
@@ -248,10 +249,12 @@ async def test_roslibjs_compressions_fragments_and_latching(
     assert decoded.header.frame_id == "laser" and len(decoded.ranges) == 360
     assert scan["raw"]["secs"] > 1_600_000_000
     assert r["latched"] == {"data": "kept for late subscribers"}
+    assert r["passThrough"] == {"a": 1, "nested": {"b": "x", "list": [1.5, None]}}
     assert r["fragIn"] == {"data": "reassembled"}
     if lib == "roslib2":
         frag = r["fragmented"]
         assert (frag["n"], frag["frame"]) == (360, "laser") and frag["pieces"] >= 2
+        assert r["fragmentedService"] == {"result": True, "hasOdom": True}
 
 
 @parametrize_clients

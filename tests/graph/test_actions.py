@@ -136,3 +136,31 @@ def test_unadvertise_action_fails_goals_and_removes_cancel_goal(graph: Graph) ->
     assert "/fib/_action/cancel_goal" not in graph.services.services
     op(server, graph, op="unadvertise_action", action="fib")
     assert "not advertised" in server.take()[-1]["msg"]
+
+
+def test_unknown_action_type_passes_goals_and_results_through(graph: Graph) -> None:
+    """No definition: the goal (even a list) and the result values travel unchanged."""
+    server, caller = RecordingPeer(graph, "s"), RecordingPeer(graph, "c")
+    op(server, graph, op="advertise_action", action="/x", type="my_pkg/action/Thing")
+    op(
+        caller,
+        graph,
+        op="send_action_goal",
+        action="/x",
+        action_type="my_pkg/Thing",
+        args=[1],
+        id=1,
+    )
+    (goal,) = server.take()
+    assert goal["args"] == [1] and goal["action_type"] == "my_pkg/action/Thing"
+    op(
+        server,
+        graph,
+        op="action_result",
+        action="/x",
+        id=goal["id"],
+        values={"any": 1},
+        status=4,
+        result=True,
+    )
+    assert caller.take()[0]["values"] == {"any": 1}

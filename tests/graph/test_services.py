@@ -193,3 +193,15 @@ def test_unknown_service_type_passes_list_args_through_unchanged(graph: Graph) -
     op(caller, graph, op="call_service", service="/x", args=[1, "two"], id=1)
     (request,) = provider.take()
     assert request["args"] == [1, "two"]
+
+
+def test_responses_are_fragmented_for_clients_that_ask(graph: Graph) -> None:
+    """call_service with fragment_size: the reply comes in fragments that join to the response."""
+    graph.add_service("/sum", "example_interfaces/srv/AddTwoInts", "/n", lambda a: {"sum": 3})
+    caller = RecordingPeer(graph, "c")
+    op(caller, graph, op="call_service", service="/sum", args=[1, 2], id="x", fragment_size=20)
+    pieces = caller.take()
+    assert len(pieces) > 1 and all(p["op"] == "fragment" for p in pieces)
+    assert {p["total"] for p in pieces} == {len(pieces)}
+    whole = json.loads("".join(p["data"] for p in sorted(pieces, key=lambda p: p["num"])))
+    assert whole["op"] == "service_response" and whole["id"] == "x"

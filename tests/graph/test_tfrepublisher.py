@@ -99,3 +99,26 @@ def test_action_goal_gets_feedback_until_cancelled() -> None:
     (result,) = client.take()
     assert (result["op"], result["status"], result["result"]) == ("action_result", 5, True)
     assert repub.requests == []
+
+
+def test_a_late_subscriber_of_a_republished_topic_gets_static_transforms() -> None:
+    """Transforms due before anyone subscribed are sent once a subscriber arrives."""
+    graph = Graph()
+    repub = TfRepublisher(graph)
+    static = graph.advertise("/tf_static", "tf2_msgs/msg/TFMessage", "/sim", latch=True)
+    graph.publish(static, {"transforms": [tf("base_link", "laser", 0.1, 0.0)]}, 0.0)
+    client = RecordingPeer(graph)
+    call(
+        graph,
+        client,
+        op="call_service",
+        service="/republish_tfs",
+        id=1,
+        args={"source_frames": ["laser"], "target_frame": "base_link", "rate": 10.0},
+    )
+    name = client.take()[0]["values"]["topic_name"]
+    repub.tick(0.0)  # nobody listens yet
+    call(graph, client, op="subscribe", topic=name)
+    repub.tick(0.1)
+    (msg,) = client.take()
+    assert msg["msg"]["transforms"][0]["child_frame_id"] == "laser"

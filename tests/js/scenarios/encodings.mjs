@@ -55,6 +55,12 @@ export default async function encodings(ROSLIB, ros, args, lib, ctx) {
     latched.publish({ data: 'kept for late subscribers' });
     await new Promise((r) => setTimeout(r, 100)); // let the publish reach the server first
     out.latched = await firstMessage(topic(conns.cbor, '/latched_note', 'std_msgs/msg/String', 'cbor'), ms);
+    // a type simbridge does not know passes through between clients unchanged
+    const custom = { a: 1, nested: { b: 'x', list: [1.5, null] } };
+    const customGot = firstMessage(topic(conns.cbor, '/custom_thing', 'my_pkg/msg/Thing', 'none'), ms);
+    await new Promise((r) => setTimeout(r, 100));
+    topic(ros, '/custom_thing', 'my_pkg/msg/Thing', 'none').publish(custom);
+    out.passThrough = await customGot;
     // fragments out: roslib 2.x reassembles them (1.4.1 cannot)
     if (lib === 'roslib2') {
       const fragments = [];
@@ -67,6 +73,16 @@ export default async function encodings(ROSLIB, ros, args, lib, ctx) {
       fragRos.callOnConnection({ op: 'subscribe', id: 'frag', topic: '/scan', type: 'sensor_msgs/msg/LaserScan', fragment_size: 1000 });
       const whole = await firstMessage(fragTopic, ms);
       out.fragmented = { n: whole.ranges.length, frame: whole.header.frame_id, pieces: fragments.length };
+      // a service response in fragments too (fragment_size on call_service)
+      const reply = await withTimeout(
+        new Promise((resolve) => {
+          fragRos.once('svc_frag', resolve);
+          fragRos.callOnConnection({ op: 'call_service', id: 'svc_frag', service: '/rosapi/topics', args: {}, fragment_size: 256 });
+        }),
+        ms,
+        'fragmented service response',
+      );
+      out.fragmentedService = { result: reply.result, hasOdom: reply.values.topics.includes('/odom') };
       fragRos.close();
     }
     // fragments in: a raw client sends a publish split into 3 fragments
