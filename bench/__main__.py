@@ -11,6 +11,7 @@ QUICK = {
     "encoding": "/scan and /odom frames for N subscribers vs stdlib json.dumps per subscriber",
     "raycast": "one 360-ray scan against 20, 100 and 500 walls",
     "headless": "headless simulation speed-up over real time",
+    "simtime": "server loop real-time factor achieved vs requested (1x to 20x)",
     "cbor": "cbor / cbor-raw / png frames of /scan and /odom vs the cbor2 library",
 }
 

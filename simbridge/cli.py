@@ -22,7 +22,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from simbridge import __version__
-from simbridge.errors import ConfigError
+from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.logs import setup_logging
 
 
@@ -253,6 +253,20 @@ def _run_parser() -> argparse.ArgumentParser:
         "clock (as ROS nodes with use_sim_time:=true expect) [SIMBRIDGE_USE_SIM_TIME]",
     )
     parser.add_argument(
+        "--record",
+        metavar="DIR",
+        default=_env("RECORD", None),
+        help="record topics into the rosbag2 MCAP bag DIR while serving (finished on stop) "
+        "[SIMBRIDGE_RECORD]",
+    )
+    parser.add_argument(
+        "--record-topics",
+        metavar="TOPIC",
+        nargs="+",
+        default=None,
+        help="topics --record records (default: every topic, also later ones)",
+    )
+    parser.add_argument(
         "--log-level",
         default=_env("LOG_LEVEL", "info"),
         choices=["debug", "info", "warning", "error"],
@@ -261,7 +275,12 @@ def _run_parser() -> argparse.ArgumentParser:
     return parser
 
 
-async def _serve(settings: ServerSettings, world: str | None, params: str | None) -> int:
+async def _serve(
+    settings: ServerSettings,
+    world: str | None,
+    params: str | None,
+    record: tuple[str, list[str] | None] | None = None,
+) -> int:
     from simbridge.runner import App  # imported late: `simbridge --help` stays fast
 
     app = App(settings, world=world, params=params)
@@ -278,6 +297,19 @@ async def _serve(settings: ServerSettings, world: str | None, params: str | None
         else:
             print(f"simbridge: cannot listen: {err}", file=sys.stderr)
         return 2
+    recorder = None
+    if record is not None:
+        from pathlib import Path
+
+        from simbridge.record import GraphRecorder
+
+        try:
+            recorder = GraphRecorder(app.graph, Path(record[0]), record[1])
+        except SimbridgeError as err:
+            await app.stop()
+            print(f"simbridge: {err}", file=sys.stderr)
+            return 2
+        app.tick_hooks.append(recorder.tick)
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -288,6 +320,9 @@ async def _serve(settings: ServerSettings, world: str | None, params: str | None
     await stop.wait()
     print("simbridge: stopping", flush=True)
     await app.stop()
+    if recorder is not None:
+        recorder.close()
+        print(f"simbridge: recorded {recorder.writer.count} messages to {record and record[0]}/")
     return 0
 
 
@@ -307,7 +342,8 @@ def _cmd_run(argv: Sequence[str]) -> int:
         # validate before binding anything, so a bad file fails fast and clearly
         load_world(args.world)
         load_params(args.params)
-        return asyncio.run(_serve(settings, args.world, args.params))
+        record = (args.record, args.record_topics) if args.record else None
+        return asyncio.run(_serve(settings, args.world, args.params, record))
     except ConfigError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 2

@@ -211,7 +211,8 @@ class App:
                 await asyncio.sleep(delay)
             now = clock()
             late = now - deadline
-            if late > MAX_CATCH_UP * dt:
+            # the catch-up allowance is in sim steps of wall time, whatever the speed-up
+            if late > MAX_CATCH_UP * self.world.dt:
                 skipped = int(late / dt)
                 self.stats.skipped_ticks += skipped
                 start += skipped * dt  # skip ahead: no burst of catch-up ticks

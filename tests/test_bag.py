@@ -44,6 +44,34 @@ def test_messages_round_trip_through_cdr(registry: TypeRegistry, tmp_path: Path)
     assert len(list(read_messages(tmp_path / "bag" / "bag.mcap"))) == 4
 
 
+def test_foxglove_mcap_library_decodes_every_message(
+    registry: TypeRegistry, tmp_path: Path
+) -> None:
+    """The official MCAP reader with its ROS 2 decoder parses the schemas simbridge writes."""
+    from mcap.reader import make_reader
+    from mcap_ros2.decoder import DecoderFactory
+
+    writer = BagWriter(tmp_path / "fox", registry, segment_seconds=0.0)
+    scan = canonical(registry, "sensor_msgs/msg/LaserScan", {"ranges": [0.5, 1.0]})
+    odom = canonical(registry, "nav_msgs/msg/Odometry", {"child_frame_id": "base_link"})
+    for k in range(3):
+        writer.write("/scan", "sensor_msgs/msg/LaserScan", scan, 10 + k)
+        writer.write("/odom", "nav_msgs/msg/Odometry", odom, 20 + k)
+        writer.tick()
+    writer.close()
+    with (tmp_path / "fox" / "fox.mcap").open("rb") as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        decoded = [(ch.topic, msg) for _s, ch, _m, msg in reader.iter_decoded_messages()]
+        summary = reader.get_summary()
+    assert summary is not None
+    assert summary.statistics is not None
+    assert summary.statistics.message_count == 6
+    assert [t for t, _ in decoded].count("/scan") == 3
+    by_topic = dict(decoded)
+    assert list(by_topic["/scan"].ranges) == [0.5, 1.0]
+    assert by_topic["/odom"].child_frame_id == "base_link"
+
+
 def test_closed_segments_read_without_close(registry: TypeRegistry, tmp_path: Path) -> None:
     """What a killed recorder leaves: closed segments listed in metadata.yaml, rosbags reads it."""
     writer = BagWriter(tmp_path / "cut", registry, segment_seconds=0.0)

@@ -138,3 +138,30 @@ def test_headless_replay_simulates_the_commands(tmp_path: Path) -> None:
     first_cmd = next(s for t, _ty, s, _m in read_messages(tmp_path / "real") if t == "/cmd_vel")
     assert odom[0][0] > first_cmd  # on the source bag's time line
     assert odom[-1][1]["pose"]["pose"]["position"]["x"] == pytest.approx(0.4, abs=0.011)
+
+
+async def test_server_records_itself_with_the_record_flag(tmp_path: Path) -> None:
+    """`simbridge --record DIR` records in process; /cmd_vel from a client lands in the bag."""
+    bag = tmp_path / "served"
+    proc = await start(
+        *("--host", "127.0.0.1", "--port", "0", "--no-http", "--log-level", "warning"),
+        *("--record", str(bag), "--record-topics", "/odom", "/cmd_vel", "/tf_static"),
+    )
+    assert proc.stdout is not None
+    line = (await asyncio.wait_for(proc.stdout.readline(), 10 * TIMEOUT_FACTOR)).decode()
+    url = line.split()[2].rstrip("/")
+    assert url.startswith("ws://127.0.0.1:"), line
+    async with connect(url) as conn:
+        await send_json(conn, {"op": "publish", "topic": "/cmd_vel", "type": "geometry_msgs/Twist",
+                               "msg": {"linear": {"x": 0.3}}})  # fmt: skip
+        await send_json(conn, {"op": "subscribe", "topic": "/odom"})
+        for _ in range(6):
+            await recv_until(conn, lambda m: m.get("topic") == "/odom")
+    proc.send_signal(signal.SIGINT)
+    code, out, err = await finish(proc)
+    assert code == 0, err
+    assert "recorded" in out
+    counts = Counter(topic for topic, *_ in read_messages(bag))
+    assert counts["/cmd_vel"] == 1
+    assert counts["/tf_static"] == 1  # latched before the recorder started
+    assert counts["/odom"] >= 6
