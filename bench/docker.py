@@ -20,6 +20,7 @@ ratio container / native. The image is built on the tests' local base (Debian bo
 from __future__ import annotations
 
 import contextlib
+import math
 import time
 from collections.abc import Iterator
 from pathlib import Path
@@ -144,10 +145,13 @@ def main() -> int:
         ("/odom Hz per client (min of 10)", "odom_hz_10", lambda v: f"{v:.1f}"),
         ("/scan Hz per client (min of 10)", "scan_hz_10", lambda v: f"{v:.1f}"),
     ]
-    print(f"{'':34} {'container':>11} {'native':>11} {'ratio':>7}")
+    print(f"{'':38} {'container':>11} {'native':>11} {'ratio':>7}")
     for label, key, fmt in rows:
+        if math.isnan(native[key]):  # the container's cgroup: no native counterpart
+            print(f"{label:38} {fmt(boxed[key]):>11} {'n/a':>11} {'n/a':>7}")
+            continue
         ratio = boxed[key] / native[key] if native[key] else float("nan")
-        print(f"{label:34} {fmt(boxed[key]):>11} {fmt(native[key]):>11} {ratio:>7.2f}")
+        print(f"{label:38} {fmt(boxed[key]):>11} {fmt(native[key]):>11} {ratio:>7.2f}")
     print(
         f"({WINDOW:.0f} s windows, idle {2 * WINDOW:.0f} s; CPU = the simbridge process's "
         f"user+system seconds; {load_average()})"

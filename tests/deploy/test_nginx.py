@@ -145,6 +145,14 @@ async def test_roslibjs_receives_odom_and_scan_through_ws(
     assert len(scan["ranges"]) == 360
 
 
+async def test_roslibpy_with_the_ws_url_as_host_receives_scan(
+    nginx: Nginx, run_roslibpy: ClientRunner
+) -> None:
+    """A roslibpy 2.1.0 ``Ros("ws://HOST:PORT/ws")`` (no port) works through nginx too."""
+    scan = await run_roslibpy(nginx.ws, "scan")
+    assert len(scan["ranges"]) == 360
+
+
 async def test_cmd_vel_published_through_ws_drives_the_robot(
     nginx: Nginx, run_js: ClientRunner
 ) -> None:
