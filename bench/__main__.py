@@ -31,6 +31,15 @@ DEPLOY = {
 }
 
 
+#: Reliability figures of issue 7, run by name (``python -m bench hostile stall churn soak``).
+RELIABILITY = {
+    "hostile": "hostile frames against a real server: crashes, /odom rate quiet vs under attack",
+    "stall": "p99 latency of normal clients without and with stalled clients",
+    "churn": "server RSS and fds over 1,000 connect/subscribe/disconnect cycles",
+    "soak": "10 minutes of churn (SOAK_SECONDS): RSS and fds before and after",
+}
+
+
 def main(argv: list[str]) -> int:
     names = argv or [*QUICK, *SCALE]
     if names == ["quick"]:

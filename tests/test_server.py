@@ -5,6 +5,7 @@ import base64
 import json
 import os
 import socket
+import struct
 import urllib.request
 
 import pytest
@@ -261,3 +262,31 @@ async def test_abrupt_disconnect_of_a_provider_fails_its_pending_calls(app: App)
         provider.close()
     await wait_for(lambda: len(app.server.clients) == 0, timeout=5)
     assert "/slow" not in app.graph.services.services and not app.graph.services.pending
+
+
+async def test_abrupt_disconnect_of_an_action_server_aborts_its_goals(app: App) -> None:
+    """An action server that vanishes mid-goal: the caller gets a failed action_result."""
+    provider = await stalled_client(
+        app.ws_port,
+        {"op": "advertise_action", "action": "/fib", "type": "example_interfaces/Fibonacci"},
+    )
+    try:
+        await wait_for(lambda: "/fib" in app.graph.actions.actions)
+        async with connect(ws_url(app)) as caller:
+            goal = {
+                "op": "send_action_goal",
+                "action": "/fib",
+                "action_type": "example_interfaces/action/Fibonacci",
+                "args": {"order": 5},
+                "id": "g1",
+            }
+            await send_json(caller, goal)
+            await wait_for(lambda: bool(app.graph.actions.goals))
+            provider.setsockopt(socket.SOL_SOCKET, socket.SO_LINGER, struct.pack("ii", 1, 0))
+            provider.close()  # RST: no close frame
+            reply = await recv_until(caller, lambda m: m.get("op") == "action_result")
+            assert reply["id"] == "g1" and reply["result"] is False
+    finally:
+        provider.close()
+    await wait_for(lambda: not app.server.clients, timeout=5)
+    assert "/fib" not in app.graph.actions.actions and not app.graph.actions.goals

@@ -10,7 +10,6 @@ and a new one is opened); no reply may be an internal error. Meanwhile a second 
 from __future__ import annotations
 
 import asyncio
-import itertools
 import json
 import threading
 import time
@@ -166,7 +165,21 @@ def harness() -> Iterator[Harness]:
 def test_hostile_frames_get_answers_and_never_disturb_the_loop_or_the_robot(
     harness: Harness,
 ) -> None:
-    """Hundreds of hostile frames: no internal error, /odom stays at 20 Hz, the robot stays."""
+    """Hundreds of hostile frames: no internal error, /odom stays at 20 Hz, the robot stays.
+
+    The /odom rate under attack is compared with a quiet window just before it, on the same
+    (shared, loaded) machine; ``bench/hostile.py`` measures it on its own process.
+    """
+    app = harness.app
+    assert app is not None
+
+    def rate(start: float, end: float) -> float:
+        return sum(1 for t in harness.odom_times if start <= t < end) / (end - start)
+
+    quiet_start = time.monotonic()
+    time.sleep(2.0)
+    quiet = rate(quiet_start, time.monotonic())
+    ticks = app.stats.ticks
     start = time.monotonic()
 
     @settings(
@@ -181,17 +194,18 @@ def test_hostile_frames_get_answers_and_never_disturb_the_loop_or_the_robot(
         harness.send(frame)
 
     run()
-    elapsed = time.monotonic() - start
-    times = [t for t in harness.odom_times if t >= start]
+    end = time.monotonic()
+    attacked = rate(start, end)
     assert harness.frames_sent >= EXAMPLES
     assert not harness.internal_errors, harness.internal_errors[:3]
     assert not harness.observer_statuses, harness.observer_statuses[:3]
-    rate = (len(times) - 1) / (times[-1] - times[0])
-    gaps = [b - a for a, b in itertools.pairwise(times)]
-    assert 18.0 <= rate <= 21.0, (rate, elapsed, app_summary(harness))
-    assert max(gaps) < 0.5 * TIMEOUT_FACTOR, max(gaps)
-    app = harness.app
-    assert app is not None
+    # every tick's /odom reaches the observer: the hostile client took nothing from it
+    expected = app.stats.ticks - ticks - 1
+    deadline = time.monotonic() + 5 * TIMEOUT_FACTOR
+    while sum(1 for t in harness.odom_times if t >= start) < expected:
+        assert time.monotonic() < deadline, (expected, app_summary(harness))
+        time.sleep(0.05)
+    assert attacked >= 0.8 * quiet, (attacked, quiet, end - start, app_summary(harness))
     robot = app.world.robots[""]
     assert (robot.state.x, robot.state.y, robot.state.theta) == robot.start
     assert (robot.cmd_v, robot.cmd_omega, robot.state.v) == (0.0, 0.0, 0.0)
