@@ -160,3 +160,26 @@ def test_healthcheck_stays_light_without_pydantic_or_numpy() -> None:
     )
     assert proc.stdout.strip() == "[]", proc.stdout + proc.stderr
     assert "unhealthy" in proc.stderr
+
+
+async def test_use_sim_time_flag_stamps_headers_with_sim_time() -> None:
+    """`simbridge --use-sim-time`: /odom header stamps count from 0, not from the epoch."""
+    proc = await asyncio.create_subprocess_exec(
+        *(PY, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0", "--no-http"),
+        "--use-sim-time",
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd=ROOT,
+    )
+    try:
+        assert proc.stdout is not None
+        line = (await asyncio.wait_for(proc.stdout.readline(), 20 * TIMEOUT_FACTOR)).decode()
+        url = line.split()[2].rstrip("/")
+        echo = await asyncio.to_thread(
+            run, "topic", "echo", "/odom", "--once", "--field", "header.stamp.sec", "--url", url
+        )
+        assert echo.returncode == 0, echo.stderr
+        assert 0 <= int(echo.stdout.splitlines()[0]) < 600
+    finally:
+        proc.terminate()
+        await proc.wait()

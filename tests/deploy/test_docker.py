@@ -10,6 +10,7 @@ engine can start (or, for the v2 run, where no ``docker compose`` plugin is inst
 from __future__ import annotations
 
 import asyncio
+import json
 import shutil
 import urllib.request
 from collections.abc import Iterator
@@ -56,6 +57,19 @@ def stack(request: pytest.FixtureRequest, image: str) -> Iterator[docker.Stack]:
 def get(url: str) -> tuple[int, str, bytes]:
     with urllib.request.urlopen(url, timeout=10) as response:
         return response.status, response.headers.get("Content-Type", ""), response.read()
+
+
+def test_image_runs_unprivileged_with_its_own_healthcheck_and_bundled_config(image: str) -> None:
+    """The image alone: non-root user, HEALTHCHECK `simbridge healthcheck`, defaults built in."""
+    config = json.loads(docker.run(["docker", "image", "inspect", image]).stdout)[0]["Config"]
+    assert config["User"].split(":")[0] not in ("", "root", "0")
+    assert config["Healthcheck"]["Test"] == ["CMD", "simbridge", "healthcheck"]
+    assert config["Cmd"][0] == "simbridge"
+    # no config mounted, no network: the bundled world and parameters load
+    checked = docker.run(
+        ["docker", "run", "--rm", "--network", "none", image, "simbridge", "check-config"]
+    )
+    assert checked.stdout.startswith("ok: world 'default'")
 
 
 def test_ps_lists_both_services_up_and_healthy(stack: docker.Stack) -> None:
