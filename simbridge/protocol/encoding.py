@@ -55,8 +55,33 @@ def _default(value: Any) -> Any:
 
 
 def encode_json(obj: Any) -> bytes:
-    """Return the UTF-8 JSON of a canonical message or envelope (NaN and inf as null)."""
-    return orjson.dumps(obj, default=_default, option=_OPTS)
+    """Return the UTF-8 JSON of a canonical message or envelope (NaN and inf as null).
+
+    An integer beyond 64 bits (a client may send one in a pass-through payload) is written as
+    the nearest double, as JavaScript would read it (``null`` past the double range).
+    """
+    try:
+        return orjson.dumps(obj, default=_default, option=_OPTS)
+    except orjson.JSONEncodeError as err:
+        if "Integer exceeds 64-bit range" not in str(err):
+            raise
+        return orjson.dumps(_as_doubles(obj), default=_default, option=_OPTS)
+
+
+def _as_doubles(obj: Any) -> Any:
+    """Return ``obj`` with every integer beyond 64 bits replaced by a double (or None)."""
+    if isinstance(obj, int) and not isinstance(obj, bool):
+        if -(2**63) <= obj < 2**64:
+            return obj
+        try:
+            return float(obj)
+        except OverflowError:
+            return None
+    if isinstance(obj, dict):
+        return {k: _as_doubles(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_as_doubles(v) for v in obj]
+    return obj
 
 
 def json_frame(obj: Any) -> Frame:

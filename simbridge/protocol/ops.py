@@ -12,6 +12,7 @@ Ids (``id``) are opaque: a string or an integer, echoed back exactly as received
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal, NewType, TypeAlias
@@ -254,6 +255,7 @@ Op: TypeAlias = (
 )
 
 _MISSING = object()
+_FLOAT_MAX = sys.float_info.max
 
 
 class _Reader:
@@ -321,8 +323,8 @@ class _Reader:
             return None
         if isinstance(value, bool) or not isinstance(value, int | float):
             raise self._fail(field, "a number", value)
-        if not math.isfinite(value):
-            raise self._fail(field, "a finite number", value)
+        if (isinstance(value, int) and abs(value) > _FLOAT_MAX) or not math.isfinite(value):
+            raise self._fail(field, "a finite number", value)  # (a huge int: OverflowError)
         return float(value)
 
     def args(self, field: str) -> dict[str, Any] | list[Any] | None:

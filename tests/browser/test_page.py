@@ -7,8 +7,10 @@ rosbridge client, never through the page itself.
 
 from __future__ import annotations
 
+import itertools
 import json
 import math
+import statistics
 from typing import Any
 
 import pytest
@@ -126,7 +128,7 @@ async def test_holding_up_moves_robot_and_releasing_sends_one_zero(
     await page.keyboard.down("ArrowUp")
     for _ in range(5):  # OS auto-repeat: further keydowns with repeat=true change nothing
         await page.keyboard.down("ArrowUp")
-    await watcher.wait(lambda: watcher.odom()["x"] > x0 + 0.15)  # type: ignore[index]
+    await watcher.wait(lambda: watcher.odom()["x"] > x0 + 0.3)  # type: ignore[index]
     assert watcher.odom()["v"] == pytest.approx(0.3)  # type: ignore[index]
     await screenshot(page, "teleop-driving")
     await page.keyboard.up("ArrowUp")
@@ -134,9 +136,10 @@ async def test_holding_up_moves_robot_and_releasing_sends_one_zero(
     cmds = [m for _, m in watcher.history["/cmd_vel"]]
     assert cmds[-1]["linear"]["x"] == 0.0
     assert all(m["linear"]["x"] == pytest.approx(0.3) for m in cmds[:-1])
+    # the fixed rate, robust to arrival jitter: the median gap between held commands
     times = [t for t, _ in watcher.history["/cmd_vel"][:-1]]
-    rate = (len(times) - 1) / (times[-1] - times[0])
-    assert 6 < rate < 14, f"published at {rate:.1f} Hz while held, expected 10"
+    gap = statistics.median(b - a for a, b in itertools.pairwise(times))
+    assert 0.07 < gap < 0.14, f"published every {gap * 1000:.0f} ms while held, expected 100"
     n = await count_cmd_vel(watcher)
     x1 = watcher.odom()["x"]  # type: ignore[index]
     await page.wait_for_timeout(500)  # silence after the one zero: nothing may arrive
@@ -371,7 +374,9 @@ async def test_plots_status_rates_and_view_pan_zoom_follow(
         "window.simbridge.conn.rates().find((r) => r.name === '/odom').rate"
     )
     assert 12 < odom_rate < 25  # published at 20 Hz
-    assert "Hz" in (await page.text_content("#statusInfo") or "")
+    await page.wait_for_function(  # the status line is refreshed twice a second
+        "/odom 1[0-9]|odom 2[0-9]/.test(document.getElementById('statusInfo').textContent)"
+    )
     await screenshot(page, "plots")
     # pan: dragging the view turns follow off and moves the centre
     view = page.locator("#view")

@@ -74,3 +74,9 @@ def test_status_frame_shape() -> None:
         "msg": "bad",
         "id": "a1",
     }
+
+
+def test_integers_beyond_64_bits_are_written_as_doubles_not_an_error() -> None:
+    """A pass-through payload may hold 2**70 or 10**400 (found by bench/hostile.py)."""
+    out = json.loads(encode_json({"a": [2**70, -(2**64) - 1, 10**400, 5], "b": {"c": 2**63}}))
+    assert out == {"a": [float(2**70), float(-(2**64) - 1), None, 5], "b": {"c": 2**63}}

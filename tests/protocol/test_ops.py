@@ -103,3 +103,9 @@ def test_auth_op_reads_rosauth_fields() -> None:
         }
     )
     assert op == o.Auth("m", "c", "d", "r", 1, "user", 2)
+
+
+def test_a_huge_integer_timeout_is_a_protocol_error_not_an_overflow() -> None:
+    """call_service timeout 10**400 (found by bench/hostile.py: was an internal error)."""
+    with pytest.raises(ProtocolError, match="finite number"):
+        parse_op({"op": "call_service", "service": "/x", "timeout": 10**400})
