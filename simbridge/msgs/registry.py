@@ -134,6 +134,8 @@ class TypeRegistry:
         #: The .msg text each registered (non-rosbags) message was defined with.
         self.texts: dict[str, str] = {}
         self._batch: dict[str, Any] | None = None
+        #: definition_text results (rosapi topics_and_raw_types is polled every 3 s by Lichtblick).
+        self._full_texts: dict[str, str] = {}
         if interfaces:
             self._add_interfaces()
 
@@ -205,8 +207,11 @@ class TypeRegistry:
         that Foxglove and Lichtblick parse.
         """
         canonical = self.spec(name).name
-        text, _digest = self.store.generate_msgdef(canonical, ros_version=2)
-        return str(text)
+        cached = self._full_texts.get(canonical)
+        if cached is None:
+            text, _digest = self.store.generate_msgdef(canonical, ros_version=2)
+            cached = self._full_texts[canonical] = str(text)
+        return cached
 
     def service(self, name: str) -> tuple[str, str]:
         """Return the (request, response) message names of a service type.
@@ -266,6 +271,7 @@ class TypeRegistry:
         else:
             self.store.register(renamed)
         self._specs.pop(name, None)
+        self._full_texts.clear()
         self.texts[name] = text
         return name
 
@@ -285,6 +291,7 @@ class TypeRegistry:
             self._batch = None
         self.store.register(batch)
         self._specs.clear()
+        self._full_texts.clear()
 
     def register_srv(self, name: str, text: str) -> str:
         """Register a service type from ``.srv`` text (request ``---`` response)."""

@@ -81,3 +81,13 @@ def test_short_type_drops_the_interface_kind() -> None:
     """pkg/msg/Type -> pkg/Type (rosapi TypeDef spelling)."""
     assert short_type("std_msgs/msg/Header") == "std_msgs/Header"
     assert short_type("std_msgs/Header") == "std_msgs/Header"
+
+
+def test_definition_text_is_cached_and_registration_invalidates_it() -> None:
+    """The same text object comes back; a newly registered type gets its own text."""
+    registry = TypeRegistry()
+    first = registry.definition_text("nav_msgs/msg/Odometry")
+    assert registry.definition_text("nav_msgs/Odometry") is first
+    registry.register_msg("my_pkg/msg/Probe", "geometry_msgs/Point p")
+    assert registry.definition_text("my_pkg/msg/Probe").startswith("geometry_msgs/Point p\n")
+    assert registry.definition_text("nav_msgs/msg/Odometry") == first
