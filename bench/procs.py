@@ -57,7 +57,8 @@ def server(kind: str, *, world: Path | None = None) -> Iterator[tuple[psutil.Pro
     port = free_port()
     if kind == "simbridge":
         cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", str(port)]
-        cmd += ["--no-http", "--log-level", "warning"]
+        # 500-client runs: above the default --max-clients (200) of a classroom server
+        cmd += ["--no-http", "--log-level", "warning", "--max-clients", "2000"]
         if world is not None:
             cmd += ["--world", str(world)]
     else:
