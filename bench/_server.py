@@ -2,12 +2,8 @@
 
 from __future__ import annotations
 
-import asyncio
-import base64
 import json
-import os
 import re
-import socket
 import subprocess
 import sys
 import time
@@ -56,32 +52,6 @@ def health(port: int) -> dict[str, Any]:
 def memory(proc: psutil.Process) -> tuple[float, int]:
     """Return the RSS (MiB) and the number of open file descriptors of ``proc``."""
     return proc.memory_info().rss / 2**20, proc.num_fds()
-
-
-async def stalled_client(port: int, subscribe: dict[str, Any]) -> socket.socket:
-    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again."""
-    sock = socket.socket()
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.setblocking(False)
-    loop = asyncio.get_running_loop()
-    await loop.sock_connect(sock, ("127.0.0.1", port))
-    key = base64.b64encode(os.urandom(16)).decode()
-    await loop.sock_sendall(
-        sock,
-        (
-            f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
-            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
-            "Sec-WebSocket-Version: 13\r\n\r\n"
-        ).encode(),
-    )
-    head = b""
-    while b"\r\n\r\n" not in head:
-        head += await loop.sock_recv(sock, 1)
-    payload = json.dumps(subscribe).encode()
-    mask = os.urandom(4)
-    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
-    await loop.sock_sendall(sock, bytes([0x81, 0x80 | len(payload)]) + mask + masked)
-    return sock
 
 
 def percentile(values: list[float], q: float) -> float:

@@ -17,7 +17,8 @@ import random
 
 from websockets.asyncio.client import connect
 
-from bench._server import health, memory, now, server, stalled_client
+from bench._server import health, memory, now, server
+from tests.helpers import stalled_client
 
 
 SECONDS = float(os.environ.get("SOAK_SECONDS", "600"))

@@ -16,7 +16,8 @@ import time
 
 from websockets.asyncio.client import ClientConnection, connect
 
-from bench._server import health, percentile, server, stalled_client
+from bench._server import health, percentile, server
+from tests.helpers import stalled_client
 
 
 PHASE = float(os.environ.get("STALL_PHASE_SECONDS", "20"))

@@ -1,10 +1,12 @@
-"""Helpers of the test suite: URLs, JSON over WebSocket, waiting for conditions."""
+"""Helpers of the test suite and the benchmarks: URLs, JSON over WebSocket, waiting, raw sockets."""
 
 from __future__ import annotations
 
 import asyncio
+import base64
 import json
 import os
+import socket
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -92,3 +94,31 @@ class RecordingPeer:
         out = self.messages()
         self.frames.clear()
         return out
+
+
+async def stalled_client(port: int, subscribe: dict[str, object]) -> socket.socket:
+    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again."""
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.setblocking(False)
+    loop = asyncio.get_running_loop()
+    await loop.sock_connect(sock, ("127.0.0.1", port))
+    key = base64.b64encode(os.urandom(16)).decode()
+    await loop.sock_sendall(
+        sock,
+        (
+            f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
+            "Sec-WebSocket-Version: 13\r\n\r\n"
+        ).encode(),
+    )
+    head = b""
+    while b"\r\n\r\n" not in head:
+        head += await loop.sock_recv(sock, 1)
+    assert head.startswith(b"HTTP/1.1 101")
+    payload = json.dumps(subscribe).encode()
+    mask = os.urandom(4)
+    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
+    assert len(payload) < 126
+    await loop.sock_sendall(sock, bytes([0x81, 0x80 | len(payload)]) + mask + masked)
+    return sock

@@ -1,9 +1,7 @@
 from __future__ import annotations
 
 import asyncio
-import base64
 import json
-import os
 import socket
 import struct
 import urllib.request
@@ -14,7 +12,7 @@ from websockets.exceptions import InvalidStatus
 
 from simbridge.runner import App
 from tests.conftest import AppFactory
-from tests.helpers import recv_json, recv_until, send_json, wait_for, ws_url
+from tests.helpers import recv_json, recv_until, send_json, stalled_client, wait_for, ws_url
 
 
 async def test_bad_input_gets_status_errors_and_the_connection_stays_open(app: App) -> None:
@@ -58,34 +56,6 @@ async def test_a_bad_client_does_not_affect_others_or_the_robot(app: App) -> Non
         odom = await recv_until(good, lambda m: m.get("topic") == "/odom")
         assert odom["msg"]["pose"]["pose"]["position"]["x"] == 0.0
         assert app.world.robots[""].cmd_v == 0.0
-
-
-async def stalled_client(port: int, subscribe: dict[str, object]) -> socket.socket:
-    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again."""
-    sock = socket.socket()
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.setblocking(False)
-    loop = asyncio.get_running_loop()
-    await loop.sock_connect(sock, ("127.0.0.1", port))
-    key = base64.b64encode(os.urandom(16)).decode()
-    await loop.sock_sendall(
-        sock,
-        (
-            f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
-            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
-            "Sec-WebSocket-Version: 13\r\n\r\n"
-        ).encode(),
-    )
-    head = b""
-    while b"\r\n\r\n" not in head:
-        head += await loop.sock_recv(sock, 1)
-    assert head.startswith(b"HTTP/1.1 101")
-    payload = json.dumps(subscribe).encode()
-    mask = os.urandom(4)
-    masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
-    assert len(payload) < 126
-    await loop.sock_sendall(sock, bytes([0x81, 0x80 | len(payload)]) + mask + masked)
-    return sock
 
 
 async def test_stalled_client_is_bounded_and_does_not_delay_others(make_app: AppFactory) -> None:
