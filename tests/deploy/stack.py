@@ -51,6 +51,11 @@ PROJECT_PREFIX = "sbtest"
 #: The two compose front ends the course's commands must work with.
 COMPOSE_COMMANDS = {"docker-compose": ["docker-compose"], "docker compose": ["docker", "compose"]}
 
+#: The dockerd this process started. It outlives the tests on purpose; keeping its Popen here
+#: stops the garbage collector from finalising it mid-run, which warns "subprocess is still
+#: running" (an error under the suite's ``filterwarnings = error``).
+_STARTED_ENGINES: list[subprocess.Popen[bytes]] = []
+
 
 def log(text: str) -> None:
     """Print a progress line (shown with ``pytest -s``; kept short)."""
@@ -128,6 +133,7 @@ def start_engine(timeout: float = 60) -> str | None:
                 stderr=out,
                 start_new_session=True,
             )
+        _STARTED_ENGINES.append(proc)
         deadline = time.monotonic() + timeout
         while time.monotonic() < deadline:
             if engine_running():
