@@ -172,7 +172,18 @@ def odom_rate(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     count = args.get("count", 41)
     timeout_s = args.get("timeout_ms", 5000 + count * 150) / 1000
     messages, times = collect(roslibpy, ros, "/odom", "nav_msgs/msg/Odometry", count, timeout_s)
-    return {"count": len(messages), "times": times, "first": messages[0], "last": messages[-1]}
+    return {
+        "count": len(messages),
+        "times": times,
+        "stamps": [_stamp_ms(m) for m in messages],
+        "first": messages[0],
+        "last": messages[-1],
+    }
+
+
+def _stamp_ms(msg: JSON) -> float:
+    stamp = msg["header"]["stamp"]
+    return float(stamp["sec"] * 1e3 + stamp["nanosec"] / 1e6)
 
 
 def scan(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
@@ -396,10 +407,16 @@ def throttle(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
         ros, "/odom", "nav_msgs/msg/Odometry", throttle_rate=rate, queue_length=1
     )
     times: list[float] = []
-    topic.subscribe(lambda _msg: times.append(now_ms()))
+    stamps: list[float] = []
+
+    def on_message(msg: JSON) -> None:
+        times.append(now_ms())
+        stamps.append(_stamp_ms(msg))
+
+    topic.subscribe(on_message)
     wait_for(lambda: len(times) >= count, args.get("timeout_ms", 5000 + count * rate * 2) / 1000)
     topic.unsubscribe()
-    return {"times": times[:count]}
+    return {"times": times[:count], "stamps": stamps[:count]}
 
 
 def rosapi_all(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:

@@ -56,11 +56,16 @@ async def test_client_lists_every_simulated_topic_with_its_type(app: App, client
 
 @parametrize_clients
 async def test_odom_arrives_at_20_hz(app: App, client: Any) -> None:
-    """/odom messages arrive every 50 ms on average, with frames odom -> base_link."""
+    """/odom is published every 50 ms and reaches the client at that rate, odom -> base_link.
+
+    The server's rate is checked on the header stamps (its publish times), tightly; the receive
+    times only loosely, as a loaded machine delays the client process, not the server.
+    """
     result = await client(ws_url(app), "odom_rate", {"count": 41})
-    times = result["times"]
-    gaps = [b - a for a, b in itertools.pairwise(times)]
-    assert statistics.mean(gaps) == pytest.approx(50.0, abs=2.5)
+    stamp_gaps = [b - a for a, b in itertools.pairwise(result["stamps"])]
+    assert statistics.mean(stamp_gaps) == pytest.approx(50.0, abs=2.5)
+    receive_gaps = [b - a for a, b in itertools.pairwise(result["times"])]
+    assert statistics.mean(receive_gaps) == pytest.approx(50.0, abs=10.0)
     first = result["first"]
     assert first["header"]["frame_id"] == "odom"
     assert first["child_frame_id"] == "base_link"
@@ -211,6 +216,8 @@ async def test_raw_bad_frames_get_one_status_error_each(
 async def test_throttle_rate_limits_what_a_subscriber_receives(app: App, client: Any) -> None:
     """throttle_rate 200 ms on the 20 Hz /odom: one message per 200 ms (4 of 5 dropped)."""
     result = await client(ws_url(app), "throttle", {"throttle_rate": 200, "count": 6})
-    gaps = [b - a for a, b in itertools.pairwise(result["times"])]
+    # on the publish stamps: the client's own scheduling delays are not the server's throttle
+    gaps = [b - a for a, b in itertools.pairwise(result["stamps"])]
     assert min(gaps) >= 150  # never two inside the window (one tick of jitter allowed)
     assert statistics.mean(gaps) == pytest.approx(200, abs=30)
+    assert len(result["times"]) == len(result["stamps"])

@@ -1,5 +1,5 @@
 // Subscribe /odom and collect args.count (default 41) messages.
-// Returns receive times (performance.now() ms) plus the first and last message.
+// Returns receive times (performance.now() ms), header stamps (ms) and the first and last message.
 import { collect, makeTopic } from '../lib.mjs';
 
 export default async function odomRate(ROSLIB, ros, args) {
@@ -11,6 +11,7 @@ export default async function odomRate(ROSLIB, ros, args) {
   return {
     count: messages.length,
     times,
+    stamps: messages.map((m) => m.header.stamp.sec * 1e3 + m.header.stamp.nanosec / 1e6),
     first: messages[0],
     last: messages[messages.length - 1],
   };
