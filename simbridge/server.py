@@ -31,8 +31,9 @@ from websockets.http11 import Request, Response
 from websockets.typing import Origin
 
 from simbridge.config import ServerSettings
-from simbridge.graph import Graph, Peer
+from simbridge.graph import Graph
 from simbridge.graph.guard import TokenBucket, token_access
+from simbridge.graph.topics import SendEntries
 from simbridge.protocol import Frame, SendQueue, Session, status_frame
 from simbridge.web import HttpRequest, WebApp, parse_target
 
@@ -41,7 +42,9 @@ __all__ = ["BridgeServer", "Client"]
 
 logger = logging.getLogger(__name__)
 
-#: Socket write-buffer size above which frames are queued instead of written (bytes).
+#: Socket write-buffer size above which frames are queued instead of written (bytes): the
+#: transport's high-water mark, so websockets' ``paused`` flag says it (and stays set until the
+#: buffer drains below a quarter of it).
 WRITE_HIGH_WATER = 64 * 1024
 #: Incoming messages handled back to back before the handler lets other tasks run.
 BATCH = 16
@@ -100,8 +103,7 @@ class Client:
         """Write a frame now if the socket keeps up, else queue it (drop-oldest)."""
         if self.closed:
             return
-        transport = self.ws.transport
-        if not self.queue and transport.get_write_buffer_size() <= WRITE_HIGH_WATER:
+        if not (self.queue.pending or self.ws.paused):
             broadcast((self.ws,), frame.data, text=frame.text)
             self.frames_sent += 1
             return
@@ -156,7 +158,7 @@ class BridgeServer:
         self._watcher: asyncio.Task[None] | None = None
         graph.topics.send_many = self._send_many
 
-    def _send_many(self, frame: Frame, entries: list[tuple[Peer, Hashable, int]]) -> None:
+    def _send_many(self, frame: Frame, entries: SendEntries) -> None:
         """Write ``frame`` to many subscribers: one ``broadcast`` for all that keep up.
 
         The same rule as :meth:`Client.send`, applied to a whole group at once; a client with
@@ -164,12 +166,7 @@ class BridgeServer:
         """
         direct = []
         for peer, key, limit in entries:
-            if (
-                type(peer) is Client
-                and not peer.closed
-                and not peer.queue
-                and peer.ws.transport.get_write_buffer_size() <= WRITE_HIGH_WATER
-            ):
+            if type(peer) is Client and not (peer.closed or peer.queue.pending or peer.ws.paused):
                 direct.append(peer.ws)
                 peer.frames_sent += 1
             else:
@@ -199,6 +196,7 @@ class BridgeServer:
             ping_interval=s.ping_interval,
             ping_timeout=s.ping_timeout,
             compression=None,  # per-client deflate would defeat encode-once
+            write_limit=WRITE_HIGH_WATER,
             server_header="simbridge",
             origins=origins,
             ssl=tls_context(s.certfile, s.keyfile) if s.certfile else None,

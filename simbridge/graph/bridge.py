@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import numpy.typing as npt
 
 from simbridge.config import Params
 from simbridge.errors import ProtocolError
@@ -176,8 +177,13 @@ class RobotBridge:
         self.graph.publish(self.tf_static, {"transforms": transforms}, now)
 
     def publish(self, now: float) -> None:
-        """Publish one step's messages: /odom and /tf always, /scan when one is due."""
+        """Publish one step's messages: /odom and /tf always, /scan when one is due.
+
+        A due scan is cast before anything is sent, so that a step's frames leave in one burst:
+        each client is woken once per step, not once for /odom and again for /scan.
+        """
         g = self.graph
+        scans = self.cast_scans() if self._scan_due() else None
         sec, nanosec = g.stamp()
         stamp = _stamp(sec, nanosec)
         transforms = []
@@ -215,8 +221,8 @@ class RobotBridge:
         if self.tf.subscriptions or self.tf.internal:
             g.publish(self.tf, {"transforms": transforms}, now)
         self.publish_contacts(now, stamp)
-        if self._scan_due():
-            self.publish_scans(now, stamp)
+        if scans is not None:
+            self.publish_scans(now, stamp, scans)
 
     def _scan_due(self) -> bool:
         """Return whether this step carries a scan (lidar.rate out of sim.rate steps)."""
@@ -258,18 +264,24 @@ class RobotBridge:
                 self.graph.publish(topic, msg, now)
         self._touching = set(touching)
 
-    def publish_scans(self, now: float, stamp: dict[str, int]) -> None:
-        """Raycast and publish every robot's /scan (skipped for robots nobody listens to).
-
-        The scans of every listened-to robot are cast in one batch.
-        """
-        lidar = self.world.params.lidar
-        increment = 2.0 * math.pi / lidar.rays
+    def cast_scans(self) -> list[tuple[_RobotTopics, npt.NDArray[np.float32]]]:
+        """Raycast the scans of every robot somebody listens to, in one batch."""
         wanted = [rt for rt in self.robots.values() if rt.scan.subscriptions or rt.scan.internal]
         if not wanted:
-            return
+            return []
         all_ranges = self.world.scans([rt.robot.name for rt in wanted])
-        for rt, ranges in zip(wanted, all_ranges, strict=True):
+        return list(zip(wanted, all_ranges, strict=True))
+
+    def publish_scans(
+        self,
+        now: float,
+        stamp: dict[str, int],
+        scans: list[tuple[_RobotTopics, npt.NDArray[np.float32]]],
+    ) -> None:
+        """Publish cast scans (see :meth:`cast_scans`) as each robot's /scan."""
+        lidar = self.world.params.lidar
+        increment = 2.0 * math.pi / lidar.rays
+        for rt, ranges in scans:
             scan = {
                 "header": {"stamp": stamp, "frame_id": rt.robot.frame("laser")},
                 "angle_min": 0.0,

@@ -14,7 +14,7 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
-from typing import Any, Protocol
+from typing import Any, Protocol, cast
 
 from simbridge.errors import ProtocolError, TypeNotFoundError
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
@@ -74,10 +74,30 @@ class Topic:
     latch: bool = False
     #: The last message, when latched.
     latched: Outgoing | None = None
+    #: How a message reaches the client subscribers (rebuilt when subscriptions change).
+    plan: _Plan | None = None
 
     def unused(self) -> bool:
         """Return whether nothing refers to the topic any more."""
         return not (self.publishers or self.subscriptions or self.internal)
+
+
+#: Subscribers that get one shared frame: ``(peer, subscription, queue bound)``.
+SendEntries = list[tuple[Peer, Hashable, int]]
+
+
+@dataclass(eq=False, slots=True)
+class _Plan:
+    """The subscribers of a topic sorted for delivery, valid for one ``version``.
+
+    Most subscribers take the frame as it is: they are grouped by (compression, topic
+    spelling), each group written with one ``send_many``. Throttled and fragmented ones are
+    served one by one.
+    """
+
+    version: tuple[int, int]
+    groups: list[tuple[str, str, SendEntries]]
+    one_by_one: list[tuple[Peer, Subscription]]
 
 
 class TopicTable:
@@ -96,9 +116,11 @@ class TopicTable:
         self.topics: dict[str, Topic] = {}
         #: Sends one frame to many subscribers at once, ``(frame, [(peer, key, limit)])`` (set by
         #: the server: one ``websockets.broadcast`` per frame instead of one call per client).
-        self.send_many: Callable[[Frame, list[tuple[Peer, Hashable, int]]], None] | None = None
+        self.send_many: Callable[[Frame, SendEntries], None] | None = None
         #: Makes the CDR-bytes function of a message for ``cbor-raw`` (set by extensions).
         self.cdr_factory: Callable[[str, Any], Callable[[], bytes]] | None = None
+        #: Bumped by every subscription change: the delivery plans of topics are rebuilt.
+        self.generation = 0
 
     # -- declaration ----------------------------------------------------------------------------
 
@@ -172,6 +194,7 @@ class TopicTable:
             topic.subscriptions[key] = sub
             peer.session.subscriptions[op.topic] = sub
         sub.add(op)
+        self.generation += 1
         return topic, sub
 
     def unsubscribe(self, peer: Peer, written: str, op_id: OpId | None) -> None:
@@ -179,6 +202,7 @@ class TopicTable:
         sub = peer.session.subscriptions.get(written)
         if sub is None:
             return
+        self.generation += 1
         if sub.remove(op_id):
             del peer.session.subscriptions[written]
             topic = self.topics.get(sub.resolved)
@@ -271,37 +295,44 @@ class TopicTable:
         out: Outgoing,
         now: float,
         default_limit: int,
-        send_many: Callable[[Frame, list[tuple[Peer, Hashable, int]]], None],
+        send_many: Callable[[Frame, SendEntries], None],
     ) -> None:
-        """Deliver ``out`` grouping the subscribers that get the very same frame.
+        """Deliver ``out`` along the topic's plan: one ``send_many`` per shared frame.
 
         Frames are cached per (compression, topic spelling), so most subscribers share one;
-        fragmented subscriptions and encoding errors take the one-by-one path.
+        throttled and fragmented subscriptions and encoding errors take the one-by-one path.
         """
-        groups: dict[tuple[str, str], tuple[Frame, list[tuple[Peer, Hashable, int]]]] = {}
-        last: tuple[str, str] | None = None
-        entries: list[tuple[Peer, Hashable, int]] = []
-        for (peer, _written), sub in topic.subscriptions.items():
+        plan = topic.plan
+        if plan is None or plan.version != (self.generation, Session.epoch):
+            plan = topic.plan = self._plan(topic, default_limit)
+        for peer, sub in plan.one_by_one:
             if sub.throttle_rate and not sub.admit(now):
                 continue
-            if sub.fragment_size is not None or peer.session.fragment_size is not None:
-                self.send_to(peer, sub, out, default_limit)
+            self.send_to(peer, sub, out, default_limit)
+        for compression, spelling, entries in plan.groups:
+            try:
+                frame = out.frame(compression, spelling)
+            except ProtocolError:
+                for peer, key, _limit in entries:
+                    self.send_to(peer, cast(Subscription, key), out, default_limit)
                 continue
-            key = (sub.compression, sub.topic)
-            if key != last:
-                group = groups.get(key)
-                if group is None:
-                    try:
-                        frame = out.frame(sub.compression, sub.topic)
-                    except ProtocolError:
-                        self.send_to(peer, sub, out, default_limit)  # reports the error once
-                        continue
-                    group = groups[key] = (frame, [])
-                entries = group[1]
-                last = key
+            send_many(frame, entries)
+
+    def _plan(self, topic: Topic, default_limit: int) -> _Plan:
+        groups: dict[tuple[str, str], SendEntries] = {}
+        one_by_one: list[tuple[Peer, Subscription]] = []
+        for (peer, _written), sub in topic.subscriptions.items():
+            fragmented = sub.fragment_size is not None or peer.session.fragment_size is not None
+            if sub.throttle_rate or fragmented:
+                one_by_one.append((peer, sub))
+                continue
+            entries = groups.setdefault((sub.compression, sub.topic), [])
             entries.append((peer, sub, sub.queue_length or default_limit))
-        for frame, group_entries in groups.values():
-            send_many(frame, group_entries)
+        return _Plan(
+            (self.generation, Session.epoch),
+            [(c, t, entries) for (c, t), entries in groups.items()],
+            one_by_one,
+        )
 
     def send_to(self, peer: Peer, sub: Subscription, out: Outgoing, default_limit: int) -> None:
         """Encode ``out`` as ``sub`` wants it (cached) and queue it for ``peer``."""

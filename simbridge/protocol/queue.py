@@ -44,10 +44,11 @@ class SendQueue:
         self.dropped = 0
         self._fifo: deque[_Entry] = deque()
         self._by_key: dict[Hashable, deque[_Entry]] = {}
-        self._live = 0
+        #: Frames waiting (``len(queue)``; a plain attribute for the send path's checks).
+        self.pending = 0
 
     def __len__(self) -> int:
-        return self._live
+        return self.pending
 
     def push(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> int:
         """Append a frame; return how many older frames were dropped to make room.
@@ -60,7 +61,7 @@ class SendQueue:
         """
         entry = _Entry(frame, key)
         self._fifo.append(entry)
-        self._live += 1
+        self.pending += 1
         self.bytes += entry.size
         dropped = 0
         if key is not None:
@@ -73,7 +74,7 @@ class SendQueue:
                 dropped += 1
         if self.bytes > self.max_bytes:
             dropped += self._shed()
-        if len(self._fifo) > 2 * self._live + 64:
+        if len(self._fifo) > 2 * self.pending + 64:
             self._fifo = deque(e for e in self._fifo if e.frame is not None)
         self.dropped += dropped
         return dropped
@@ -87,7 +88,7 @@ class SendQueue:
             if frame is None:
                 continue
             entry.frame = None
-            self._live -= 1
+            self.pending -= 1
             self.bytes -= entry.size
             if entry.key is not None:
                 same = self._by_key[entry.key]
@@ -101,19 +102,19 @@ class SendQueue:
         """Drop everything pending (the client is gone)."""
         self._fifo.clear()
         self._by_key.clear()
-        self._live = 0
+        self.pending = 0
         self.bytes = 0
 
     def _kill(self, entry: _Entry) -> None:
         entry.frame = None
-        self._live -= 1
+        self.pending -= 1
         self.bytes -= entry.size
 
     def _shed(self) -> int:
         """Drop the oldest keyed frames until within the byte budget (keep the newest one)."""
         dropped = 0
         for entry in self._fifo:
-            if self.bytes <= self.max_bytes or self._live <= 1:
+            if self.bytes <= self.max_bytes or self.pending <= 1:
                 break
             if entry.frame is None or entry.key is None:
                 continue

@@ -130,14 +130,28 @@ class Session:
         self.services: dict[str, str] = {}
         #: Actions this client serves: absolute name -> type.
         self.actions: dict[str, str] = {}
-        #: Client-wide outgoing fragment size (any op carrying ``fragment_size`` sets it).
-        self.fragment_size: int | None = None
+        self._fragment_size: int | None = None
         #: Lowest ``status`` level sent to this client (``set_level``).
         self.status_level = "error"
         #: Reassembly of incoming ``fragment`` ops.
         self.defrag = Defragmenter(max_bytes=max_message_size, timeout=fragment_timeout)
         #: Free-form per-client data of extensions (auth state, rate limits...).
         self.extra: dict[str, Any] = {}
+
+    #: Bumped whenever any session's :attr:`fragment_size` changes (delivery plans of topics
+    #: depend on it; see :class:`~simbridge.graph.topics.TopicTable`).
+    epoch = 0
+
+    @property
+    def fragment_size(self) -> int | None:
+        """Client-wide outgoing fragment size (any op carrying ``fragment_size`` sets it)."""
+        return self._fragment_size
+
+    @fragment_size.setter
+    def fragment_size(self, size: int | None) -> None:
+        if size != self._fragment_size:
+            self._fragment_size = size
+            Session.epoch += 1
 
     def parse(self, data: str | bytes, now: float) -> list[Op | ProtocolError]:
         """Decode one incoming frame into ops; errors come back in place, never raised.

@@ -8,9 +8,11 @@ the wall with the rest of its move (only the component into the wall is removed)
 robot it stops at the contact. Heading is never blocked: a disc turns freely.
 
 Work is proportional to what can touch: walls are culled by bounding boxes of the swept paths,
-robot pairs by a window on x, and only the few robots near something are resolved exactly
-(walls vectorised over those robots, robot pairs in a short Python loop in index order, each
-robot checked against the others' current positions so two robots never claim the same spot).
+robot pairs by a window on x, and only the few robots near something are resolved exactly.
+Against walls, the time of first touch is solved in closed form (the points within ``r`` of a
+segment are a band and two end discs), vectorised over every robot-wall pair. Robot pairs are
+resolved in a short Python loop in index order, each robot checked against the others' current
+positions so two robots never claim the same spot.
 """
 
 from __future__ import annotations
@@ -54,37 +56,9 @@ def _closest_on_segments(
     """Return the closest point of each segment ``seg[k]`` to point ``(px[k], py[k])``."""
     ex, ey = seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]
     length2 = ex * ex + ey * ey
-    s = np.clip(
-        ((px - seg[:, 0]) * ex + (py - seg[:, 1]) * ey) / np.where(length2 > 0, length2, 1.0),
-        0.0,
-        1.0,
-    )
+    s = ((px - seg[:, 0]) * ex + (py - seg[:, 1]) * ey) / np.where(length2 > 0, length2, 1.0)
+    s = np.minimum(np.maximum(s, 0.0), 1.0)  # np.clip's Python wrapper costs more here
     return seg[:, 0] + s * ex, seg[:, 1] + s * ey
-
-
-def _path_wall_distance(
-    ax: FloatArray, ay: FloatArray, bx: FloatArray, by: FloatArray, seg: FloatArray
-) -> FloatArray:
-    """Return the distance between path ``a -> b`` and wall ``seg``, pairwise."""
-    # Two segments that cross are at distance 0; otherwise the distance is reached at one of
-    # the four endpoints.
-    qx, qy = _closest_on_segments(ax, ay, seg)
-    d = np.hypot(ax - qx, ay - qy)
-    qx, qy = _closest_on_segments(bx, by, seg)
-    d = np.minimum(d, np.hypot(bx - qx, by - qy))
-    path = np.stack([ax, ay, bx, by], axis=1)
-    for ex, ey in ((seg[:, 0], seg[:, 1]), (seg[:, 2], seg[:, 3])):
-        qx, qy = _closest_on_segments(ex, ey, path)
-        d = np.minimum(d, np.hypot(ex - qx, ey - qy))
-    rx, ry = bx - ax, by - ay
-    wx, wy = seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]
-    c1 = rx * (seg[:, 1] - ay) - ry * (seg[:, 0] - ax)
-    c2 = rx * (seg[:, 3] - ay) - ry * (seg[:, 2] - ax)
-    c3 = wx * (ay - seg[:, 1]) - wy * (ax - seg[:, 0])
-    c4 = wx * (by - seg[:, 1]) - wy * (bx - seg[:, 0])
-    crossing = (c1 * c2 < 0) & (c3 * c4 < 0)
-    out: FloatArray = np.where(crossing, 0.0, d)
-    return out
 
 
 def _wall_pairs(
@@ -110,6 +84,42 @@ def _wall_pairs(
     return robot.astype(np.intp), wall.astype(np.intp)
 
 
+def _first_touch_walls(a: FloatArray, d: FloatArray, seg: FloatArray, reach: float) -> FloatArray:
+    """Return per pair the fraction of its path at which it first comes ``reach`` from its wall.
+
+    The path is ``a[k] -> a[k] + d[k]``, the wall ``seg[k]``. 1.0 when it never comes that
+    close; 0.0 when it starts that close and moves closer.
+
+    The points within ``reach`` of a segment are a band along it plus a disc at each end; the
+    first touch is the earliest entry into one of them (the band through its long sides).
+    """
+    ax, ay, dx, dy = a[:, 0], a[:, 1], d[:, 0], d[:, 1]
+    best = np.ones(a.shape[0])
+    motion2 = dx * dx + dy * dy
+    moving = motion2 > 0.0
+    safe2 = np.where(moving, motion2, 1.0)
+    for cx, cy in ((seg[:, 0], seg[:, 1]), (seg[:, 2], seg[:, 3])):
+        rx, ry = ax - cx, ay - cy
+        c = rx * rx + ry * ry - reach * reach
+        b = rx * dx + ry * dy
+        disc = b * b - motion2 * c
+        ok = moving & (b < 0.0) & (disc > 0.0)  # closing in (touching already: t < 0 -> 0)
+        t = (-b - np.sqrt(np.where(ok, disc, 0.0))) / safe2
+        best = np.where(ok, np.minimum(best, np.maximum(t, 0.0)), best)
+    ex, ey = seg[:, 2] - seg[:, 0], seg[:, 3] - seg[:, 1]
+    length = np.hypot(ex, ey)
+    has_length = length > 0.0
+    ux, uy = ex / np.where(has_length, length, 1.0), ey / np.where(has_length, length, 1.0)
+    h0 = -uy * (ax - seg[:, 0]) + ux * (ay - seg[:, 1])  # signed distance to the line
+    hd = -uy * dx + ux * dy
+    toward = np.where(h0 >= 0.0, -hd, hd)  # speed towards the line
+    ok = has_length & (toward > 0.0)
+    t = np.maximum((np.abs(h0) - reach) / np.where(ok, toward, 1.0), 0.0)  # touching: 0
+    along = ux * (ax + t * dx - seg[:, 0]) + uy * (ay + t * dy - seg[:, 1])
+    ok &= (t <= 1.0) & (along >= 0.0) & (along <= length)
+    return np.where(ok, np.minimum(best, t), best)
+
+
 def _walls(
     p0: FloatArray, p1: FloatArray, radius: float, segments: FloatArray, contacts: list[Contact]
 ) -> FloatArray:
@@ -121,16 +131,9 @@ def _walls(
     if robot.shape[0] == 0:
         return out
     seg = segments[wall]
-    a, b = p0[robot], p1[robot]
+    a = p0[robot]
+    d = p1[robot] - a
     limit = radius - TOLERANCE
-    hit = _path_wall_distance(a[:, 0], a[:, 1], b[:, 0], b[:, 1], seg) < limit
-    if not hit.any():
-        return out
-    # Keep the pairs of robots with at least one hit: only those need resolving.
-    involved = np.unique(robot[hit])
-    keep = np.isin(robot, involved)
-    robot, seg, a, b = robot[keep], seg[keep], a[keep], b[keep]
-    d = b - a
     # A wall the robot already overlaps (a larger radius set at run time) blocks only motion
     # that goes further into it, so the robot can always back out.
     qx, qy = _closest_on_segments(a[:, 0], a[:, 1], seg)
@@ -138,32 +141,17 @@ def _walls(
     inside = np.hypot(nx, ny) < limit
     away = (d[:, 0] * nx + d[:, 1] * ny) >= 0.0
     skip = inside & away
-    blocked_at_start = inside & ~away
-
-    def blocked(frac: FloatArray) -> npt.NDArray[np.bool_]:
-        """Per pair: does the path prefix ``a -> a + frac d`` hit the wall?"""
-        e = a + frac[:, None] * d
-        hit = _path_wall_distance(a[:, 0], a[:, 1], e[:, 0], e[:, 1], seg) < limit
-        return (hit & ~skip) | blocked_at_start
-
-    # Largest safe fraction per robot: bisection, vectorised over the involved robots.
-    index = np.searchsorted(involved, robot)
-    lo = np.zeros(involved.shape[0])
-    hi = np.ones(involved.shape[0])
-    full = np.zeros(involved.shape[0], dtype=bool)
-    np.logical_or.at(full, index, blocked(np.ones(robot.shape[0])))
-    hi = np.where(full, 1.0, hi)
-    lo = np.where(full, 0.0, 1.0)
-    for _ in range(_BISECTIONS):
-        mid = (lo + hi) / 2.0
-        bad = np.zeros(involved.shape[0], dtype=bool)
-        np.logical_or.at(bad, index, blocked(mid[index]))
-        lo = np.where(full & ~bad, mid, lo)
-        hi = np.where(full & bad, mid, hi)
-    stopped = involved[full]
-    frac = lo[full]
+    # The fraction of its move at which each path first touches its wall (exact, not
+    # bisected); a robot stops at the smallest of its pairs.
+    t = _first_touch_walls(a, d, seg, radius)
+    t = np.where(inside, np.where(away, 1.0, 0.0), t)
+    if not (t < 1.0).any():
+        return out
+    lo = np.ones(p0.shape[0])
+    np.minimum.at(lo, robot, t)
+    stopped = np.nonzero(lo < 1.0)[0]
+    frac = lo[stopped]
     mid_pos = p0[stopped] + frac[:, None] * (p1[stopped] - p0[stopped])
-    out[involved[~full]] = p1[involved[~full]]
     for n, i in enumerate(stopped.tolist()):
         pairs = np.nonzero(robot == i)[0]
         here = mid_pos[n]
@@ -180,20 +168,13 @@ def _walls(
         rest = (1.0 - frac[n]) * (p1[i] - p0[i])
         into = float(rest @ normal)
         slide = rest - min(into, 0.0) * normal
-        end = here + slide
-        segs = seg[pairs]
+        # slide with the rest of the move unless that path comes within the footprint of a
+        # wall it does not already overlap and leave
         starts = np.tile(here, (pairs.shape[0], 1))
-        ends = np.tile(end, (pairs.shape[0], 1))
-        clear = not bool(
-            (
-                (
-                    _path_wall_distance(starts[:, 0], starts[:, 1], ends[:, 0], ends[:, 1], segs)
-                    < limit
-                )
-                & ~skip[pairs]
-            ).any()
-        )
-        out[i] = end if clear else here
+        moves = np.tile(slide, (pairs.shape[0], 1))
+        touch = _first_touch_walls(starts, moves, seg[pairs], limit)
+        clear = not bool(((touch < 1.0) & ~skip[pairs]).any())
+        out[i] = here + slide if clear else here
         contacts.append(
             Contact(i, -1, (float(qx[w]), float(qy[w])), (float(normal[0]), float(normal[1])))
         )

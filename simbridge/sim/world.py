@@ -112,6 +112,9 @@ class World:
         self.rng = np.random.default_rng(seed)
         self._angles_key: tuple[int, float] | None = None
         self._angles: FloatArray = np.zeros(0)
+        #: The last batch of noiseless ranges and what it depends on (see :meth:`scans`).
+        self._scan_key: tuple[object, ...] | None = None
+        self._scan_ranges: FloatArray = np.zeros((0, 0))
         for robot in self.robots.values():
             robot.place(robot.start)
 
@@ -184,9 +187,12 @@ class World:
                 p0[i] = (robot.state.x, robot.state.y)  # a reset is a jump, not a move to cut
                 self.failures += 1
         self.contacts = []
-        if robots and (len(robots) > 1 or self.segments.shape[0]):
+        p1 = [(r.state.x, r.state.y) for r in robots]
+        # robots start each step clear of each other and the walls: if none moves, none can
+        # touch anything (idle robots, the common case in a class, cost no collision work)
+        if p1 != p0 and (len(robots) > 1 or self.segments.shape[0]):
             start = np.array(p0, dtype=np.float64).reshape(-1, 2)
-            proposed = np.array([(r.state.x, r.state.y) for r in robots], dtype=np.float64)
+            proposed = np.array(p1, dtype=np.float64)
             final, contacts = resolve_moves(start, proposed, limits.radius, self.segments)
             for c in contacts:
                 robot = robots[c.robot]
@@ -231,23 +237,32 @@ class World:
         (:func:`~simbridge.sim.lidar.raycast_batch`).
         """
         lidar = self.params.lidar
-        everyone = list(self.robots)
-        index = {n: i for i, n in enumerate(everyone)}
-        poses = np.array([self.laser_pose(n) for n in names], dtype=np.float64).reshape(-1, 3)
-        centres = np.array(
-            [(r.state.x, r.state.y) for r in self.robots.values()], dtype=np.float64
-        ).reshape(-1, 2)
-        owners = np.array([index[n] for n in names], dtype=np.intp)
-        ranges = raycast_batch(
-            poses[:, :2],
-            poses[:, 2],
-            lidar.rays,
-            self.segments,
-            lidar.range_max,
-            circles=centres,
-            circle_radius=self.params.robot.radius,
-            owners=owners,
-        )
+        radius = self.params.robot.radius
+        centres_list = [(r.state.x, r.state.y) for r in self.robots.values()]
+        poses_list = [self.laser_pose(n) for n in names]
+        # The walls never change, so while no robot moved (nor a LiDAR setting) the noiseless
+        # ranges are the last ones: a parked robot's scan costs no raycast.
+        key: tuple[object, ...] = (tuple(names), tuple(centres_list), tuple(poses_list))
+        key += (radius, lidar.rays, lidar.range_max)
+        if key != self._scan_key:
+            everyone = list(self.robots)
+            index = {n: i for i, n in enumerate(everyone)}
+            poses = np.array(poses_list, dtype=np.float64).reshape(-1, 3)
+            centres = np.array(centres_list, dtype=np.float64).reshape(-1, 2)
+            owners = np.array([index[n] for n in names], dtype=np.intp)
+            raw = raycast_batch(
+                poses[:, :2],
+                poses[:, 2],
+                lidar.rays,
+                self.segments,
+                lidar.range_max,
+                circles=centres,
+                circle_radius=radius,
+                owners=owners,
+            )
+            raw.flags.writeable = False
+            self._scan_key, self._scan_ranges = key, raw
+        ranges = self._scan_ranges
         if lidar.noise_stddev > 0:
             ranges = ranges + self.rng.normal(0.0, lidar.noise_stddev, ranges.shape)
         return np.clip(ranges, lidar.range_min, lidar.range_max).astype(np.float32)

@@ -3,7 +3,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from simbridge.sim.collision import pose_clear, resolve_moves
+from simbridge.sim.collision import _first_touch_walls, pose_clear, resolve_moves
 from simbridge.sim.lidar import _point_segment_distance
 
 
@@ -89,3 +89,32 @@ def test_pose_clear_says_what_the_footprint_overlaps() -> None:
     assert "wall [1, -5, 1, 5]" in (pose_clear(0.95, 0.0, R, WALL_X1, np.zeros((0, 2))) or "")
     why = pose_clear(0.0, 0.0, R, WALL_X1, np.array([[0.1, 0.0]]))
     assert why is not None and "another robot" in why
+
+
+def test_first_touch_with_a_wall_is_exact() -> None:
+    """The closed-form time of first touch agrees with a dense walk along each path.
+
+    Random paths and segments (some of them points): up to the touch the path stays at least
+    ``R`` from the wall, and just after it comes closer (unless it never touches).
+    """
+    rng = np.random.default_rng(3)
+    a = rng.uniform(-1, 1, (2000, 2))
+    d = rng.uniform(-1, 1, (2000, 2))
+    seg = rng.uniform(-1, 1, (2000, 4))
+    seg[:50, 2:] = seg[:50, :2]  # degenerate segments: points
+    clear = np.array([_distance(a[k], seg[k]) > R for k in range(len(a))])
+    a, d, seg = a[clear], d[clear], seg[clear]  # paths that start clear of their wall
+    t = _first_touch_walls(a, d, seg, R)
+    assert ((t >= 0.0) & (t <= 1.0)).all()
+    samples = np.linspace(0.0, 1.0, 2001)
+    for k in range(a.shape[0]):
+        path = a[k] + samples[:, None] * d[k]
+        dist = _point_segment_distance(path[:, 0], path[:, 1], seg[k : k + 1])[:, 0]
+        assert dist[samples <= t[k]].min() >= R - 1e-9
+        if t[k] < 1.0:
+            assert _distance(a[k] + min(t[k] + 1e-3, 1.0) * d[k], seg[k]) < R
+    assert (t < 1.0).sum() > 100  # plenty of the paths touch
+
+
+def _distance(p: np.ndarray, seg: np.ndarray) -> float:
+    return float(_point_segment_distance(p[:1], p[1:], seg[None, :])[0, 0])
