@@ -8,7 +8,9 @@ each: server CPU (its own user + system seconds per second), publish-to-receive 
 any client received must reach every client, and the server must drop nothing
 (``dropped_frames`` of /healthz).
 
-``python -m bench.fanout [SECONDS [N ...]]`` (default 20 s, N = 100 and 500).
+``python -m bench.fanout [SECONDS [N ...]]`` (default 20 s, N = 100 and 500). A full run
+also reports, without a target, the 100-client ratio while one client drives the robot (the
+default rows keep it parked, as the floor has no robot to move).
 
 Targets (issue 6): 100 clients: p99 <= 20 ms, nothing lost, CPU <= 1.3x the broadcaster's;
 500 clients: nothing lost.
@@ -37,10 +39,19 @@ from bench.procs import (
 TOPICS = ["/odom", "/scan"]
 
 
-def phase(kind: str, n: int, seconds: float, processes: int = 2) -> dict[str, Any]:
-    """Run ``n`` clients against one server kind for ``seconds``; return the figures."""
+def phase(
+    kind: str, n: int, seconds: float, processes: int = 2, *, drive: bool = False
+) -> dict[str, Any]:
+    """Run ``n`` clients against one server kind for ``seconds``; return the figures.
+
+    With ``drive``, the first client also publishes /cmd_vel at 10 Hz (the broadcaster reads
+    and ignores it), so that simbridge moves its robot, casts a new scan each time and resolves
+    contacts with the walls the robot slides along.
+    """
     with server(kind) as (proc, port):
-        clients = [{"subscribe": TOPICS} for _ in range(n)]
+        clients: list[dict[str, Any]] = [{"subscribe": TOPICS} for _ in range(n)]
+        if drive:
+            clients[0]["drive"] = "/cmd_vel"
         start = time.time() + 3.0 + n / 60.0
         end = start + seconds
         procs = start_loadgens(f"ws://127.0.0.1:{port}", clients, processes, start, end)
@@ -58,7 +69,7 @@ def phase(kind: str, n: int, seconds: float, processes: int = 2) -> dict[str, An
     latencies = [x for r in results for x in r.get("latencies", [])]
     expected, missing, errors = losses(results, TOPICS)
     return {
-        "kind": kind,
+        "kind": kind + ("+drive" if drive else ""),
         "n": n,
         "cpu": (cpu1 - cpu0) / seconds,
         "p50": percentile(latencies, 0.5) * 1e3,
@@ -103,12 +114,24 @@ def main(argv: list[str] | None = None) -> int:
                 print(row(r), flush=True)
     if (("simbridge", 100) not in runs) or (("simbridge", 500) not in runs):
         return 0  # a partial run (other client counts): figures only
+    # For the record, not a target: the same 100 clients while one of them drives the robot.
+    driven = {}
+    for _ in range(2):
+        for kind in ("simbridge", "broadcaster"):
+            r = phase(kind, 100, seconds, drive=True)
+            driven.setdefault(kind, []).append(r["cpu"])
+            print(row(r), flush=True)
     s_cpu = statistics.median(r["cpu"] for r in runs[("simbridge", 100)])
     b_cpu = statistics.median(r["cpu"] for r in runs[("broadcaster", 100)])
     ratio = s_cpu / b_cpu
     print(
         f"100 clients, median CPU: simbridge {s_cpu * 100:.1f} %, broadcaster "
         f"{b_cpu * 100:.1f} %: {ratio:.2f}x"
+    )
+    d_ratio = statistics.median(driven["simbridge"]) / statistics.median(driven["broadcaster"])
+    print(
+        f"100 clients, robot driven (no target; the floor has no robot): median CPU "
+        f"{d_ratio:.2f}x the broadcaster's"
     )
     s100 = {
         "p99": statistics.median(r["p99"] for r in runs[("simbridge", 100)]),

@@ -179,11 +179,10 @@ class RobotBridge:
     def publish(self, now: float) -> None:
         """Publish one step's messages: /odom and /tf always, /scan when one is due.
 
-        A due scan is cast before anything is sent, so that a step's frames leave in one burst:
-        each client is woken once per step, not once for /odom and again for /scan.
+        /odom and /tf go first, so that their timing does not depend on how many scans are
+        cast in the step.
         """
         g = self.graph
-        scans = self.cast_scans() if self._scan_due() else None
         sec, nanosec = g.stamp()
         stamp = _stamp(sec, nanosec)
         transforms = []
@@ -221,8 +220,8 @@ class RobotBridge:
         if self.tf.subscriptions or self.tf.internal:
             g.publish(self.tf, {"transforms": transforms}, now)
         self.publish_contacts(now, stamp)
-        if scans is not None:
-            self.publish_scans(now, stamp, scans)
+        if self._scan_due():
+            self.publish_scans(now, stamp, self.cast_scans())
 
     def _scan_due(self) -> bool:
         """Return whether this step carries a scan (lidar.rate out of sim.rate steps)."""
