@@ -63,7 +63,13 @@ await new Promise((resolve, reject) => {
   ros.on('error', (e) => reject(new Error(`cannot connect to ${opt.url}: ${e?.message ?? e}`)));
 });
 const odom = new ROSLIB.Topic({ ros, name: '/odom', messageType: 'nav_msgs/msg/Odometry' });
-const cmdVel = new ROSLIB.Topic({ ros, name: '/cmd_vel', messageType: 'geometry_msgs/msg/Twist' });
+// Newer ROS 2 stacks (diff_drive_controller since Jazzy, simbridge with robot.cmd_vel_stamped)
+// want geometry_msgs/msg/TwistStamped on /cmd_vel: ask rosapi which type it has.
+const TWIST = 'geometry_msgs/msg/Twist';
+const cmdVelType = await new Promise((resolve) => {
+  ros.getTopicType('/cmd_vel', (type) => resolve(type || TWIST), () => resolve(TWIST));
+});
+const cmdVel = new ROSLIB.Topic({ ros, name: '/cmd_vel', messageType: cmdVelType });
 cmdVel.advertise();
 
 let pose = null;
@@ -73,7 +79,13 @@ odom.subscribe((msg) => {
   const yaw = Math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y * q.y + q.z * q.z));
   pose = [p.position.x, p.position.y, yaw];
 });
-const twist = (v, w) => ({ linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w } });
+const twist = (v, w) => {
+  const t = { linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w } };
+  if (!cmdVelType.endsWith('TwistStamped')) return t;
+  const ms = Date.now();
+  const stamp = { sec: Math.floor(ms / 1000), nanosec: (ms % 1000) * 1e6 };
+  return { header: { stamp, frame_id: 'base_link' }, twist: t };
+};
 
 const start = performance.now();
 while (pose === null) {

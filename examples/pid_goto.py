@@ -6,7 +6,8 @@ Works unchanged against simbridge and against rosbridge on the real robot:
     pip install roslibpy
     python examples/pid_goto.py --url ws://127.0.0.1:9090 --goal 1.0 0.5 --heading 1.57
 
-Reads /odom (nav_msgs/msg/Odometry), publishes /cmd_vel (geometry_msgs/msg/Twist) every 100 ms:
+Reads /odom (nav_msgs/msg/Odometry), publishes /cmd_vel every 100 ms
+(geometry_msgs/msg/Twist, or TwistStamped when the robot's /cmd_vel has that type):
 
 * heading loop: angular.z = PID(wrap(bearing to goal - yaw)); once within ``--tolerance`` of
   the goal, the error is wrap(``--heading`` - yaw) instead (when a heading is given);
@@ -25,6 +26,7 @@ import math
 import sys
 import threading
 import time
+from collections.abc import Callable
 from urllib.parse import urlparse
 
 import roslibpy
@@ -54,6 +56,28 @@ class PID:
         return max(-self.limit, min(self.limit, out))
 
 
+def velocity_publisher(ros: roslibpy.Ros, name: str = "/cmd_vel") -> Callable[[float, float], None]:
+    """Return ``publish(linear, angular)`` in the type the robot expects on ``name``.
+
+    Newer ROS 2 stacks (diff_drive_controller since Jazzy, simbridge with
+    ``robot.cmd_vel_stamped``) want geometry_msgs/msg/TwistStamped; rosapi says which.
+    """
+    kind = ros.get_topic_type(name) or "geometry_msgs/msg/Twist"
+    topic = roslibpy.Topic(ros, name, kind)
+    topic.advertise()
+
+    def publish(linear: float, angular: float) -> None:
+        twist = {"linear": {"x": linear, "y": 0.0, "z": 0.0},
+                 "angular": {"x": 0.0, "y": 0.0, "z": angular}}  # fmt: skip
+        if kind.endswith("TwistStamped"):
+            sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
+            header = {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": "base_link"}
+            twist = {"header": header, "twist": twist}
+        topic.publish(roslibpy.Message(twist))
+
+    return publish
+
+
 def main() -> int:
     """Run the example; return the exit code."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -70,8 +94,7 @@ def main() -> int:
     ros = roslibpy.Ros(host=url.hostname or "127.0.0.1", port=url.port or 9090)
     ros.run(timeout=10)
     odom = roslibpy.Topic(ros, "/odom", "nav_msgs/msg/Odometry")
-    cmd_vel = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/msg/Twist")
-    cmd_vel.advertise()
+    drive = velocity_publisher(ros)
 
     pose: list[float] = []
     lock = threading.Lock()
@@ -119,12 +142,11 @@ def main() -> int:
             heading_err = wrap(math.atan2(gy - y, gx - x) - yaw)
             linear = position_pid.update(dist, period) * max(0.0, math.cos(heading_err))
         angular = heading_pid.update(heading_err, period)
-        cmd_vel.publish({"linear": {"x": linear, "y": 0.0, "z": 0.0},
-                         "angular": {"x": 0.0, "y": 0.0, "z": angular}})  # fmt: skip
+        drive(linear, angular)
         tick += 1
         time.sleep(max(0.0, start + tick * period - time.monotonic()))  # absolute deadlines
 
-    cmd_vel.publish({"linear": {"x": 0.0}, "angular": {"z": 0.0}})
+    drive(0.0, 0.0)
     time.sleep(0.3)  # let the stop command leave before closing
     with lock:
         x, y, yaw = pose

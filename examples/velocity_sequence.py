@@ -23,6 +23,7 @@ import json
 import math
 import sys
 import time
+from collections.abc import Callable
 from urllib.parse import urlparse
 
 import roslibpy
@@ -35,6 +36,28 @@ SEQUENCE: list[tuple[float, float, float]] = [
     *[(3.0, 0.2, 0.0), (math.pi / 2 / 0.5, 0.0, 0.5)] * 4,
     (1.0, 0.0, 0.0),
 ]
+
+
+def velocity_publisher(ros: roslibpy.Ros, name: str = "/cmd_vel") -> Callable[[float, float], None]:
+    """Return ``publish(linear, angular)`` in the type the robot expects on ``name``.
+
+    Newer ROS 2 stacks (diff_drive_controller since Jazzy, simbridge with
+    ``robot.cmd_vel_stamped``) want geometry_msgs/msg/TwistStamped; rosapi says which.
+    """
+    kind = ros.get_topic_type(name) or "geometry_msgs/msg/Twist"
+    topic = roslibpy.Topic(ros, name, kind)
+    topic.advertise()
+
+    def publish(linear: float, angular: float) -> None:
+        twist = {"linear": {"x": linear, "y": 0.0, "z": 0.0},
+                 "angular": {"x": 0.0, "y": 0.0, "z": angular}}  # fmt: skip
+        if kind.endswith("TwistStamped"):
+            sec, nanosec = divmod(time.time_ns(), 1_000_000_000)
+            header = {"stamp": {"sec": sec, "nanosec": nanosec}, "frame_id": "base_link"}
+            twist = {"header": header, "twist": twist}
+        topic.publish(roslibpy.Message(twist))
+
+    return publish
 
 
 def main() -> int:
@@ -52,19 +75,17 @@ def main() -> int:
     url = urlparse(args.url)
     ros = roslibpy.Ros(host=url.hostname or "127.0.0.1", port=url.port or 9090)
     ros.run(timeout=10)
-    cmd_vel = roslibpy.Topic(ros, "/cmd_vel", "geometry_msgs/msg/Twist")
-    cmd_vel.advertise()
+    drive = velocity_publisher(ros)
 
     period = 1.0 / args.rate
     start = time.monotonic()
     tick = 0
     for seconds, linear, angular in sequence:
         for _ in range(round(seconds * args.rate)):
-            cmd_vel.publish({"linear": {"x": linear, "y": 0.0, "z": 0.0},
-                             "angular": {"x": 0.0, "y": 0.0, "z": angular}})  # fmt: skip
+            drive(linear, angular)
             tick += 1
             time.sleep(max(0.0, start + tick * period - time.monotonic()))
-    cmd_vel.publish({"linear": {"x": 0.0}, "angular": {"z": 0.0}})
+    drive(0.0, 0.0)
     time.sleep(0.3)  # let the stop command leave before closing
     ros.terminate()
     summary = {"segments": len(sequence), "messages": tick + 1, "seconds": time.monotonic() - start}

@@ -30,6 +30,7 @@ import numpy.typing as npt
 
 from simbridge.bag import read_messages
 from simbridge.errors import SimbridgeError
+from simbridge.graph.cmdvel import twist_of
 
 
 __all__ = ["CompareError", "Comparison", "Run", "compare", "compare_main", "load_run", "plot"]
@@ -82,7 +83,8 @@ def load_run(path: str | Path, odom: str = "/odom", cmd_vel: str = "/cmd_vel") -
     for topic, _type, stamp, msg in read_messages(path, {odom, cmd_vel}):
         first_ns = stamp if first_ns is None else first_ns
         if topic == cmd_vel:
-            moving = abs(msg["linear"]["x"]) > MOVING or abs(msg["angular"]["z"]) > MOVING
+            twist = twist_of(msg)  # Twist or TwistStamped
+            moving = abs(twist["linear"]["x"]) > MOVING or abs(twist["angular"]["z"]) > MOVING
             if start_ns is None and moving:
                 start_ns = stamp
         else:

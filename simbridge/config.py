@@ -97,6 +97,11 @@ class RobotParams(_Strict):
         le=1000,
         description="dynamic model: wheel velocity-loop gain, N m per m/s of wheel-speed error",
     )
+    cmd_vel_stamped: bool = Field(
+        False,
+        description="cmd_vel is geometry_msgs/msg/TwistStamped instead of Twist (as "
+        "diff_drive_controller's stamped velocity); startup only: set it in the params file",
+    )
 
 
 class LidarParams(_Strict):

@@ -30,6 +30,7 @@ from simbridge.bag import BagError, BagWriter, read_messages
 from simbridge.client import ClientError, RosbridgeClient
 from simbridge.errors import SimbridgeError
 from simbridge.graph import Graph
+from simbridge.graph.cmdvel import convert_twist
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.rostool import DEFAULT_URL
 
@@ -250,13 +251,18 @@ async def replay(url: str, bag: str, topic: str, rate: float, timeout: float) ->
     """Publish ``topic`` of ``bag`` to ``url`` with the recorded spacing; return the count."""
     commands = _commands(bag, topic)
     async with RosbridgeClient.connect(url, timeout) as ros:
+        try:  # a Twist bag into a TwistStamped robot (or back) is converted
+            target = await ros.topic_type(topic)
+        except ClientError:
+            target = ""
         loop = asyncio.get_running_loop()
         start = loop.time()
         first = commands[0][0]
         for stamp, type_name, msg in commands:
             due = start + (stamp - first) / 1e9 / rate
             await asyncio.sleep(max(0.0, due - loop.time()))
-            await ros.publish(topic, msg, type_name)
+            kind = target or type_name
+            await ros.publish(topic, convert_twist(msg, type_name, kind, _wall_stamp()), kind)
         await asyncio.sleep(0.2)  # let the last one leave before closing
     return len(commands)
 
@@ -295,10 +301,14 @@ def replay_headless(
         sim.graph.subscribe(name, type_name, "/replay", recorder(name, type_name))
     end = (commands[-1][0] - base) / 1e9 + tail
     i = 0
+    found = sim.graph.topics.topics.get(topic)
+    target = found.type if found is not None and found.type else None
     while sim.time < end - 1e-9:
         now_ns = base + round(sim.time * 1e9)
         while i < len(commands) and commands[i][0] <= now_ns:
-            sim.publish(topic, commands[i][2], commands[i][1])
+            stamp, type_name, msg = commands[i]
+            kind = target or type_name
+            sim.publish(topic, convert_twist(msg, type_name, kind, divmod(stamp, 10**9)), kind)
             i += 1
         sim.step()
     writer.close()

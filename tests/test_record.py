@@ -12,9 +12,12 @@ from rosbags.typesys import Stores, get_typestore
 from websockets.asyncio.client import connect
 
 from simbridge.bag import BagWriter, read_messages
+from simbridge.compare import load_run
+from simbridge.config import Params, RobotParams
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.record import replay_headless
 from simbridge.runner import App
+from tests.conftest import AppFactory
 from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, wait_for, ws_url
 
 
@@ -138,6 +141,34 @@ def test_headless_replay_simulates_the_commands(tmp_path: Path) -> None:
     first_cmd = next(s for t, _ty, s, _m in read_messages(tmp_path / "real") if t == "/cmd_vel")
     assert odom[0][0] > first_cmd  # on the source bag's time line
     assert odom[-1][1]["pose"]["pose"]["position"]["x"] == pytest.approx(0.4, abs=0.011)
+
+
+def test_headless_replay_of_a_twist_bag_drives_a_stamped_robot(tmp_path: Path) -> None:
+    """robot.cmd_vel_stamped: the bag's Twists become TwistStamped; compare still aligns."""
+    cmd_vel_bag(tmp_path / "real", [(1.0, 0.2, 0.0)])
+    params = tmp_path / "stamped.yaml"
+    params.write_text("robot:\n  cmd_vel_stamped: true\n")
+    replay_headless(str(tmp_path / "real"), tmp_path / "sim", params=str(params))
+    cmds = [(ty, m) for t, ty, _s, m in read_messages(tmp_path / "sim") if t == "/cmd_vel"]
+    assert cmds[0][0] == "geometry_msgs/msg/TwistStamped"
+    assert cmds[0][1]["twist"]["linear"]["x"] == 0.2
+    assert cmds[0][1]["header"]["stamp"]["sec"] == 1_700_000_000
+    assert load_run(tmp_path / "sim").distance() == pytest.approx(0.2, abs=0.011)
+
+
+async def test_replay_converts_twist_to_the_servers_twist_stamped(
+    make_app: AppFactory, tmp_path: Path
+) -> None:
+    app = await make_app(params=Params(robot=RobotParams(cmd_vel_stamped=True)))
+    cmd_vel_bag(tmp_path / "cmds", [(0.1, 0.2, 0.0)])
+    async with connect(ws_url(app)) as conn:
+        await send_json(conn, {"op": "subscribe", "topic": "/cmd_vel"})
+        proc = await start("replay", str(tmp_path / "cmds"), "--url", ws_url(app))
+        got = (await recv_until(conn, lambda m: m.get("topic") == "/cmd_vel", timeout=5))["msg"]
+        code, _out, err = await finish(proc)
+    assert code == 0, err
+    assert got["twist"]["linear"]["x"] == 0.2
+    assert got["header"]["frame_id"] == "base_link"
 
 
 async def test_server_records_itself_with_the_record_flag(tmp_path: Path) -> None:

@@ -9,7 +9,8 @@ Node ``/virtual_robot`` publishes, per robot (REP-105 frames, wall-clock header 
 * ``/scan`` (sensor_msgs/LaserScan) at ``lidar.rate``: frame ``laser``, ``angle_min = 0``,
   ``angle_increment = 2 pi / rays``, ``angle_max = angle_min + (rays - 1) * increment``;
 
-and subscribes ``/cmd_vel`` (geometry_msgs/Twist). It serves ``/reset`` (std_srvs/Empty).
+and subscribes ``/cmd_vel`` (geometry_msgs/Twist, or TwistStamped with parameter
+``robot.cmd_vel_stamped``: :mod:`simbridge.graph.cmdvel`). It serves ``/reset`` (std_srvs/Empty).
 
 Named robots (``robots:`` in the world file, or spawned at run time) have the same topics under
 their name (``/r1/odom``, frames ``r1/odom``, ``r1/base_link``, ``r1/laser``) on the shared
@@ -30,6 +31,7 @@ import numpy.typing as npt
 
 from simbridge.config import Params
 from simbridge.errors import ProtocolError
+from simbridge.graph.cmdvel import STARTUP_ONLY, cmd_vel_type, twist_of
 from simbridge.graph.fleet import (
     CONTACT_TYPE,
     add_robot_services,
@@ -96,6 +98,7 @@ class RobotBridge:
             read=lambda: self.world.params.flat(),
             write=self._write_params,
             descriptions=Params.describe(),
+            read_only=STARTUP_ONLY,
         )
         self.params.on_change.append(self._params_changed)
         graph.params.add(self.params)
@@ -122,7 +125,9 @@ class RobotBridge:
             robot,
             g.advertise(robot.topic("odom"), "nav_msgs/msg/Odometry", ROBOT_NODE),
             g.advertise(robot.topic("scan"), "sensor_msgs/msg/LaserScan", ROBOT_NODE),
-            g.subscribe(robot.topic("cmd_vel"), "geometry_msgs/msg/Twist", ROBOT_NODE, on_cmd_vel),
+            g.subscribe(
+                robot.topic("cmd_vel"), cmd_vel_type(self.world.params), ROBOT_NODE, on_cmd_vel
+            ),
             g.advertise(robot.topic("contact"), CONTACT_TYPE, ROBOT_NODE),
             on_cmd_vel,
         )
@@ -142,8 +147,9 @@ class RobotBridge:
             callback(name)
 
     def _on_cmd_vel(self, name: str, msg: Any) -> None:
-        v = msg["linear"]["x"]
-        omega = msg["angular"]["z"]
+        twist = twist_of(msg)
+        v = twist["linear"]["x"]
+        omega = twist["angular"]["z"]
         try:
             self.world.command(name, v, omega)
         except ValueError as err:

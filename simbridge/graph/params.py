@@ -159,8 +159,9 @@ class ParameterStore:
                 msg = f"node {target.name} has no parameter '{name}'"
                 raise ServiceError(msg)
             if name in target.read_only:
-                msg = f"parameter {name} of {target.name} is read-only"
-                raise ServiceError(msg)
+                why = target.descriptions.get(name, "")
+                msg = f"parameter {name} of {target.name} is read-only at run time"
+                raise ServiceError(f"{msg} ({why})" if why else msg)
             new[name] = _coerce(name, current[name], value)
         try:
             target.write(new)

@@ -20,6 +20,7 @@ import math
 from typing import Any
 
 from simbridge.graph.bridge import ROBOT_NODE
+from simbridge.graph.cmdvel import cmd_vel_type, twist_of
 from simbridge.graph.graph import Graph
 from simbridge.graph.topics import InternalCallback, Peer
 from simbridge.sim import World
@@ -30,7 +31,8 @@ __all__ = ["Safety"]
 
 def _finite_command(msg: Any) -> bool:
     try:
-        return math.isfinite(msg["linear"]["x"]) and math.isfinite(msg["angular"]["z"])
+        twist = twist_of(msg)
+        return math.isfinite(twist["linear"]["x"]) and math.isfinite(twist["angular"]["z"])
     except (KeyError, TypeError):
         return False
 
@@ -79,7 +81,8 @@ class Safety:
 
             topic = robot.topic("cmd_vel")
             # the robot's own node: the watchdog is part of its driver, as in turtlesim
-            self.graph.subscribe(topic, "geometry_msgs/msg/Twist", ROBOT_NODE, on_cmd_vel)
+            kind = cmd_vel_type(self.world.params)
+            self.graph.subscribe(topic, kind, ROBOT_NODE, on_cmd_vel)
             self._callbacks[name] = (topic, on_cmd_vel)
 
     def tick(self, now: float) -> None:

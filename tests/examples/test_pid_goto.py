@@ -16,6 +16,7 @@ from typing import Any
 
 import pytest
 
+from simbridge.config import Params, RobotParams
 from simbridge.runner import App
 from tests.conftest import AppFactory
 from tests.helpers import JS_DIR, ROOT, TIMEOUT_FACTOR, ws_url
@@ -65,12 +66,17 @@ def check(result: Any, app: App) -> None:
 
 @pytest.mark.usefixtures("node_ready")
 async def test_pid_examples_reach_the_goal_in_python_and_javascript(make_app: AppFactory) -> None:
-    """All three run at once, each against its own simulator."""
-    py_app = await make_app()
+    """All three run at once, each against its own simulator.
+
+    The Python and roslib 2 runs face a robot whose /cmd_vel is TwistStamped
+    (robot.cmd_vel_stamped): the examples ask rosapi for the type and publish that.
+    """
+    stamped = Params(robot=RobotParams(cmd_vel_stamped=True))
+    py_app = await make_app(params=stamped)
     runs = [run_example([sys.executable, "examples/pid_goto.py", *goal_args(py_app)])]
     apps = [py_app]
-    for module in LIBS.values():
-        app = await make_app()
+    for lib, module in LIBS.items():
+        app = await make_app(params=stamped if lib == "roslib2" else None)
         apps.append(app)
         cmd = ["node", "examples/pid_goto.mjs", *goal_args(app)]
         runs.append(run_example(cmd, {"ROSLIB_MODULE": str(module)}))

@@ -13,7 +13,9 @@ import signal
 import sys
 from pathlib import Path
 
-from simbridge.runner import App
+from simbridge.bag import read_messages
+from simbridge.config import Params, RobotParams
+from tests.conftest import AppFactory
 from tests.helpers import ROOT, TIMEOUT_FACTOR, ws_url
 
 
@@ -36,8 +38,15 @@ async def finish(proc: asyncio.subprocess.Process) -> tuple[int, str, str]:
 
 
 async def test_sequence_recorded_on_the_server_matches_its_headless_replay(
-    app: App, tmp_path: Path
+    make_app: AppFactory, tmp_path: Path
 ) -> None:
+    """A "real robot" that wants TwistStamped on /cmd_vel, compared with its Twist replay.
+
+    robot.cmd_vel_stamped stands for a Jazzy diff_drive_controller: the example publishes
+    TwistStamped, the replay feeds the default (Twist) simulation the same commands and compare
+    aligns on them.
+    """
+    app = await make_app(params=Params(robot=RobotParams(cmd_vel_stamped=True)))
     sequence = tmp_path / "seq.yaml"
     sequence.write_text(
         "- [0.5, 0.0, 0.0]\n- [1.5, 0.2, 0.0]\n- [1.5, 0.0, 0.6]\n- [1.0, 0.2, 0.3]\n"
@@ -62,6 +71,8 @@ async def test_sequence_recorded_on_the_server_matches_its_headless_replay(
     recorder.send_signal(signal.SIGINT)
     code, _out, err = await finish(recorder)
     assert code == 0, err
+    kinds = {ty for t, ty, _s, _m in read_messages(tmp_path / "real") if t == "/cmd_vel"}
+    assert kinds == {"geometry_msgs/msg/TwistStamped"}
     code, _out, err = await run(
         py, "-m", "simbridge", "replay", str(tmp_path / "real"), "--headless",
         "-o", str(tmp_path / "sim"),
