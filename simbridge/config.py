@@ -100,7 +100,7 @@ class RobotParams(_Strict):
     cmd_vel_stamped: bool = Field(
         False,
         description="cmd_vel is geometry_msgs/msg/TwistStamped instead of Twist (as "
-        "diff_drive_controller's stamped velocity); startup only: set it in the params file",
+        "diff_drive_controller expects since Jazzy); startup only: set it in the params file",
     )
 
 
