@@ -161,7 +161,7 @@ class ParameterStore:
             if name in target.read_only:
                 why = target.descriptions.get(name, "")
                 msg = f"parameter {name} of {target.name} is read-only at run time"
-                raise ServiceError(f"{msg} ({why})" if why else msg)
+                raise ServiceError(f"{msg}: {why}" if why else msg)
             new[name] = _coerce(name, current[name], value)
         try:
             target.write(new)

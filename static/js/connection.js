@@ -158,6 +158,10 @@ export class Connection extends EventTarget {
   publish(name, type, msg) {
     if (!this.connected) return false;
     let topic = this.pubs.get(name);
+    if (topic && topic.messageType !== type) { // the type changed (e.g. Twist -> TwistStamped)
+      try { topic.unadvertise(); } catch (e) { /* closed */ }
+      topic = null;
+    }
     if (!topic) {
       topic = new ROSLIB.Topic({ ros: this.ros, name, messageType: type, queue_size: 1 });
       this.pubs.set(name, topic);

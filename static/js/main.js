@@ -5,9 +5,9 @@ import { TeleopDriver, installKeyboard, installJoystick, installGamepad } from '
 import { TimeSeriesPlot } from './plots.js';
 import { PidLab, exampleCode } from './pid.js';
 import { spawnNear } from './spawn.js';
+import { CmdVelType, TWIST, choiceFromUrl, velocityMessage, twistOf } from './cmdvel.js';
 
 const $ = (id) => document.getElementById(id);
-const TWIST = 'geometry_msgs/msg/Twist';
 const NODE = '/virtual_robot';
 
 const state = {
@@ -83,10 +83,33 @@ function toast(text) {
 }
 
 // ---- driving -------------------------------------------------------------------------------
+// Every command (teleop, its zeros, the PID lab, the e-stop's zero) goes out in the type the
+// robot takes: Twist or TwistStamped, asked of the server or chosen (cmdvel.js).
+const cmdVel = new CmdVelType(choiceFromUrl());
 function publishTwist(v, w) {
-  return conn.publish(topic('cmd_vel'), TWIST, {
-    linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w },
-  });
+  if (!cmdVel.ready) return false; // still asking the server which type to send
+  return conn.publish(topic('cmd_vel'), cmdVel.type, velocityMessage(cmdVel.type, v, w));
+}
+function showCmdVelType() {
+  const sel = $('cmdVelType');
+  const auto = cmdVel.pending === 0 ? (cmdVel.detected || TWIST).split('/').pop() : '…';
+  sel.options[0].textContent = `auto (${auto})`;
+  sel.value = cmdVel.choice;
+}
+$('cmdVelType').addEventListener('change', (e) => {
+  releaseInputs();
+  cmdVel.setChoice(e.target.value);
+  const params = new URLSearchParams(location.search);
+  if (cmdVel.choice === 'auto') params.delete('cmd_vel_type'); else params.set('cmd_vel_type', cmdVel.choice);
+  const query = params.toString();
+  history.replaceState(null, '', `${location.pathname}${query ? `?${query}` : ''}`);
+  showCmdVelType();
+});
+cmdVel.addEventListener('change', () => { showCmdVelType(); subscribeCmd(); showExample(); });
+cmdVel.addEventListener('ready', () => { showCmdVelType(); subscribeCmd(); });
+function detectCmdVel() {
+  if (conn.connected) cmdVel.detect(conn, topic('cmd_vel'));
+  showCmdVelType();
 }
 const driver = new TeleopDriver(publishTwist);
 const speeds = () => ({ v: Number($('speedV').value), w: Number($('speedW').value) });
@@ -113,7 +136,13 @@ function releaseInputs() {
 window.addEventListener('blur', releaseInputs);
 window.addEventListener('pagehide', releaseInputs);
 document.addEventListener('visibilitychange', () => { if (document.hidden) releaseInputs(); });
-conn.addEventListener('lost', () => { releaseInputs(); lab.stop(false); });
+conn.addEventListener('lost', () => {
+  releaseInputs();
+  lab.stop(false);
+  cmdVel.forget();
+  subscribeCmd();
+  showCmdVelType();
+});
 
 // ---- e-stop and reset ----------------------------------------------------------------------
 async function estop() {
@@ -191,10 +220,23 @@ function subscribeRobot() {
       view.setScan(points);
       plots.range.push(now(), [state.nearest]);
     }),
-    conn.subscribe(topic('cmd_vel'), TWIST, (m) => {
-      state.cmd = { v: m.linear.x, w: m.angular.z };
-    }),
   ];
+  subscribeCmd();
+}
+// /cmd_vel (any publisher) for the plots, in the type it has: subscribing with the other type
+// would be refused, so only once the type is known
+let cmdSub = null;
+function subscribeCmd() {
+  const key = cmdVel.ready ? `${topic('cmd_vel')} ${cmdVel.type}` : null;
+  if (cmdSub && cmdSub.key === key) return;
+  if (cmdSub) cmdSub.off();
+  cmdSub = key && {
+    key,
+    off: conn.subscribe(topic('cmd_vel'), cmdVel.type, (m) => {
+      const t = twistOf(m);
+      state.cmd = { v: t.linear.x, w: t.angular.z };
+    }),
+  };
 }
 conn.subscribe('/tf_static', 'tf2_msgs/msg/TFMessage', (m) => {
   for (const tf of m.transforms) {
@@ -259,6 +301,7 @@ async function discoverRobots() {
     sel.replaceChildren(...found.map((ns) => new Option(ns || '(default)', ns)));
     if (!found.includes(state.ns)) {
       state.ns = found.includes('') || !found.length ? '' : found[0];
+      detectCmdVel();
       subscribeRobot();
       subscribeOthers();
     }
@@ -271,6 +314,7 @@ function selectRobot(ns) {
   lab.stop();
   state.ns = ns;
   $('robot').value = ns;
+  detectCmdVel();
   subscribeRobot();
   loadLimits();
 }
@@ -294,6 +338,7 @@ $('robot').addEventListener('change', (e) => {
   releaseInputs();
   lab.stop();
   state.ns = e.target.value;
+  detectCmdVel();
   subscribeRobot();
   subscribeOthers();
   loadLimits();
@@ -316,7 +361,7 @@ async function loadLimits() {
   }
   showSpeeds();
 }
-conn.addEventListener('connected', () => { discoverRobots(); loadLimits(); });
+conn.addEventListener('connected', () => { detectCmdVel(); discoverRobots(); loadLimits(); });
 setInterval(() => { discoverRobots(); loadLimits(); }, 3000);
 
 // ---- PID lab -------------------------------------------------------------------------------
@@ -328,7 +373,7 @@ const pidInputs = () => ({
 });
 function showExample() {
   const { mode, gains, setpoint } = pidInputs();
-  $('example').textContent = exampleCode(mode, gains, setpoint);
+  $('example').textContent = exampleCode(mode, gains, setpoint, cmdVel.type);
 }
 $('pidMode').addEventListener('change', () => {
   const heading = $('pidMode').value === 'heading';
@@ -386,5 +431,5 @@ for (const tab of document.querySelectorAll('.tabs button')) {
 }
 
 // for tests and curious students: the page's parts
-window.simbridge = { conn, view, driver, lab, plots, state };
+window.simbridge = { conn, view, driver, lab, plots, state, cmdVel };
 conn.connect();

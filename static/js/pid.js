@@ -136,15 +136,18 @@ export class PidLab {
   }
 }
 
-/** The copyable example: the PID class above plus a 10 Hz loop with roslib, current gains. */
-export function exampleCode(mode, gains, setpoint) {
+/**
+ * The copyable example: the PID class above plus a 10 Hz loop with roslib, current gains;
+ * cmdVelType is the type the page sends (Twist, or TwistStamped with a header).
+ */
+export function exampleCode(mode, gains, setpoint, cmdVelType = 'geometry_msgs/msg/Twist') {
   const loop = mode === 'heading'
     ? `const target = ${setpoint.theta.toFixed(3)};                 // rad
 const pid = new PID(${gains.kp}, ${gains.ki}, ${gains.kd}, 2.5);   // limit: max angular velocity
 setInterval(() => {
   if (!pose) return;
   const w = pid.update(wrapAngle(target - pose.theta), 0.1);
-  cmdVel.publish({ linear: { x: 0, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w } });
+  cmdVel.publish(command(0, w));
 }, 100);`
     : `const goal = { x: ${setpoint.x.toFixed(2)}, y: ${setpoint.y.toFixed(2)} };   // m
 const pid = new PID(${gains.kp}, ${gains.ki}, ${gains.kd}, 0.5);   // limit: max linear velocity
@@ -157,11 +160,20 @@ setInterval(() => {
   const bearing = Math.hypot(dx, dy) > 0.03 ? wrapAngle(Math.atan2(dy, dx) - pose.theta) : 0;
   const v = pid.update(along, 0.1) * Math.max(0, Math.cos(bearing));
   const w = Math.max(-2.5, Math.min(2.5, 2.0 * bearing));
-  cmdVel.publish({ linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w } });
+  cmdVel.publish(command(v, w));
 }, 100);`;
+  const command = cmdVelType.endsWith('TwistStamped')
+    ? `function command(v, w) {                        // TwistStamped: header + twist
+  const ms = Date.now(), sec = Math.floor(ms / 1000);
+  return { header: { stamp: { sec, nanosec: (ms - sec * 1000) * 1e6 }, frame_id: 'base_link' },
+           twist: { linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w } } };
+}`
+    : `function command(v, w) {
+  return { linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w } };
+}`;
   return `// ${mode} control at 10 Hz with roslib (browser: <script src="roslib.min.js">)
 const ros = new ROSLIB.Ros({ url: 'ws://' + location.hostname + ':9090' });
-const cmdVel = new ROSLIB.Topic({ ros, name: '/cmd_vel', messageType: 'geometry_msgs/msg/Twist' });
+const cmdVel = new ROSLIB.Topic({ ros, name: '/cmd_vel', messageType: '${cmdVelType}' });
 const odom = new ROSLIB.Topic({ ros, name: '/odom', messageType: 'nav_msgs/msg/Odometry' });
 let pose = null;
 odom.subscribe((m) => {
@@ -169,6 +181,7 @@ odom.subscribe((m) => {
   pose = { x: p.position.x, y: p.position.y, theta: 2 * Math.atan2(q.z, q.w) };
 });
 function wrapAngle(a) { return Math.atan2(Math.sin(a), Math.cos(a)); }
+${command}
 
 ${PID.toString()}
 

@@ -30,6 +30,7 @@ async def open_connected(open_page: OpenPage, app: App, **context: Any) -> tuple
     await page.wait_for_function("window.simbridge && window.simbridge.conn.connected")
     await page.wait_for_function(
         "window.simbridge.state.pose !== null && window.simbridge.state.walls > 0"
+        " && window.simbridge.cmdVel.ready"  # knows which type /cmd_vel takes
     )
     return page, log
 
@@ -124,6 +125,7 @@ async def test_holding_up_moves_robot_and_releasing_sends_one_zero(
     """Up held: /cmd_vel at a fixed rate, the robot drives; released: one zero, then silence."""
     await watcher.subscribe("/cmd_vel", "geometry_msgs/msg/Twist")
     page, log = await open_connected(open_page, app)
+    assert await page.evaluate("window.simbridge.cmdVel.type") == "geometry_msgs/msg/Twist"
     x0 = watcher.odom()["x"]  # type: ignore[index]
     await page.keyboard.down("ArrowUp")
     for _ in range(5):  # OS auto-repeat: further keydowns with repeat=true change nothing
