@@ -1,7 +1,10 @@
 // The simbridge page: wires the connection, view, teleop, plots and PID lab together.
 import { Connection, defaultUrl } from './connection.js';
 import { View, scanToWorld, markerSegments, yawOf } from './view.js';
-import { TeleopDriver, installKeyboard, installJoystick, installGamepad } from './teleop.js';
+import {
+  TeleopDriver, installKeyboard, installJoystick, installGamepad, gamepadSettingsFromUrl,
+  gamepadSettingsToUrl, parseSetting, formatSetting,
+} from './teleop.js';
 import { TimeSeriesPlot } from './plots.js';
 import { PidLab, exampleCode } from './pid.js';
 import { spawnNear } from './spawn.js';
@@ -125,7 +128,37 @@ driver.addEventListener('command', (e) => showCmd(e.detail.v, e.detail.w));
 
 const keyboard = installKeyboard(driver, speeds, () => estop());
 const joystick = installJoystick($('joystick'), $('knob'), driver, speeds, showCmd);
-const gamepad = installGamepad(driver, speeds, (text) => { $('gamepad').textContent = text; });
+const gamepadSettings = gamepadSettingsFromUrl();
+driver.setRate(gamepadSettings.rate);
+const gamepad = installGamepad(driver, speeds, (text) => { $('gamepad').textContent = text; }, gamepadSettings);
+// the gamepad panel: axes, inversion, deadman buttons and the teleop rate, kept in the URL
+const GAMEPAD_FIELDS = {
+  gpLinearAxis: 'linearAxis', gpInvertLinear: 'invertLinear', gpAngularAxis: 'angularAxis',
+  gpInvertAngular: 'invertAngular', gpDeadman: 'deadman', teleopRate: 'rate',
+};
+function showGamepadSettings() {
+  for (const [id, key] of Object.entries(GAMEPAD_FIELDS)) {
+    const el = $(id);
+    if (el.type === 'checkbox') el.checked = gamepadSettings[key];
+    else el.value = formatSetting(key, gamepadSettings[key]);
+  }
+}
+$('gpSettings').addEventListener('change', (e) => {
+  const key = GAMEPAD_FIELDS[e.target.id];
+  if (!key) return;
+  const value = parseSetting(key, e.target.type === 'checkbox' ? String(e.target.checked) : e.target.value);
+  if (value === null) {
+    toast(`${e.target.dataset.label || key}: "${e.target.value}" is not valid.`);
+  } else {
+    gamepadSettings[key] = value;
+    driver.setRate(gamepadSettings.rate);
+    const params = gamepadSettingsToUrl(gamepadSettings, new URLSearchParams(location.search));
+    const query = params.toString();
+    history.replaceState(null, '', `${location.pathname}${query ? `?${query}` : ''}`);
+  }
+  showGamepadSettings();
+});
+showGamepadSettings();
 
 function releaseInputs() {
   keyboard.release();

@@ -4,6 +4,7 @@
 // blur, hidden tab, page hide, disconnect) ends in that one zero.
 
 export const RATE_HZ = 10;
+export const MAX_RATE_HZ = 50;
 const DEADZONE = 0.12;
 
 /** Source names -> {v, w} while active. */
@@ -17,6 +18,16 @@ export class TeleopDriver extends EventTarget {
     this.enabled = true;
     this.last = { v: 0, w: 0 };
     this.sent = 0;
+    this.rateHz = RATE_HZ;
+  }
+
+  /** Publish at `hz` while driving (1 to MAX_RATE_HZ); takes effect at once. */
+  setRate(hz) {
+    this.rateHz = Math.min(MAX_RATE_HZ, Math.max(1, Number(hz) || RATE_HZ));
+    if (this.timer !== null) {
+      clearInterval(this.timer);
+      this.timer = setInterval(() => this._tick(), 1000 / this.rateHz);
+    }
   }
 
   /** Set (or clear with null) the command wanted by one input source. */
@@ -56,7 +67,7 @@ export class TeleopDriver extends EventTarget {
     if (this.active) {
       if (this.timer === null) {
         this._tick(); // respond at once, then at the fixed rate
-        this.timer = setInterval(() => this._tick(), 1000 / RATE_HZ);
+        this.timer = setInterval(() => this._tick(), 1000 / this.rateHz);
       }
     } else if (this.timer !== null) {
       clearInterval(this.timer);
@@ -155,29 +166,90 @@ export function installJoystick(pad, knob, driver, speeds, onValue) {
   return { release: () => { if (id !== null) { id = null; centre(); } } };
 }
 
+/** The gamepad mapping as now: left stick (axis 1 drives, axis 0 turns), LB or RB held. */
+export const GAMEPAD_DEFAULTS = Object.freeze({
+  linearAxis: 1, angularAxis: 0, invertLinear: false, invertAngular: false, deadman: [4, 5],
+  rate: RATE_HZ,
+});
+// the standard mapping's names of the buttons most used as deadman
+const BUTTON_NAMES = { 0: 'A', 1: 'B', 2: 'X', 3: 'Y', 4: 'LB', 5: 'RB', 6: 'LT', 7: 'RT' };
+// URL parameter of each setting (?gp_linear_axis=3&gp_deadman=7&teleop_rate=20)
+const GAMEPAD_PARAMS = {
+  linearAxis: 'gp_linear_axis', angularAxis: 'gp_angular_axis', invertLinear: 'gp_invert_linear',
+  invertAngular: 'gp_invert_angular', deadman: 'gp_deadman', rate: 'teleop_rate',
+};
+
+/** Parse one setting from text ('3', '1', '4,5', 'none'); null when it is not valid. */
+export function parseSetting(key, text) {
+  const t = String(text).trim();
+  if (key === 'invertLinear' || key === 'invertAngular') return t === '1' || t === 'true';
+  if (key === 'deadman') {
+    if (t === '' || t === 'none') return [];
+    const list = t.split(',').map((x) => Number(x.trim()));
+    return list.every((n) => Number.isInteger(n) && n >= 0 && n < 64) ? list : null;
+  }
+  const n = Number(t);
+  if (key === 'rate') return t !== '' && n >= 1 && n <= MAX_RATE_HZ ? n : null;
+  return t !== '' && Number.isInteger(n) && n >= 0 && n < 64 ? n : null;
+}
+
+export const formatSetting = (key, value) => {
+  if (key === 'deadman') return value.length ? value.join(',') : 'none';
+  if (typeof value === 'boolean') return value ? '1' : '0';
+  return String(value);
+};
+
+/** The gamepad settings in `search` (a location.search), defaults for absent or bad ones. */
+export function gamepadSettingsFromUrl(search = window.location.search) {
+  const params = new URLSearchParams(search);
+  const settings = { ...GAMEPAD_DEFAULTS, deadman: [...GAMEPAD_DEFAULTS.deadman] };
+  for (const [key, name] of Object.entries(GAMEPAD_PARAMS)) {
+    if (!params.has(name)) continue;
+    const value = parseSetting(key, params.get(name));
+    if (value !== null) settings[key] = value;
+  }
+  return settings;
+}
+
+/** Write the settings that differ from the defaults into `params` (URLSearchParams). */
+export function gamepadSettingsToUrl(settings, params) {
+  for (const [key, name] of Object.entries(GAMEPAD_PARAMS)) {
+    const value = formatSetting(key, settings[key]);
+    if (value === formatSetting(key, GAMEPAD_DEFAULTS[key])) params.delete(name);
+    else params.set(name, value);
+  }
+  return params;
+}
+
 /**
- * Gamepad (standard mapping): hold LB or RB (buttons 4/5) as deadman; left stick y drives,
- * left stick x turns. Releasing the deadman sends the one zero (teleop_tools #45).
+ * Gamepad (standard mapping by default): while a deadman button is held (none configured:
+ * always), settings.linearAxis drives and settings.angularAxis turns, pushed up / left meaning
+ * forward / left unless inverted. Releasing the deadman sends the one zero (teleop_tools #45).
+ * `settings` is read at every poll, so the settings panel applies at once.
  */
-export function installGamepad(driver, speeds, onStatus) {
+export function installGamepad(driver, speeds, onStatus, settings = GAMEPAD_DEFAULTS) {
   let polling = false;
+  const dead = (x) => (Math.abs(x) < DEADZONE ? 0 : (x - Math.sign(x) * DEADZONE) / (1 - DEADZONE));
+  const pressed = (gp, i) => Boolean(gp.buttons[i] && gp.buttons[i].pressed);
   const poll = () => {
     const pads = navigator.getGamepads ? [...navigator.getGamepads()].filter(Boolean) : [];
     const gp = pads[0];
     if (!gp) { driver.set('gamepad', null); polling = false; onStatus('no gamepad'); return; }
-    const deadman = (gp.buttons[4] && gp.buttons[4].pressed) || (gp.buttons[5] && gp.buttons[5].pressed);
-    if (deadman) {
-      const dead = (x) => (Math.abs(x) < DEADZONE ? 0 : (x - Math.sign(x) * DEADZONE) / (1 - DEADZONE));
-      const { v, w } = speeds();
-      driver.set('gamepad', { v: -dead(gp.axes[1] || 0) * v, w: -dead(gp.axes[0] || 0) * w });
-    } else {
-      driver.set('gamepad', null);
-    }
-    onStatus(`${gp.id.slice(0, 40)}: ${deadman ? 'driving' : 'hold LB/RB to drive'}`);
+    const s = settings;
+    const { v, w } = speeds();
+    const lin = -dead(gp.axes[s.linearAxis] || 0) * (s.invertLinear ? -1 : 1);
+    const ang = -dead(gp.axes[s.angularAxis] || 0) * (s.invertAngular ? -1 : 1);
+    // no deadman: drive while the stick is off centre, so centring it sends the one zero
+    const held = s.deadman.length ? s.deadman.some((i) => pressed(gp, i)) : (lin !== 0 || ang !== 0);
+    driver.set('gamepad', held ? { v: lin * v, w: ang * w } : null);
+    const names = s.deadman.map((i) => BUTTON_NAMES[i] || `button ${i}`).join('/');
+    const hint = s.deadman.length ? `hold ${names} to drive` : 'stick drives';
+    const axes = [...gp.axes].map((a) => a.toFixed(1)).join(' ');
+    onStatus(`${gp.id.slice(0, 40)}: ${held ? 'driving' : hint} · axes ${axes}`);
     requestAnimationFrame(poll);
   };
   const start = () => { if (!polling) { polling = true; requestAnimationFrame(poll); } };
   window.addEventListener('gamepadconnected', start);
   window.addEventListener('gamepaddisconnected', () => driver.set('gamepad', null));
-  return { release: () => driver.set('gamepad', null) };
+  return { release: () => driver.set('gamepad', null), settings };
 }
