@@ -148,7 +148,7 @@ $('gpSettings').addEventListener('change', (e) => {
   if (!key) return;
   const value = parseSetting(key, e.target.type === 'checkbox' ? String(e.target.checked) : e.target.value);
   if (value === null) {
-    toast(`${e.target.dataset.label || key}: "${e.target.value}" is not valid.`);
+    toast(`${e.target.dataset.label}: "${e.target.value}" is not valid (${e.target.dataset.hint}).`);
   } else {
     gamepadSettings[key] = value;
     driver.setRate(gamepadSettings.rate);
