@@ -87,7 +87,7 @@ def phase(
 
 def row(r: dict[str, Any]) -> str:
     return (
-        f"{r['kind']:<11} {r['n']:>4} {r['cpu'] * 100:>6.1f}% {r['p50']:>7.2f} {r['p99']:>7.2f} "
+        f"{r['kind']:<17} {r['n']:>4} {r['cpu'] * 100:>6.1f}% {r['p50']:>7.2f} {r['p99']:>7.2f} "
         f"{r['max']:>7.1f} {r['received']:>8} {r['missing']:>7} "
         f"{'-' if r['dropped'] is None else r['dropped']:>7} {r['errors']:>6} "
         f"{r['rss_mb']:>6.0f}  {r['load']}"
@@ -100,7 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     counts = [int(a) for a in args[1:]] or [100, 500]
     print(f"fanout: clients subscribed to /odom + /scan, {seconds:g} s measured per row")
     print(
-        f"{'server':<11} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
+        f"{'server':<17} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
         f"{'received':>8} {'missing':>7} {'dropped':>7} {'errors':>6} {'RSS MB':>6}"
     )
     runs: dict[tuple[str, int], list[dict[str, Any]]] = {}

@@ -30,7 +30,6 @@ __all__ = ["Contact", "pose_clear", "resolve_moves"]
 
 #: Distances within this of the footprint boundary count as touching, not overlapping (m).
 TOLERANCE = 1e-9
-_BISECTIONS = 14
 
 
 @dataclass(frozen=True, slots=True)
