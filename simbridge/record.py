@@ -30,7 +30,7 @@ from simbridge.bag import BagError, BagWriter, read_messages
 from simbridge.client import ClientError, RosbridgeClient
 from simbridge.errors import SimbridgeError
 from simbridge.graph import Graph
-from simbridge.graph.cmdvel import convert_twist
+from simbridge.graph.cmdvel import command_type, convert_twist
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.rostool import DEFAULT_URL
 
@@ -248,7 +248,10 @@ def _commands(bag: str, topic: str) -> list[tuple[int, str, dict[str, Any]]]:
 
 
 async def replay(url: str, bag: str, topic: str, rate: float, timeout: float) -> int:
-    """Publish ``topic`` of ``bag`` to ``url`` with the recorded spacing; return the count."""
+    """Publish ``topic`` of ``bag`` to ``url`` with the recorded spacing; return the count.
+
+    Twist commands go to a TwistStamped topic as TwistStamped (stamped now), and back.
+    """
     commands = _commands(bag, topic)
     async with RosbridgeClient.connect(url, timeout) as ros:
         try:  # a Twist bag into a TwistStamped robot (or back) is converted
@@ -261,7 +264,7 @@ async def replay(url: str, bag: str, topic: str, rate: float, timeout: float) ->
         for stamp, type_name, msg in commands:
             due = start + (stamp - first) / 1e9 / rate
             await asyncio.sleep(max(0.0, due - loop.time()))
-            kind = target or type_name
+            kind = command_type(type_name, target)
             await ros.publish(topic, convert_twist(msg, type_name, kind, _wall_stamp()), kind)
         await asyncio.sleep(0.2)  # let the last one leave before closing
     return len(commands)
@@ -307,7 +310,7 @@ def replay_headless(
         now_ns = base + round(sim.time * 1e9)
         while i < len(commands) and commands[i][0] <= now_ns:
             stamp, type_name, msg = commands[i]
-            kind = target or type_name
+            kind = command_type(type_name, target)
             sim.publish(topic, convert_twist(msg, type_name, kind, divmod(stamp, 10**9)), kind)
             i += 1
         sim.step()

@@ -24,6 +24,7 @@ __all__ = [
     "TWIST",
     "TWIST_STAMPED",
     "cmd_vel_type",
+    "command_type",
     "convert_twist",
     "twist_of",
 ]
@@ -46,6 +47,17 @@ _KINDS = {
 def cmd_vel_type(params: Params) -> str:
     """Return the type of the robots' ``cmd_vel`` topics under ``params``."""
     return TWIST_STAMPED if params.robot.cmd_vel_stamped else TWIST
+
+
+def command_type(recorded: str, target: str | None) -> str:
+    """Return the type to send a ``recorded`` command as to a topic of type ``target``.
+
+    ``target`` when both are Twist or TwistStamped (the command is converted), else
+    ``recorded`` (unknown target, or other types: sent as they are).
+    """
+    if target and recorded in _KINDS and target in _KINDS:
+        return target
+    return recorded
 
 
 def twist_of(msg: Any) -> Any:

@@ -8,7 +8,7 @@ import pytest
 from simbridge.config import Params, RobotParams, SafetyParams, WorldSpec
 from simbridge.errors import ServiceError
 from simbridge.graph import ROBOT_NODE, Graph, RobotBridge
-from simbridge.graph.cmdvel import TWIST, TWIST_STAMPED, convert_twist, twist_of
+from simbridge.graph.cmdvel import TWIST, TWIST_STAMPED, command_type, convert_twist, twist_of
 from simbridge.graph.safety import Safety
 from simbridge.sim import World
 from tests.helpers import RecordingPeer
@@ -103,3 +103,9 @@ def test_convert_twist_between_twist_and_twist_stamped() -> None:
     assert convert_twist(twist, TWIST, TWIST, (0, 0)) is twist
     assert convert_twist(twist, "std_msgs/msg/String", TWIST, (0, 0)) is twist
     assert twist_of(stamped) == twist_of(twist) == twist
+
+
+def test_commands_take_the_target_type_only_between_twist_kinds() -> None:
+    assert command_type("geometry_msgs/Twist", TWIST_STAMPED) == TWIST_STAMPED
+    assert command_type(TWIST, None) == command_type(TWIST, "") == TWIST
+    assert command_type("std_msgs/msg/Float64", TWIST) == "std_msgs/msg/Float64"
