@@ -52,6 +52,9 @@ $('urlForm').addEventListener('submit', (e) => {
   const params = new URLSearchParams(location.search);
   params.set('url', url);
   history.replaceState(null, '', `${location.pathname}?${params}`);
+  releaseInputs();
+  cmdVel.forget(); // another server (a real robot?) may take another type: ask it again
+  subscribeCmd();
   conn.connect(url);
 });
 

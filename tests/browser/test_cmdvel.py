@@ -16,7 +16,7 @@ from simbridge.config import Params, RobotParams
 from simbridge.runner import App
 from tests.browser.conftest import OpenPage, PageLog, Watcher, screenshot
 from tests.conftest import AppFactory
-from tests.helpers import ws_url
+from tests.helpers import wait_for, ws_url
 
 
 pytestmark = pytest.mark.e2e
@@ -89,3 +89,25 @@ async def test_override_control_is_kept_in_the_url(
     await page.keyboard.up("KeyW")
     await page.select_option("#cmdVelType", "TwistStamped")
     assert "cmd_vel_type=TwistStamped" in page.url
+
+
+async def test_pointing_the_page_at_a_stamped_robot_switches_the_type(
+    app: App, make_app: AppFactory, open_page: OpenPage
+) -> None:
+    """The URL field is the sim-to-real switch: the new server is asked its type again."""
+    plain = await make_app()
+    page, log = await open_ready(open_page, plain)
+    assert await page.evaluate("window.simbridge.cmdVel.type") == "geometry_msgs/msg/Twist"
+    await page.fill("#url", ws_url(app))
+    await page.click("#urlForm button[type=submit]")
+    await page.wait_for_function(
+        f"window.simbridge.conn.url === '{ws_url(app)}' && window.simbridge.conn.connected"
+        f" && window.simbridge.cmdVel.ready && window.simbridge.cmdVel.type === '{STAMPED}'"
+    )
+    await page.focus("#view")
+    await page.keyboard.down("ArrowUp")
+    await wait_for(lambda: app.world.robots[""].state.x > 0.05)
+    await page.keyboard.up("ArrowUp")
+    await wait_for(lambda: app.world.robots[""].cmd_v == 0.0)
+    assert plain.world.robots[""].state.x == 0.0
+    assert log.errors == []
