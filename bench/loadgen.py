@@ -9,11 +9,16 @@ after the window (at most 60 s more). Each client subscribes (``queue_length`` 0
 default bound) and, if ``drive`` is set, publishes a Twist on it at 10 Hz (a slowly turning
 command).
 
-Latency is receive time minus the message's ``header.stamp`` (wall clock of the same host, set
+The clients are the measuring instrument, so they are kept light: each is websockets' Sans-I/O
+protocol on a plain asyncio ``Protocol``, and a message's arrival time is taken when its bytes
+are read from the socket, before any of it is parsed (with websockets' asyncio client, a client
+read its message only after the loop had handed every other client's frames of the same burst
+through a queue and a task switch, adding milliseconds of the load generator's own delay).
+
+Latency is arrival time minus the message's ``header.stamp`` (wall clock of the same host, set
 by the server when it publishes). The stamp is read with a regular expression from the head of
-the frame, so a client's cost per message stays small and the clients keep up. Per client and
-topic the result lists the stamps received (as integer nanoseconds), so the caller can find
-losses by comparing clients with each other.
+the frame. Per client and topic the result lists the stamps received (as integer nanoseconds),
+so the caller can find losses by comparing clients with each other.
 """
 
 from __future__ import annotations
@@ -25,77 +30,158 @@ import re
 import sys
 import time
 from typing import Any
+from urllib.parse import urlsplit
 
-from websockets.asyncio.client import connect
+from websockets.client import ClientProtocol
+from websockets.frames import Frame, Opcode
+from websockets.http11 import Response
+from websockets.protocol import State
+from websockets.uri import parse_uri
 
 
 _TOPIC = re.compile(rb'"topic":\s*"([^"]+)"')
 _STAMP = re.compile(rb'"stamp":\s*\{\s*"sec":\s*(\d+),\s*"nanosec":\s*(\d+)')
 
 
-async def _client(
-    url: str, spec: dict[str, Any], start: float, end: float, out: dict[str, Any]
-) -> None:
-    stamps: dict[str, list[int]] = {t: [] for t in spec["subscribe"]}
-    arrivals: dict[str, list[float]] = {t: [] for t in spec["subscribe"]}
-    latencies: list[float] = []
-    out.update(stamps=stamps, arrivals=arrivals, latencies=latencies, error=None)
-    async with connect(url, max_size=None, compression=None, ping_interval=None) as ws:
-        for topic in spec["subscribe"]:
-            await ws.send(json.dumps({"op": "subscribe", "topic": topic}))
-        drive = spec.get("drive")
-        driver = None
+class _Client(asyncio.Protocol):
+    """One rosbridge client: subscribes, optionally drives, records what arrives."""
+
+    def __init__(self, url: str, spec: dict[str, Any], start: float, end: float) -> None:
+        self.ws = ClientProtocol(parse_uri(url), max_size=None)
+        self.spec = spec
+        self.start, self.end = start, end
+        self.stamps: dict[str, list[int]] = {t: [] for t in spec["subscribe"]}
+        self.arrivals: dict[str, list[float]] = {t: [] for t in spec["subscribe"]}
+        self.latencies: list[float] = []
+        #: Topics that delivered a message stamped after the window (frames arrive in order).
+        self.done: set[str] = set()
+        self.finished = asyncio.get_running_loop().create_future()
+        self.transport: asyncio.Transport | None = None
+        self.open = False
+        self.driver: asyncio.Task[None] | None = None
+
+    # -- asyncio.Protocol --------------------------------------------------------------------
+
+    def connection_made(self, transport: asyncio.BaseTransport) -> None:
+        assert isinstance(transport, asyncio.Transport)
+        self.transport = transport
+        self.ws.send_request(self.ws.connect())
+        self._flush()
+
+    def data_received(self, data: bytes) -> None:
+        now = time.time()
+        self.ws.receive_data(data)
+        for event in self.ws.events_received():
+            if isinstance(event, Response):
+                self._opened()
+            elif isinstance(event, Frame) and event.opcode in (Opcode.TEXT, Opcode.BINARY):
+                self._message(event.data, now)
+        self._flush()  # pongs, close frames
+        if self.ws.state is State.CLOSED:
+            self._finish(ConnectionError("the server closed the connection"))
+
+    def connection_lost(self, exc: Exception | None) -> None:
+        self._finish(exc or ConnectionError("connection lost"))
+
+    # -- rosbridge -------------------------------------------------------------------------------
+
+    def _send(self, op: dict[str, Any]) -> None:
+        self.ws.send_text(json.dumps(op).encode())
+        self._flush()
+
+    def _flush(self) -> None:
+        assert self.transport is not None
+        for chunk in self.ws.data_to_send():
+            if chunk:
+                self.transport.write(chunk)
+
+    def _opened(self) -> None:
+        if self.ws.state is not State.OPEN:
+            self._finish(ConnectionError(f"handshake refused: {self.ws.handshake_exc}"))
+            return
+        self.open = True
+        for topic in self.spec["subscribe"]:
+            self._send({"op": "subscribe", "topic": topic})
+        drive = self.spec.get("drive")
         if drive:
-            await ws.send(
-                json.dumps({"op": "advertise", "topic": drive, "type": "geometry_msgs/msg/Twist"})
-            )
+            self._send({"op": "advertise", "topic": drive, "type": "geometry_msgs/msg/Twist"})
+            self.driver = asyncio.get_running_loop().create_task(self._drive(drive))
 
-            async def drive_loop() -> None:
-                k = 0
-                t0 = time.monotonic()
-                while True:
-                    k += 1
-                    w = 0.8 * math.sin(k / 15.0)
-                    msg = {
-                        "linear": {"x": 0.2, "y": 0, "z": 0},
-                        "angular": {"x": 0, "y": 0, "z": w},
-                    }
-                    await ws.send(json.dumps({"op": "publish", "topic": drive, "msg": msg}))
-                    await asyncio.sleep(max(0.0, t0 + k * 0.1 - time.monotonic()))
+    async def _drive(self, topic: str) -> None:
+        k = 0
+        t0 = time.monotonic()
+        while self.open:
+            k += 1
+            w = 0.8 * math.sin(k / 15.0)
+            msg = {"linear": {"x": 0.2, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": w}}
+            self._send({"op": "publish", "topic": topic, "msg": msg})
+            await asyncio.sleep(max(0.0, t0 + k * 0.1 - time.monotonic()))
 
-            driver = asyncio.create_task(drive_loop())
-        # Frames of a connection arrive in order: once a topic delivers a message stamped at or
-        # after ``end``, every message of the window on that topic has arrived (or was lost).
-        done: set[str] = set()
-        try:
-            while len(done) < len(stamps):
-                remaining = end + 60.0 - time.time()
-                if remaining <= 0:
-                    break
-                try:
-                    data = await asyncio.wait_for(ws.recv(), remaining)
-                except TimeoutError:
-                    break
-                now = time.time()
-                raw = data.encode() if isinstance(data, str) else data
-                head = raw[:400]
-                m = _STAMP.search(head)
-                t = _TOPIC.search(head)
-                if m is None or t is None:
-                    continue
-                stamp_ns = int(m.group(1)) * 1_000_000_000 + int(m.group(2))
-                topic = t.group(1).decode()
-                if stamp_ns / 1e9 >= end:
-                    done.add(topic)
-                if not (start <= stamp_ns / 1e9 < end):
-                    continue
-                if topic in stamps:
-                    stamps[topic].append(stamp_ns)
-                    arrivals[topic].append(now)
-                latencies.append(now - stamp_ns / 1e9)
-        finally:
-            if driver is not None:
-                driver.cancel()
+    def _message(self, raw: bytes, now: float) -> None:
+        head = raw[:400]
+        m = _STAMP.search(head)
+        t = _TOPIC.search(head)
+        if m is None or t is None:
+            return
+        stamp_ns = int(m.group(1)) * 1_000_000_000 + int(m.group(2))
+        topic = t.group(1).decode()
+        if stamp_ns / 1e9 >= self.end:
+            self.done.add(topic)
+            if len(self.done) >= len(self.stamps):
+                self._finish(None)
+        if not (self.start <= stamp_ns / 1e9 < self.end):
+            return
+        if topic in self.stamps:
+            self.stamps[topic].append(stamp_ns)
+            self.arrivals[topic].append(now)
+        self.latencies.append(now - stamp_ns / 1e9)
+
+    def _finish(self, error: BaseException | None) -> None:
+        self.open = False
+        if self.driver is not None:
+            self.driver.cancel()
+        if not self.finished.done():
+            if error is None:
+                self.finished.set_result(None)
+            else:
+                self.finished.set_exception(error)
+
+    def close(self) -> None:
+        """Stop driving and send a close frame (the server then sees a clean close)."""
+        self.open = False
+        if self.driver is not None:
+            self.driver.cancel()
+        if self.ws.state is State.OPEN:
+            self.ws.send_close()
+            self._flush()
+
+    def result(self) -> dict[str, Any]:
+        return {
+            "stamps": self.stamps,
+            "arrivals": self.arrivals,
+            "latencies": self.latencies,
+            "error": None,
+        }
+
+
+async def _one(url: str, spec: dict[str, Any], start: float, end: float) -> dict[str, Any]:
+    loop = asyncio.get_running_loop()
+    parts = urlsplit(url)
+    client = _Client(url, spec, start, end)
+    transport, _ = await loop.create_connection(
+        lambda: client, parts.hostname or "127.0.0.1", parts.port or 80
+    )
+    result = client.result()
+    try:
+        await asyncio.wait_for(client.finished, max(1.0, end + 60.0 - time.time()))
+    except TimeoutError:
+        pass  # a topic never delivered past the window: report what arrived
+    except Exception as err:  # what arrived before the error still counts
+        result["error"] = f"{type(err).__name__}: {err}"
+    finally:
+        client.close()
+        transport.close()
+    return result
 
 
 async def _main(spec: dict[str, Any]) -> list[dict[str, Any]]:
@@ -103,9 +189,9 @@ async def _main(spec: dict[str, Any]) -> list[dict[str, Any]]:
 
     async def one(i: int, c: dict[str, Any]) -> None:
         try:
-            await _client(spec["url"], c, spec["start"], spec["end"], results[i])
+            results[i] = await _one(spec["url"], c, spec["start"], spec["end"])
         except Exception as err:  # reported, not raised: the other clients carry on
-            results[i]["error"] = f"{type(err).__name__}: {err}"
+            results[i] = {"error": f"{type(err).__name__}: {err}"}
 
     await asyncio.gather(*(one(i, c) for i, c in enumerate(spec["clients"])))
     return results

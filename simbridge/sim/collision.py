@@ -150,32 +150,42 @@ def _walls(
     np.minimum.at(lo, robot, t)
     stopped = np.nonzero(lo < 1.0)[0]
     frac = lo[stopped]
-    mid_pos = p0[stopped] + frac[:, None] * (p1[stopped] - p0[stopped])
+    move = p1[stopped] - p0[stopped]
+    here = p0[stopped] + frac[:, None] * move
+    # The pairs of the stopped robots, each with its robot's slot in ``stopped``.
+    slot = np.full(p0.shape[0], -1)
+    slot[stopped] = np.arange(stopped.shape[0])
+    mine = slot[robot] >= 0
+    k = slot[robot[mine]]
+    at = here[k]
+    qx, qy = _closest_on_segments(at[:, 0], at[:, 1], seg[mine])
+    # each stopped robot's nearest wall (first of its pairs by distance; ties keep pair order)
+    order = np.lexsort((np.hypot(at[:, 0] - qx, at[:, 1] - qy), k))
+    first = order[np.r_[True, k[order][1:] != k[order][:-1]]]
+    point = np.stack([qx[first], qy[first]], axis=1)
+    normal = here - point
+    length = np.hypot(normal[:, 0], normal[:, 1])
+    heading = move / np.maximum(np.hypot(move[:, 0], move[:, 1]), 1e-12)[:, None]
+    normal = np.where(
+        (length > 0)[:, None], normal / np.where(length > 0, length, 1.0)[:, None], -heading
+    )
+    # slide with the rest of the move (its part into the wall removed) unless that path comes
+    # within the footprint of a wall it does not already overlap and leave
+    rest = (1.0 - frac)[:, None] * move
+    into = np.minimum((rest * normal).sum(axis=1), 0.0)
+    slide = rest - into[:, None] * normal
+    touch = _first_touch_walls(at, slide[k], seg[mine], limit)
+    blocked = np.zeros(stopped.shape[0], dtype=bool)
+    np.logical_or.at(blocked, k, (touch < 1.0) & ~skip[mine])
+    out[stopped] = np.where(blocked[:, None], here, here + slide)
     for n, i in enumerate(stopped.tolist()):
-        pairs = np.nonzero(robot == i)[0]
-        here = mid_pos[n]
-        qx, qy = _closest_on_segments(
-            np.full(pairs.shape[0], here[0]), np.full(pairs.shape[0], here[1]), seg[pairs]
-        )
-        dist = np.hypot(here[0] - qx, here[1] - qy)
-        w = int(np.argmin(dist))
-        normal = np.array([here[0] - qx[w], here[1] - qy[w]])
-        length = float(np.hypot(normal[0], normal[1]))
-        normal = (
-            normal / length if length > 0 else -d[pairs[0]] / max(np.hypot(*d[pairs[0]]), 1e-12)
-        )
-        rest = (1.0 - frac[n]) * (p1[i] - p0[i])
-        into = float(rest @ normal)
-        slide = rest - min(into, 0.0) * normal
-        # slide with the rest of the move unless that path comes within the footprint of a
-        # wall it does not already overlap and leave
-        starts = np.tile(here, (pairs.shape[0], 1))
-        moves = np.tile(slide, (pairs.shape[0], 1))
-        touch = _first_touch_walls(starts, moves, seg[pairs], limit)
-        clear = not bool(((touch < 1.0) & ~skip[pairs]).any())
-        out[i] = here + slide if clear else here
         contacts.append(
-            Contact(i, -1, (float(qx[w]), float(qy[w])), (float(normal[0]), float(normal[1])))
+            Contact(
+                i,
+                -1,
+                (float(point[n, 0]), float(point[n, 1])),
+                (float(normal[n, 0]), float(normal[n, 1])),
+            )
         )
     return out
 
