@@ -7,7 +7,8 @@ Without a configured token every request is refused: admin is off by default.
 =========================  ======  ==========================================================
 path                       method  what it does
 =========================  ======  ==========================================================
-``/api/admin/state``       GET     clients, parameters with descriptions, motion models, e-stop
+``/api/admin/state``       GET     clients, parameters with descriptions (and the read-only
+                                  ones), motion models, e-stop
 ``/api/admin/params``      POST    ``{"changes": {"robot.mass": 3.0}}``: all or nothing
 ``/api/admin/motion``      POST    ``{"model": "dynamic"}`` (or ``"kinematic"``)
 ``/api/admin/reset``       POST    every robot back to its start pose, stopped
@@ -129,6 +130,7 @@ class _Admin:
             "clients": clients,
             "params": params.read(),
             "descriptions": params.descriptions,
+            "read_only": sorted(params.read_only),
             "motion_model": app.world.motion.name,
             "motion_models": sorted(MOTION_MODELS),
             "estopped": app.world.estopped,

@@ -83,6 +83,11 @@ async def test_admin_api_with_the_token_changes_params_model_and_lists_clients(
     status, state = await _aio(request, app, "/api/admin/state", None, "s3cret")
     assert status == 200 and state["motion_model"] == "dynamic"
     assert state["clients"] == [] and "robot.inertia" in state["params"]
+    assert state["read_only"] == ["robot.cmd_vel_stamped"]  # /cmd_vel's type: startup only
+    status, body = await _aio(
+        request, app, "/api/admin/params", {"changes": {"robot.cmd_vel_stamped": True}}, "s3cret"
+    )
+    assert status == 400 and "read-only at run time" in body["error"]
 
 
 async def _aio(fn: Any, *args: Any) -> Any:

@@ -40,6 +40,7 @@ function renderParams(state) {
     const input = document.createElement('input');
     input.name = name;
     input.value = JSON.stringify(current[name]);
+    input.readOnly = (state.read_only || []).includes(name); // startup only (the description says)
     input.addEventListener('input', () => { input.dataset.dirty = '1'; });
     const hint = document.createElement('small');
     hint.textContent = state.descriptions[name] || '';
