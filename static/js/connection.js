@@ -34,7 +34,8 @@ class TopicStats {
 }
 
 /**
- * Events (EventTarget): 'state' (detail: {state, url, attempt, retryInMs}), 'connected'.
+ * Events (EventTarget): 'state' (detail: {state, url, attempt, retryInMs}), 'connected',
+ * 'lost', 'refused' (detail: {topic, text}: the server refused to let the page publish it).
  * state is one of 'connecting', 'connected', 'reconnecting', 'disconnected'.
  */
 export class Connection extends EventTarget {
@@ -165,6 +166,12 @@ export class Connection extends EventTarget {
     if (!topic) {
       topic = new ROSLIB.Topic({ ros: this.ros, name, messageType: type, queue_size: 1 });
       this.pubs.set(name, topic);
+      topic.advertise();
+      // a refused advertise (e.g. the wrong type) comes back as a status with its id
+      this.ros.once(`status:${topic.advertiseId}`, (m) => {
+        if (m.level !== 'error' && m.level !== 'warning') return;
+        this.dispatchEvent(new CustomEvent('refused', { detail: { topic: name, text: String(m.msg) } }));
+      });
     }
     topic.publish(msg);
     this._stat(name).hit(performance.now());

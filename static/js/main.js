@@ -172,6 +172,7 @@ function releaseInputs() {
 window.addEventListener('blur', releaseInputs);
 window.addEventListener('pagehide', releaseInputs);
 document.addEventListener('visibilitychange', () => { if (document.hidden) releaseInputs(); });
+conn.addEventListener('refused', (e) => toast(`${e.detail.topic} refused: ${e.detail.text}`));
 conn.addEventListener('lost', () => {
   releaseInputs();
   lab.stop(false);

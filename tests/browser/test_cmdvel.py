@@ -76,10 +76,17 @@ async def test_teleop_pid_and_estop_zero_publish_twist_stamped_to_a_stamped_robo
 async def test_override_control_is_kept_in_the_url(
     app: App, open_page: OpenPage, watcher: Watcher
 ) -> None:
-    """?cmd_vel_type=Twist forces Twist; choosing auto again drops it and drives the robot."""
+    """?cmd_vel_type=Twist forces Twist (refused here, and the page says why); auto drives."""
     page, _ = await open_ready(open_page, app, "&cmd_vel_type=Twist")
     assert await page.input_value("#cmdVelType") == "Twist"
     assert await page.evaluate("window.simbridge.cmdVel.type") == "geometry_msgs/msg/Twist"
+    await page.focus("#view")
+    await page.keyboard.down("KeyW")
+    await page.wait_for_function(
+        "document.getElementById('toast').textContent.includes('already established with type"
+        f" {STAMPED}')"
+    )
+    await page.keyboard.up("KeyW")
     await page.select_option("#cmdVelType", "auto")
     assert "cmd_vel_type" not in page.url
     assert await page.evaluate("window.simbridge.cmdVel.type") == STAMPED
