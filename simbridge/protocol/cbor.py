@@ -126,10 +126,14 @@ def _encode(value: Any, out: list[bytes]) -> None:
     elif t is bool:
         append(b"\xf5" if value else b"\xf4")
     elif t is int:
-        if value >= 0:
+        if 0 <= value < _BIG:
             append(_head(0, value))
-        else:
+        elif -_BIG <= value < 0:
             append(_head(1, -1 - value))
+        else:  # beyond 64 bits (JSON allows it): a bignum, tag 2 or 3 (RFC 8949 3.4.3)
+            n = value if value >= 0 else -1 - value
+            append(_head(6, 2 if value >= 0 else 3))
+            _encode(n.to_bytes((n.bit_length() + 7) // 8, "big"), out)
     elif t is list or t is tuple:
         append(_head(4, len(value)))
         for item in value:
@@ -150,6 +154,8 @@ def _encode(value: Any, out: list[bytes]) -> None:
 
 
 _SMALL = [bytes((n,)) for n in range(24)]
+#: Integers from ``-_BIG`` to ``_BIG - 1`` fit a CBOR head; others are bignums.
+_BIG = 1 << 64
 
 
 def encode_cbor(value: Any) -> bytes:

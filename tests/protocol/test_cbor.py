@@ -11,7 +11,9 @@ from simbridge.protocol import Outgoing, encode_cbor
 def test_values_decode_with_cbor2_and_arrays_are_rfc8746_typed_arrays() -> None:
     """Scalars, text, bytes and every numeric dtype (little-endian tagged byte strings)."""
     value = {
-        "i": [0, 23, 24, 255, 256, 65536, 2**32, -1, -25, -(2**40)],
+        "i": [0, 23, 24, 255, 256, 65536, 2**32, 2**64 - 1, -1, -25, -(2**40), -(2**64)],
+        # beyond 64 bits (a JSON client may send them): bignums, tags 2 and 3
+        "big": [2**64, 10**40, -(2**64) - 1, -(10**40)],
         "f": 1.5,
         "s": "héllo" * 10,
         "b": [True, False, None],
