@@ -260,3 +260,38 @@ async def test_abrupt_disconnect_of_an_action_server_aborts_its_goals(app: App) 
         provider.close()
     await wait_for(lambda: not app.server.clients, timeout=5)
     assert "/fib" not in app.graph.actions.actions and not app.graph.actions.goals
+
+
+async def test_subscription_changes_apply_to_the_next_message(app: App) -> None:
+    """Each delivery follows the current subscriptions (the server caches how it delivers).
+
+    A plain /odom subscriber gets whole frames; a later op carrying ``fragment_size`` makes
+    its next /odom messages arrive in fragments; a second spelling of the topic adds a second
+    copy; after unsubscribing that spelling, one copy again; a gone client takes nothing.
+    """
+    async with connect(ws_url(app)) as ws, connect(ws_url(app)) as other:
+        await send_json(ws, {"op": "subscribe", "topic": "/odom"})
+        await send_json(other, {"op": "subscribe", "topic": "/odom"})
+        first = await recv_until(ws, lambda m: m.get("op") == "publish")
+        assert first["topic"] == "/odom"
+        await other.close()
+        await send_json(ws, {"op": "subscribe", "topic": "/tf_static", "fragment_size": 300})
+        await recv_until(ws, lambda m: m.get("op") == "fragment" and m["id"].startswith("/odom"))
+        await send_json(ws, {"op": "subscribe", "topic": "/scan", "fragment_size": 100_000})
+        # the client-wide fragment size is now large: /odom comes whole again
+        await recv_until(ws, lambda m: m.get("op") == "publish" and m["topic"] == "/odom")
+        await send_json(ws, {"op": "subscribe", "topic": "odom"})  # a second spelling
+        spellings = set()
+        while spellings != {"/odom", "odom"}:
+            msg = await recv_until(ws, lambda m: m.get("topic") in ("/odom", "odom"))
+            spellings.add(msg["topic"])
+        await send_json(ws, {"op": "unsubscribe", "topic": "odom"})
+        stamps: dict[str, list[tuple[int, int]]] = {"/odom": [], "odom": []}
+        while len(stamps["/odom"]) < 5:
+            msg = await recv_until(ws, lambda m: m.get("topic") in ("/odom", "odom"))
+            stamp = msg["msg"]["header"]["stamp"]
+            stamps[msg["topic"]].append((stamp["sec"], stamp["nanosec"]))
+        # anything under the old spelling was sent before the unsubscribe took effect
+        assert all(s < stamps["/odom"][-1] for s in stamps["odom"])
+        assert len(set(stamps["/odom"])) == len(stamps["/odom"])
+    await wait_for(lambda: not app.server.clients)

@@ -208,6 +208,7 @@ class TopicTable:
             topic = self.topics.get(sub.resolved)
             if topic is not None:
                 topic.subscriptions.pop((peer, written), None)
+                topic.plan = None  # holds the peer: drop it now, not at the next publish
                 self._forget_if_unused(topic)
 
     def subscribe_internal(
