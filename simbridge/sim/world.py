@@ -242,7 +242,8 @@ class World:
         poses_list = [self.laser_pose(n) for n in names]
         # The walls never change, so while no robot moved (nor a LiDAR setting) the noiseless
         # ranges are the last ones: a parked robot's scan costs no raycast.
-        key: tuple[object, ...] = (tuple(names), tuple(centres_list), tuple(poses_list))
+        key: tuple[object, ...] = (tuple(names), tuple(self.robots), tuple(centres_list))
+        key += (tuple(poses_list),)
         key += (radius, lidar.rays, lidar.range_max)
         if key != self._scan_key:
             everyone = list(self.robots)

@@ -167,6 +167,24 @@ def test_scans_see_other_robots_and_never_their_own_footprint() -> None:
     np.testing.assert_array_equal(world.scan("r1"), r1)
 
 
+def test_a_parked_robots_scan_follows_every_change_around_it() -> None:
+    """A parked robot's scan is reused while nothing moves, never when something does."""
+    world = fleet(("r1", -1.0, 0.0, 0.0))
+    empty = world.scan("r1")
+    assert empty[0] == pytest.approx(3.5)  # nothing ahead within range_max
+    world.spawn("r2", (1.0, 0.0, 0.0))
+    assert world.scan("r1")[0] == pytest.approx(2.0 - world.params.robot.radius, abs=1e-5)
+    world.command("r2", 0.5, 0.0)  # r2 drives away
+    world.step()
+    assert world.scan("r1")[0] == pytest.approx(2.025 - world.params.robot.radius, abs=1e-5)
+    world.remove("r2")
+    np.testing.assert_array_equal(world.scan("r1"), empty)
+    world.params.lidar.range_max = 2.0  # a LiDAR setting changed at run time
+    assert world.scan("r1")[0] == pytest.approx(2.0)
+    world.params.lidar.noise_stddev = 0.01  # noise is drawn for every scan of a parked robot
+    assert not np.array_equal(world.scan("r1"), world.scan("r1"))
+
+
 def test_a_robot_driving_into_another_stops_at_contact_and_reports_it() -> None:
     world = fleet(("r1", -1.0, 0.0, 0.0), ("r2", 1.0, 0.0, math.pi))
     world.command("r1", 0.5, 0.0)
