@@ -154,6 +154,26 @@ async def test_roslibjs_authenticates_with_a_rosauth_mac(
     assert refused["closed"] is True
 
 
+async def test_roslibpy_authenticates_with_a_rosauth_mac(
+    make_app: AppFactory, run_roslibpy: ClientRunner
+) -> None:
+    """Ros.authenticate of roslibpy (sent on connection): a valid MAC lets it list topics."""
+    secret = "sixteen-chars-ok"
+    app = await make_app(auth_secret=secret)
+    t = int(time.time())
+    fields: dict[str, Any] = {
+        "client": "127.0.0.1",
+        "dest": "127.0.0.1",
+        "rand": "d4e5f6",
+        "t": t,
+        "level": "user",
+        "end": t + 3600,
+    }
+    mac = rosauth_mac(secret, **fields)
+    result = await run_roslibpy(ws_url(app), "topics", {"authenticate": {**fields, "mac": mac}})
+    assert "/odom" in result["topics"]
+
+
 async def test_origin_allow_list_refuses_foreign_pages(make_app: AppFactory) -> None:
     app = await make_app(allowed_origins=("http://pi.local:8080",))
     with pytest.raises(InvalidStatus) as info:

@@ -9,6 +9,8 @@ Same contract as tests/js/run.mjs:
   ``{"ok":true,"result":...}`` (exit 0) or ``{"ok":false,"error":"..."}`` (exit 1).
   Anything else (roslibpy/Twisted logging, prints) goes to stderr.
 * Scenarios live in ``roslibpy_scenarios.SCENARIOS``.
+* ``args.authenticate`` (the fields of ``Ros.authenticate``) authenticates on connection,
+  before any scenario.
 * Failing to connect, an exception, the connection closing mid-scenario or the
   global timeout (default 20000 ms, connect included) give ok:false. The
   Twisted reactor is always stopped (``ros.terminate()``) before the line is
@@ -144,6 +146,10 @@ def main() -> None:
 
     global _ros
     _ros = roslibpy.Ros(opts.url)  # port=None -> the URL is used as given
+    if "authenticate" in args:
+        # roslibpy sends the rosbridge `auth` op on connection (its documented use), so the
+        # fields must be given before connecting: the scenario then runs authenticated
+        _ros.authenticate(**args["authenticate"])
     remaining_s = opts.timeout_ms / 1000 - (time.monotonic() - started)
     connect_timeout_s = max(0.1, min(opts.connect_timeout_ms / 1000, remaining_s))
     try:
