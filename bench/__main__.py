@@ -16,7 +16,7 @@ QUICK = {
 }
 
 
-#: The classroom-scale benchmarks (issue 6; about 6 minutes together, server and clients in
+#: The classroom-scale benchmarks (issue 6; about 10 minutes together, server and clients in
 #: separate processes; ``pip install -e '.[bench]'`` for the ir-sim baseline of ``raycast``).
 SCALE = {
     "fleet": "robots in real time on one core (step, collisions, batched scans, messages)",
