@@ -23,6 +23,24 @@ ROSLIBPY_RUN = ROOT / "tests" / "clients" / "roslibpy_run.py"
 TIMEOUT_FACTOR = float(os.environ.get("SIMBRIDGE_TEST_TIMEOUT_FACTOR", "1"))
 
 
+async def finish_process(
+    proc: asyncio.subprocess.Process, timeout: float = 20
+) -> tuple[int, str, str]:
+    """Wait for a process started with piped output; return (exit code, stdout, stderr).
+
+    ``timeout`` is scaled by :data:`TIMEOUT_FACTOR`; past it the process is killed and
+    ``TimeoutError`` raised.
+    """
+    try:
+        out, err = await asyncio.wait_for(proc.communicate(), timeout * TIMEOUT_FACTOR)
+    except TimeoutError:
+        proc.kill()
+        await proc.wait()
+        raise
+    assert proc.returncode is not None
+    return proc.returncode, out.decode(), err.decode()
+
+
 def ws_url(app: App) -> str:
     """Return the rosbridge URL of a running app."""
     return f"ws://127.0.0.1:{app.ws_port}"

@@ -18,7 +18,15 @@ from simbridge.msgs import Converter, TypeRegistry
 from simbridge.record import replay_headless
 from simbridge.runner import App
 from tests.conftest import AppFactory
-from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, wait_for, ws_url
+from tests.helpers import (
+    ROOT,
+    TIMEOUT_FACTOR,
+    finish_process,
+    recv_until,
+    send_json,
+    wait_for,
+    ws_url,
+)
 
 
 async def start(*args: str) -> asyncio.subprocess.Process:
@@ -31,17 +39,6 @@ async def start(*args: str) -> asyncio.subprocess.Process:
         stderr=asyncio.subprocess.PIPE,
         cwd=ROOT,
     )
-
-
-async def finish(proc: asyncio.subprocess.Process, timeout: float = 20) -> tuple[int, str, str]:
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(), timeout * TIMEOUT_FACTOR)
-    except TimeoutError:
-        proc.kill()
-        await proc.wait()
-        raise
-    assert proc.returncode is not None
-    return proc.returncode, out.decode(), err.decode()
 
 
 def cmd_vel_bag(path: Path, commands: list[tuple[float, float, float]]) -> None:
@@ -80,7 +77,7 @@ async def test_record_until_sigint_writes_one_mcap(app: App, tmp_path: Path) -> 
         for _ in range(10):  # half a second of /odom
             await recv_until(conn, lambda m: m.get("topic") == "/odom")
     proc.send_signal(signal.SIGINT)
-    code, out, err = await finish(proc)
+    code, out, err = await finish_process(proc)
     assert code == 0, err
     assert "recorded" in out
     bag = tmp_path / "run"
@@ -98,7 +95,7 @@ async def test_sigkill_mid_recording_leaves_a_readable_bag(app: App, tmp_path: P
     proc = await start("record", "--url", ws_url(app), "-o", str(bag), "-a", "--segment", "0.3")
     await wait_for(lambda: len(list(bag.glob("killed_*.mcap"))) >= 3, timeout=10)
     proc.kill()
-    await finish(proc)
+    await finish_process(proc)
     with Reader(bag) as reader:
         assert reader.message_count > 10
         store = get_typestore(Stores.LATEST)
@@ -111,7 +108,7 @@ async def test_sigkill_mid_recording_leaves_a_readable_bag(app: App, tmp_path: P
 
 
 async def test_record_needs_topics_or_all() -> None:
-    code, _out, err = await finish(await start("record", "--url", "ws://127.0.0.1:1"))
+    code, _out, err = await finish_process(await start("record", "--url", "ws://127.0.0.1:1"))
     assert code == 2
     assert "-a" in err
 
@@ -125,7 +122,7 @@ async def test_replay_publishes_the_recorded_commands(app: App, tmp_path: Path) 
             (await recv_until(conn, lambda m: m.get("topic") == "/cmd_vel", timeout=5))["msg"]
             for _ in range(11)
         ]
-        code, out, err = await finish(proc)
+        code, out, err = await finish_process(proc)
     assert code == 0, err
     assert "replayed 11 messages" in out
     assert [m["linear"]["x"] for m in got] == [0.2] * 5 + [0.0] * 6
@@ -165,7 +162,7 @@ async def test_replay_converts_twist_to_the_servers_twist_stamped(
         await send_json(conn, {"op": "subscribe", "topic": "/cmd_vel"})
         proc = await start("replay", str(tmp_path / "cmds"), "--url", ws_url(app))
         got = (await recv_until(conn, lambda m: m.get("topic") == "/cmd_vel", timeout=5))["msg"]
-        code, _out, err = await finish(proc)
+        code, _out, err = await finish_process(proc)
     assert code == 0, err
     assert got["twist"]["linear"]["x"] == 0.2
     assert got["header"]["frame_id"] == "base_link"
@@ -189,7 +186,7 @@ async def test_server_records_itself_with_the_record_flag(tmp_path: Path) -> Non
         for _ in range(6):
             await recv_until(conn, lambda m: m.get("topic") == "/odom")
     proc.send_signal(signal.SIGINT)
-    code, out, err = await finish(proc)
+    code, out, err = await finish_process(proc)
     assert code == 0, err
     assert "recorded" in out
     counts = Counter(topic for topic, *_ in read_messages(bag))

@@ -10,7 +10,14 @@ from websockets.asyncio.client import connect
 from simbridge.client import ClientError
 from simbridge.rostool import describe_value, hz_report, parse_yaml
 from simbridge.runner import App
-from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, wait_for, ws_url
+from tests.helpers import (
+    ROOT,
+    finish_process,
+    recv_until,
+    send_json,
+    wait_for,
+    ws_url,
+)
 
 
 async def simbridge(*args: str, timeout: float = 15) -> tuple[int, str, str]:
@@ -24,14 +31,7 @@ async def simbridge(*args: str, timeout: float = 15) -> tuple[int, str, str]:
         stderr=asyncio.subprocess.PIPE,
         cwd=ROOT,
     )
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(), timeout * TIMEOUT_FACTOR)
-    except TimeoutError:
-        proc.kill()
-        await proc.wait()
-        raise
-    assert proc.returncode is not None
-    return proc.returncode, out.decode(), err.decode()
+    return await finish_process(proc, timeout)
 
 
 async def test_topic_list_shows_types(app: App) -> None:

@@ -129,13 +129,11 @@ async def test_roslibpy_connects_with_a_token_in_the_url(
     assert "/odom" in result["topics"]
 
 
-@pytest.mark.parametrize("lib", ["roslib1", "roslib2"])
-async def test_roslibjs_authenticates_with_a_rosauth_mac(
-    make_app: AppFactory, run_js: ClientRunner, lib: str
-) -> None:
-    """Ros.authenticate of roslibjs: a valid MAC lets it in, a wrong one closes the connection."""
-    secret = "sixteen-chars-ok"
-    app = await make_app(auth_secret=secret)
+AUTH_SECRET = "sixteen-chars-ok"
+
+
+def signed_auth() -> dict[str, Any]:
+    """The fields of a rosauth ``auth`` op for ``AUTH_SECRET``, valid for an hour from now."""
     t = int(time.time())
     fields: dict[str, Any] = {
         "client": "127.0.0.1",
@@ -145,8 +143,17 @@ async def test_roslibjs_authenticates_with_a_rosauth_mac(
         "level": "user",
         "end": t + 3600,
     }
-    mac = rosauth_mac(secret, **fields)
-    result = await run_js(lib, ws_url(app), "auth", {**fields, "mac": mac})
+    return {**fields, "mac": rosauth_mac(AUTH_SECRET, **fields)}
+
+
+@pytest.mark.parametrize("lib", ["roslib1", "roslib2"])
+async def test_roslibjs_authenticates_with_a_rosauth_mac(
+    make_app: AppFactory, run_js: ClientRunner, lib: str
+) -> None:
+    """Ros.authenticate of roslibjs: a valid MAC lets it in, a wrong one closes the connection."""
+    app = await make_app(auth_secret=AUTH_SECRET)
+    fields = signed_auth()
+    result = await run_js(lib, ws_url(app), "auth", fields)
     assert "/odom" in result["topics"]
     refused = await run_js(
         lib, ws_url(app), "auth", {**fields, "mac": "0" * 128, "expect_refusal": True}
@@ -158,19 +165,8 @@ async def test_roslibpy_authenticates_with_a_rosauth_mac(
     make_app: AppFactory, run_roslibpy: ClientRunner
 ) -> None:
     """Ros.authenticate of roslibpy (sent on connection): a valid MAC lets it list topics."""
-    secret = "sixteen-chars-ok"
-    app = await make_app(auth_secret=secret)
-    t = int(time.time())
-    fields: dict[str, Any] = {
-        "client": "127.0.0.1",
-        "dest": "127.0.0.1",
-        "rand": "d4e5f6",
-        "t": t,
-        "level": "user",
-        "end": t + 3600,
-    }
-    mac = rosauth_mac(secret, **fields)
-    result = await run_roslibpy(ws_url(app), "topics", {"authenticate": {**fields, "mac": mac}})
+    app = await make_app(auth_secret=AUTH_SECRET)
+    result = await run_roslibpy(ws_url(app), "topics", {"authenticate": signed_auth()})
     assert "/odom" in result["topics"]
 
 

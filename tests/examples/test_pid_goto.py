@@ -19,7 +19,7 @@ import pytest
 from simbridge.config import Params, RobotParams
 from simbridge.runner import App
 from tests.conftest import AppFactory
-from tests.helpers import JS_DIR, ROOT, TIMEOUT_FACTOR, ws_url
+from tests.helpers import JS_DIR, ROOT, finish_process, ws_url
 
 
 GOAL = (1.0, 0.5)
@@ -38,16 +38,11 @@ async def run_example(cmd: list[str], env: dict[str, str] | None = None) -> Any:
         cwd=ROOT,
         env={**os.environ, **(env or {})},
     )
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(), 45 * TIMEOUT_FACTOR)
-    except TimeoutError:
-        proc.kill()
-        await proc.wait()
-        raise
-    lines = out.decode().strip().splitlines()
-    assert lines, f"no output (exit {proc.returncode}):\n{err.decode()[-2000:]}"
+    code, out, err = await finish_process(proc, 45)
+    lines = out.strip().splitlines()
+    assert lines, f"no output (exit {code}):\n{err[-2000:]}"
     result = json.loads(lines[-1])
-    assert proc.returncode == 0, f"{result}\n{err.decode()[-2000:]}"
+    assert code == 0, f"{result}\n{err[-2000:]}"
     return result
 
 

@@ -16,25 +16,14 @@ from pathlib import Path
 from simbridge.bag import read_messages
 from simbridge.config import Params, RobotParams
 from tests.conftest import AppFactory
-from tests.helpers import ROOT, TIMEOUT_FACTOR, ws_url
+from tests.helpers import ROOT, TIMEOUT_FACTOR, finish_process, ws_url
 
 
 async def run(*cmd: str) -> tuple[int, str, str]:
     proc = await asyncio.create_subprocess_exec(
         *cmd, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.PIPE, cwd=ROOT
     )
-    return await finish(proc)
-
-
-async def finish(proc: asyncio.subprocess.Process) -> tuple[int, str, str]:
-    try:
-        out, err = await asyncio.wait_for(proc.communicate(), 30 * TIMEOUT_FACTOR)
-    except TimeoutError:
-        proc.kill()
-        await proc.wait()
-        raise
-    assert proc.returncode is not None
-    return proc.returncode, out.decode(), err.decode()
+    return await finish_process(proc, 30)
 
 
 async def test_sequence_recorded_on_the_server_matches_its_headless_replay(
@@ -69,7 +58,7 @@ async def test_sequence_recorded_on_the_server_matches_its_headless_replay(
     assert json.loads(out.splitlines()[-1])["messages"] == 46
     await asyncio.sleep(0.5)  # the stopped robot's last /odom
     recorder.send_signal(signal.SIGINT)
-    code, _out, err = await finish(recorder)
+    code, _out, err = await finish_process(recorder, 30)
     assert code == 0, err
     kinds = {ty for t, ty, _s, _m in read_messages(tmp_path / "real") if t == "/cmd_vel"}
     assert kinds == {"geometry_msgs/msg/TwistStamped"}
