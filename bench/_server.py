@@ -14,6 +14,8 @@ from typing import Any
 
 import psutil
 
+from bench.procs import stop
+
 
 @contextmanager
 def server(*options: str) -> Iterator[tuple[int, psutil.Process]]:
@@ -34,12 +36,7 @@ def server(*options: str) -> Iterator[tuple[int, psutil.Process]]:
             raise RuntimeError(msg)
         yield int(match.group(1)), psutil.Process(proc.pid)
     finally:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop(proc)
 
 
 def health(port: int) -> dict[str, Any]:
@@ -52,12 +49,6 @@ def health(port: int) -> dict[str, Any]:
 def memory(proc: psutil.Process) -> tuple[float, int]:
     """Return the RSS (MiB) and the number of open file descriptors of ``proc``."""
     return proc.memory_info().rss / 2**20, proc.num_fds()
-
-
-def percentile(values: list[float], q: float) -> float:
-    """Return the ``q`` quantile (0..1) of ``values``."""
-    ordered = sorted(values)
-    return ordered[min(len(ordered) - 1, int(q * len(ordered)))] if ordered else float("nan")
 
 
 def now() -> float:

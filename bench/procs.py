@@ -68,12 +68,17 @@ def server(kind: str, *, world: Path | None = None) -> Iterator[tuple[psutil.Pro
         wait_listening(port)
         yield psutil.Process(proc.pid), port
     finally:
-        proc.terminate()
-        try:
-            proc.wait(10)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        stop(proc)
+
+
+def stop(proc: subprocess.Popen[Any]) -> None:
+    """Terminate a server process; kill it if it has not exited within 10 s."""
+    proc.terminate()
+    try:
+        proc.wait(10)
+    except subprocess.TimeoutExpired:
+        proc.kill()
+        proc.wait()
 
 
 def cpu_seconds(proc: psutil.Process) -> float:

@@ -16,7 +16,8 @@ import time
 
 from websockets.asyncio.client import ClientConnection, connect
 
-from bench._server import health, percentile, server
+from bench._server import health, server
+from bench.procs import percentile
 from tests.helpers import stalled_client
 
 
