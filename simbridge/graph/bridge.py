@@ -27,7 +27,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from simbridge.config import Params
 from simbridge.errors import ProtocolError
@@ -227,7 +226,7 @@ class RobotBridge:
             g.publish(self.tf, {"transforms": transforms}, now)
         self.publish_contacts(now, stamp)
         if self._scan_due():
-            self.publish_scans(now, stamp, self.cast_scans())
+            self.publish_scans(now, stamp)
 
     def _scan_due(self) -> bool:
         """Return whether this step carries a scan (lidar.rate out of sim.rate steps)."""
@@ -269,24 +268,18 @@ class RobotBridge:
                 self.graph.publish(topic, msg, now)
         self._touching = set(touching)
 
-    def cast_scans(self) -> list[tuple[_RobotTopics, npt.NDArray[np.float32]]]:
-        """Raycast the scans of every robot somebody listens to, in one batch."""
-        wanted = [rt for rt in self.robots.values() if rt.scan.subscriptions or rt.scan.internal]
-        if not wanted:
-            return []
-        all_ranges = self.world.scans([rt.robot.name for rt in wanted])
-        return list(zip(wanted, all_ranges, strict=True))
+    def publish_scans(self, now: float, stamp: dict[str, int]) -> None:
+        """Raycast and publish every robot's /scan (skipped for robots nobody listens to).
 
-    def publish_scans(
-        self,
-        now: float,
-        stamp: dict[str, int],
-        scans: list[tuple[_RobotTopics, npt.NDArray[np.float32]]],
-    ) -> None:
-        """Publish cast scans (see :meth:`cast_scans`) as each robot's /scan."""
+        The scans of every listened-to robot are cast in one batch.
+        """
         lidar = self.world.params.lidar
         increment = 2.0 * math.pi / lidar.rays
-        for rt, ranges in scans:
+        wanted = [rt for rt in self.robots.values() if rt.scan.subscriptions or rt.scan.internal]
+        if not wanted:
+            return
+        all_ranges = self.world.scans([rt.robot.name for rt in wanted])
+        for rt, ranges in zip(wanted, all_ranges, strict=True):
             scan = {
                 "header": {"stamp": stamp, "frame_id": rt.robot.frame("laser")},
                 "angle_min": 0.0,
