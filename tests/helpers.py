@@ -41,6 +41,25 @@ async def finish_process(
     return proc.returncode, out.decode(), err.decode()
 
 
+def cmd_vel_bag(path: Path, commands: list[tuple[float, float, float]]) -> None:
+    """Write a bag of /cmd_vel: (seconds, linear, angular) at 10 Hz, then one zero command."""
+    from simbridge.bag import BagWriter  # rosbags: only the tests that write bags pay for it
+    from simbridge.msgs import Converter, TypeRegistry
+
+    registry = TypeRegistry()
+    conv = Converter(registry, lambda: (0, 0))
+    writer = BagWriter(path, registry)
+    t = 1_700_000_000 * 10**9
+    for seconds, v, w in [*commands, (0.1, 0.0, 0.0)]:
+        for _ in range(round(seconds * 10)):
+            msg = conv.from_json(
+                "geometry_msgs/msg/Twist", {"linear": {"x": v}, "angular": {"z": w}}
+            )
+            writer.write("/cmd_vel", "geometry_msgs/msg/Twist", msg, t)
+            t += 100_000_000
+    writer.close()
+
+
 def ws_url(app: App) -> str:
     """Return the rosbridge URL of a running app."""
     return f"ws://127.0.0.1:{app.ws_port}"

@@ -6,29 +6,9 @@ from pathlib import Path
 
 import pytest
 
-from simbridge.bag import BagWriter
 from simbridge.compare import CompareError, compare, compare_main, load_run
-from simbridge.msgs import Converter, TypeRegistry
 from simbridge.record import replay_headless
-
-
-BASE = 1_700_000_000 * 10**9
-
-
-def commands_bag(path: Path, segments: list[tuple[float, float, float]], idle: float) -> None:
-    """/cmd_vel at 10 Hz: ``idle`` seconds of zeros, then (seconds, linear, angular) segments."""
-    registry = TypeRegistry()
-    conv = Converter(registry, lambda: (0, 0))
-    writer = BagWriter(path, registry)
-    t = BASE
-    for seconds, v, w in [(idle, 0.0, 0.0), *segments, (0.1, 0.0, 0.0)]:
-        for _ in range(round(seconds * 10)):
-            msg = conv.from_json(
-                "geometry_msgs/msg/Twist", {"linear": {"x": v}, "angular": {"z": w}}
-            )
-            writer.write("/cmd_vel", "geometry_msgs/msg/Twist", msg, t)
-            t += 100_000_000
-    writer.close()
+from tests.helpers import cmd_vel_bag
 
 
 SQUAREISH = [(2.0, 0.2, 0.0), (2.0, 0.0, 0.5), (2.0, 0.2, 0.0)]
@@ -37,7 +17,7 @@ SQUAREISH = [(2.0, 0.2, 0.0), (2.0, 0.0, 0.5), (2.0, 0.2, 0.0)]
 def simulated(
     tmp_path: Path, name: str, segments: list, idle: float, world: Path | None = None
 ) -> Path:
-    commands_bag(tmp_path / f"{name}_cmds", segments, idle)
+    cmd_vel_bag(tmp_path / f"{name}_cmds", [(idle, 0.0, 0.0), *segments])
     out = tmp_path / name
     replay_headless(str(tmp_path / f"{name}_cmds"), out, world=str(world) if world else None)
     return out
@@ -95,7 +75,7 @@ def test_command_line_report_json_and_plot(
 def test_a_bag_without_commands_is_a_clear_error(
     tmp_path: Path, capsys: pytest.CaptureFixture[str]
 ) -> None:
-    commands_bag(tmp_path / "still", [], idle=1.0)  # only zero commands
+    cmd_vel_bag(tmp_path / "still", [(1.0, 0.0, 0.0)])  # only zero commands
     with pytest.raises(CompareError, match="no non-zero /cmd_vel"):
         load_run(tmp_path / "still")
     assert compare_main([str(tmp_path / "still"), str(tmp_path / "still")]) == 1

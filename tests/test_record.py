@@ -11,16 +11,16 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 from websockets.asyncio.client import connect
 
-from simbridge.bag import BagWriter, read_messages
+from simbridge.bag import read_messages
 from simbridge.compare import load_run
 from simbridge.config import Params, RobotParams
-from simbridge.msgs import Converter, TypeRegistry
 from simbridge.record import replay_headless
 from simbridge.runner import App
 from tests.conftest import AppFactory
 from tests.helpers import (
     ROOT,
     TIMEOUT_FACTOR,
+    cmd_vel_bag,
     finish_process,
     recv_until,
     send_json,
@@ -39,22 +39,6 @@ async def start(*args: str) -> asyncio.subprocess.Process:
         stderr=asyncio.subprocess.PIPE,
         cwd=ROOT,
     )
-
-
-def cmd_vel_bag(path: Path, commands: list[tuple[float, float, float]]) -> None:
-    """A bag of /cmd_vel: (seconds, linear, angular) at 10 Hz, then one zero command."""
-    registry = TypeRegistry()
-    conv = Converter(registry, lambda: (0, 0))
-    writer = BagWriter(path, registry)
-    t = 1_700_000_000 * 10**9
-    for seconds, v, w in [*commands, (0.1, 0.0, 0.0)]:
-        for _ in range(round(seconds * 10)):
-            msg = conv.from_json(
-                "geometry_msgs/msg/Twist", {"linear": {"x": v}, "angular": {"z": w}}
-            )
-            writer.write("/cmd_vel", "geometry_msgs/msg/Twist", msg, t)
-            t += 100_000_000
-    writer.close()
 
 
 async def test_record_until_sigint_writes_one_mcap(app: App, tmp_path: Path) -> None:
