@@ -11,6 +11,7 @@ from __future__ import annotations
 import argparse
 import asyncio
 import errno
+import logging
 import os
 import signal
 import ssl
@@ -23,7 +24,6 @@ from typing import TYPE_CHECKING, Any
 
 from simbridge import __version__
 from simbridge.errors import ConfigError, SimbridgeError
-from simbridge.logs import setup_logging
 
 
 if TYPE_CHECKING:
@@ -34,6 +34,15 @@ if TYPE_CHECKING:
 
 
 __all__ = ["COMMANDS", "main"]
+
+
+def setup_logging(level: str = "info") -> None:
+    """Configure the root logger: one line per notable event, never one per message."""
+    logging.basicConfig(
+        level=getattr(logging, level.upper(), logging.INFO),
+        format="%(asctime)s %(levelname)s %(name)s: %(message)s",
+    )
+    logging.getLogger("websockets").setLevel(logging.WARNING)
 
 
 def _env(name: str, default: str | None) -> str | None:
@@ -301,7 +310,7 @@ async def _serve(
     if record is not None:
         from pathlib import Path
 
-        from simbridge.record import GraphRecorder
+        from simbridge.tools.record import GraphRecorder
 
         try:
             recorder = GraphRecorder(app.graph, Path(record[0]), record[1])
@@ -396,37 +405,37 @@ def _cmd_healthcheck(argv: Sequence[str]) -> int:
 
 
 def _cmd_topic(argv: Sequence[str]) -> int:
-    from simbridge.rostool import topic_main
+    from simbridge.tools.rostool import topic_main
 
     return topic_main(argv)
 
 
 def _cmd_service(argv: Sequence[str]) -> int:
-    from simbridge.rostool import service_main
+    from simbridge.tools.rostool import service_main
 
     return service_main(argv)
 
 
 def _cmd_param(argv: Sequence[str]) -> int:
-    from simbridge.rostool import param_main
+    from simbridge.tools.rostool import param_main
 
     return param_main(argv)
 
 
 def _cmd_record(argv: Sequence[str]) -> int:
-    from simbridge.record import record_main
+    from simbridge.tools.record import record_main
 
     return record_main(argv)
 
 
 def _cmd_replay(argv: Sequence[str]) -> int:
-    from simbridge.record import replay_main
+    from simbridge.tools.record import replay_main
 
     return replay_main(argv)
 
 
 def _cmd_compare(argv: Sequence[str]) -> int:
-    from simbridge.compare import compare_main
+    from simbridge.tools.compare import compare_main
 
     return compare_main(argv)
 

@@ -26,8 +26,7 @@ from typing import Any
 
 from simbridge.config import Params, WorldSpec, load_params, load_world
 from simbridge.errors import ServiceError, SimbridgeError
-from simbridge.graph import Graph, RobotBridge, install_rosapi
-from simbridge.graph.simclock import SimClock
+from simbridge.graph.assembly import build_robot_graph
 from simbridge.graph.topics import Topic
 from simbridge.sim import World
 
@@ -84,14 +83,15 @@ class Simulation:
         prm = params if isinstance(params, Params) else load_params(params)
         #: The simulated world (robots, walls, time).
         self.world = World(spec, prm, seed=seed)
-        #: The ROS graph, as the server has it.
-        self.graph = Graph()
-        install_rosapi(self.graph)
+        #: The robot world's ROS graph, built as the server builds it.
+        self.robot = build_robot_graph(self.world, self._advance, use_sim_time=use_sim_time)
+        #: The ROS graph.
+        self.graph = self.robot.graph
         #: The robot's topics and services.
-        self.bridge = RobotBridge(self.graph, self.world)
+        self.bridge = self.robot.bridge
         #: /clock and the sim-time services.
-        self.clock = SimClock(self.graph, self.world, self._advance, use_sim_time=use_sim_time)
-        self.bridge.publish_static(0.0)
+        self.clock = self.robot.simclock
+        self.robot.publish_static(0.0)
 
     # -- time ---------------------------------------------------------------------------------
 
@@ -115,11 +115,11 @@ class Simulation:
         self.step(max(0, round(seconds / self.dt)))
 
     def _advance(self) -> None:
+        # the server's tick on sim time: step, publish, then timeouts, the watchdog and TF
         self.world.step()
         now = self.world.time
-        self.bridge.publish(now)
-        self.clock.publish(now)
-        self.graph.tick(now)
+        self.robot.publish(now)
+        self.robot.tick(now)
 
     # -- the robot ------------------------------------------------------------------------------
 

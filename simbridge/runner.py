@@ -10,16 +10,15 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import ipaddress
 import logging
 import time
 from collections import deque
-from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 from simbridge import __version__
-from simbridge.admin import install_admin
 from simbridge.config import (
     Params,
     ServerSettings,
@@ -28,15 +27,12 @@ from simbridge.config import (
     load_world,
     resource_dir,
 )
-from simbridge.graph import Graph, RobotBridge, install_rosapi
-from simbridge.graph.estop import EStop
-from simbridge.graph.simclock import SimClock
-from simbridge.graph.tfrepublisher import install_tf_republisher
-from simbridge.graph.walls import WallsPublisher
-from simbridge.security import install_security
+from simbridge.graph.assembly import build_robot_graph
+from simbridge.graph.guard import Guard
 from simbridge.server import BridgeServer, tls_context
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
+from simbridge.web.admin import install_admin
 
 
 __all__ = ["MAX_CATCH_UP", "App", "LoopStats"]
@@ -45,6 +41,15 @@ logger = logging.getLogger(__name__)
 
 #: Ticks the loop may run back to back to catch up before it skips ahead.
 MAX_CATCH_UP = 5
+
+
+def _loopback(host: str) -> bool:
+    if host in ("localhost", ""):
+        return host == "localhost"
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return False
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -101,42 +106,56 @@ class App:
         prm = params if isinstance(params, Params) else load_params(params)
         #: The simulation.
         self.world = World(spec, prm, seed=seed)
-        #: The ROS graph.
-        self.graph = Graph(settings=self.settings)
-        install_rosapi(self.graph)
-        #: The virtual robot's ROS interface.
-        self.bridge = RobotBridge(self.graph, self.world)
-        #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
-        self.simclock = SimClock(
-            self.graph,
+        #: The robot world's ROS graph (the same as the headless API's).
+        self.robot = build_robot_graph(
             self.world,
             lambda: self.advance(time.monotonic()),
+            settings=self.settings,
             use_sim_time=self.settings.use_sim_time,
         )
+        #: The ROS graph.
+        self.graph = self.robot.graph
+        #: The virtual robot's ROS interface.
+        self.bridge = self.robot.bridge
+        #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
+        self.simclock = self.robot.simclock
+        #: The latching emergency stop (/estop, /estop/reset, /estop/state).
+        self.estop = self.robot.estop
+        #: The walls as a latched /walls marker, for pages and tools.
+        self.walls = self.robot.walls
+        #: tf2_web_republisher for web TF clients (/republish_tfs, /tf2_web_republisher).
+        self.tf_republisher = self.robot.tf_republisher
+        #: The robots' safety watchdog (docs/security.md).
+        self.safety = self.robot.safety
+        #: Hooks run after each tick's publishing, with ``now`` (extensions).
+        self.tick_hooks = self.robot.tick_hooks
         #: HTTP answers (page, /healthz).
         self.web = WebApp(static_dir or resource_dir("static"), self.health)
         #: The WebSocket server.
         self.server = BridgeServer(self.graph, self.settings, self.web)
-        #: The latching emergency stop (/estop, /estop/reset, /estop/state).
-        self.estop = EStop(self.graph, self.world)
-        #: The walls as a latched /walls marker, for pages and tools.
-        self.walls = WallsPublisher(self.graph, self.world)
-        install_admin(self)
+        install_admin(
+            self.web,
+            graph=self.graph,
+            world=self.world,
+            clients=lambda: self.server.clients,
+            settings=self.settings,
+        )
         #: Loop timing.
         self.stats = LoopStats()
-        #: Hooks run after each tick's publishing, with ``now`` (extensions).
-        self.tick_hooks: list[Callable[[float], None]] = []
-        #: tf2_web_republisher for web TF clients (/republish_tfs, /tf2_web_republisher).
-        self.tf_republisher = install_tf_republisher(self.graph)
-        self.tick_hooks.append(self.tf_republisher.tick)
         self._http: asyncio.Server | None = None
         self._loop_task: asyncio.Task[None] | None = None
         self._started = time.monotonic()
         #: Set once the servers listen and the loop runs.
         self.ready = asyncio.Event()
         # last, so that it guards whatever the lines above installed (docs/security.md)
-        #: Access control and limits of client ops; the robots' safety watchdog.
-        self.guard, self.safety = install_security(self)
+        #: Access control and limits of client ops.
+        self.guard = Guard(self.graph, self.settings, robots=lambda: self.world.robots.keys())
+        if self.settings.admin_token is None and not _loopback(self.settings.host):
+            logger.warning(
+                "no admin token: anyone who can reach %s may reset the world and change "
+                "parameters (set --admin-token or SIMBRIDGE_ADMIN_TOKEN)",
+                self.settings.host,
+            )
 
     # -- facts ----------------------------------------------------------------------------
 
@@ -175,8 +194,7 @@ class App:
             tls = tls_context(s.certfile, s.keyfile) if s.certfile else None
             self._http = await serve_http(self.web, s.host, s.http_port, ssl=tls)
         loop = asyncio.get_running_loop()
-        self.bridge.publish_static(loop.time())
-        self.walls.publish(loop.time())
+        self.robot.publish_static(loop.time())
         self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
         self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
         self.ready.set()
@@ -235,12 +253,8 @@ class App:
         """Run one tick: step and publish (unless paused), expire timeouts, run hooks."""
         if not self.simclock.paused:
             self.advance(now)
-        self.graph.tick(now)
-        for hook in self.tick_hooks:
-            hook(now)
+        self.robot.tick(now)
 
     def advance(self, now: float) -> None:
         """Step the simulation once and publish the step (/odom, /tf, /scan, /clock)."""
-        self.world.step()
-        self.bridge.publish(now)
-        self.simclock.publish(now)
+        self.robot.advance(now)

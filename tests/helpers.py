@@ -43,8 +43,8 @@ async def finish_process(
 
 def cmd_vel_bag(path: Path, commands: list[tuple[float, float, float]]) -> None:
     """Write a bag of /cmd_vel: (seconds, linear, angular) at 10 Hz, then one zero command."""
-    from simbridge.bag import BagWriter  # rosbags: only the tests that write bags pay for it
     from simbridge.msgs import Converter, TypeRegistry
+    from simbridge.tools.bag import BagWriter  # rosbags: only the tests that write bags pay for it
 
     registry = TypeRegistry()
     conv = Converter(registry, lambda: (0, 0))

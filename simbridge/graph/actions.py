@@ -31,16 +31,14 @@ import logging
 import uuid
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
+from simbridge.graph.services import ServiceTable
 from simbridge.graph.topics import BRIDGE_NODE, Peer
-from simbridge.msgs import normalize_type
+from simbridge.msgs import Converter, TypeRegistry, normalize_type
 from simbridge.protocol import OpId, json_frame, ops as o, resolve_name
 
-
-if TYPE_CHECKING:
-    from simbridge.graph.graph import Graph
 
 __all__ = [
     "ABORTED",
@@ -49,6 +47,7 @@ __all__ = [
     "EXECUTING",
     "SUCCEEDED",
     "Action",
+    "ActionHost",
     "ActionServer",
     "ActionTable",
     "Goal",
@@ -134,10 +133,26 @@ class Goal:
         self.caller.send(json_frame(body))
 
 
+class ActionHost(Protocol):
+    """What the action table needs of its graph (a :class:`~simbridge.graph.graph.Graph`)."""
+
+    #: In-process nodes: name -> description.
+    nodes: dict[str, str]
+    #: Where an action's cancel service lives.
+    services: ServiceTable
+    #: Interface definitions.
+    registry: TypeRegistry
+    #: Validation of client payloads.
+    converter: Converter
+
+    def stamp(self) -> tuple[int, int]:
+        """Return the header stamp for now, as (sec, nanosec)."""
+
+
 class ActionTable:
     """Every action of the graph and the goals in flight."""
 
-    def __init__(self, graph: Graph) -> None:
+    def __init__(self, graph: ActionHost) -> None:
         #: The graph (services table, converter, clock).
         self.graph = graph
         #: Actions by absolute name.

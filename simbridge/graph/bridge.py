@@ -79,6 +79,8 @@ class RobotBridge:
         self.graph = graph
         #: What is simulated.
         self.world = world
+        #: The node that provides the robots' topics and services.
+        self.node = ROBOT_NODE
         graph.nodes[ROBOT_NODE] = "the simulated robot"
         self.tf = graph.advertise("/tf", "tf2_msgs/msg/TFMessage", ROBOT_NODE)
         self.tf_static = graph.advertise(

@@ -25,20 +25,18 @@ Contacts are published as ``simbridge_msgs/msg/Contact`` (:data:`CONTACT_DEFINIT
 from __future__ import annotations
 
 import math
-from typing import TYPE_CHECKING, Any
+from typing import Any, Protocol
 
 from simbridge.errors import ServiceError
+from simbridge.graph.graph import Graph
 from simbridge.graph.rosapi import request_fields
-
-
-if TYPE_CHECKING:
-    from simbridge.graph.bridge import RobotBridge
-    from simbridge.sim import Robot
+from simbridge.sim import Robot, World
 
 
 __all__ = [
     "CONTACT_DEFINITION",
     "CONTACT_TYPE",
+    "Fleet",
     "add_robot_services",
     "install_fleet",
     "remove_robot_services",
@@ -62,6 +60,28 @@ _SERVICES = {
 }
 
 
+class Fleet(Protocol):
+    """What the fleet services need of the robots' ROS interface (a ``RobotBridge``)."""
+
+    #: Where the services live.
+    graph: Graph
+    #: Whose robots are spawned and removed.
+    world: World
+    #: The node that provides the services (the robots' driver).
+    node: str
+    #: The robots that have topics, by name.
+    robots: dict[str, Any]
+
+    def add_robot(self, robot: Robot) -> None:
+        """Create the topics of one robot."""
+
+    def remove_robot(self, name: str) -> None:
+        """Remove the topics of one robot."""
+
+    def publish_static(self, now: float) -> None:
+        """Publish ``/tf_static`` again (the set of robots changed)."""
+
+
 def _number(req: dict[str, Any], key: str, service: str) -> float:
     value = req.get(key, 0.0)
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
@@ -78,10 +98,8 @@ def _name(req: dict[str, Any], service: str) -> str:
     return value.strip("/")
 
 
-def install_fleet(bridge: RobotBridge) -> None:
+def install_fleet(bridge: Fleet) -> None:
     """Register the types and the ``/spawn`` and ``/kill`` services of ``bridge``'s world."""
-    from simbridge.graph.bridge import ROBOT_NODE
-
     registry = bridge.graph.registry
     if not registry.known(CONTACT_TYPE):
         registry.register_msg(CONTACT_TYPE, CONTACT_DEFINITION)
@@ -126,14 +144,12 @@ def install_fleet(bridge: RobotBridge) -> None:
         graph.log("info", f"removed robot '{name}'")
         return {}
 
-    graph.add_service("/spawn", "turtlesim/srv/Spawn", ROBOT_NODE, spawn)
-    graph.add_service("/kill", "turtlesim/srv/Kill", ROBOT_NODE, kill)
+    graph.add_service("/spawn", "turtlesim/srv/Spawn", bridge.node, spawn)
+    graph.add_service("/kill", "turtlesim/srv/Kill", bridge.node, kill)
 
 
-def add_robot_services(bridge: RobotBridge, robot: Robot) -> None:
+def add_robot_services(bridge: Fleet, robot: Robot) -> None:
     """Register the per-robot services (``teleport_absolute``) of ``robot``."""
-    from simbridge.graph.bridge import ROBOT_NODE
-
     service = robot.topic("teleport_absolute")
     world = bridge.world
     name = robot.name
@@ -148,9 +164,9 @@ def add_robot_services(bridge: RobotBridge, robot: Robot) -> None:
             raise ServiceError(f"{service}: {err}") from None
         return {}
 
-    bridge.graph.add_service(service, "turtlesim/srv/TeleportAbsolute", ROBOT_NODE, teleport)
+    bridge.graph.add_service(service, "turtlesim/srv/TeleportAbsolute", bridge.node, teleport)
 
 
-def remove_robot_services(bridge: RobotBridge, robot: Robot) -> None:
+def remove_robot_services(bridge: Fleet, robot: Robot) -> None:
     """Remove the per-robot services of ``robot``."""
     bridge.graph.services.services.pop(robot.topic("teleport_absolute"), None)

@@ -9,18 +9,14 @@ its response are separated by ``---``, an action's goal, result and feedback lik
 
 The tf2_web_republisher interfaces are registered under both package names: the ROS 2 package
 ``tf2_web_republisher_interfaces`` and the ROS 1 name ``tf2_web_republisher`` that roslibjs 1.x
-and roslibpy still send.
+and roslibpy still send. The registry (:mod:`simbridge.msgs.registry`) adds them all to every
+:class:`~simbridge.msgs.registry.TypeRegistry`; this module is data only.
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
 
-
-if TYPE_CHECKING:
-    from simbridge.msgs.registry import TypeRegistry
-
-__all__ = ["ACTIONS", "MESSAGES", "SERVICES", "register_interfaces"]
+__all__ = ["ACTIONS", "MESSAGES", "SERVICES"]
 
 _STATUS = "bool success\nstring message"
 _TYPEDEFS = "string type\n---\nTypeDef[] typedefs"
@@ -143,12 +139,3 @@ ACTIONS: dict[str, str] = {
         for pkg in ("tf2_web_republisher", "tf2_web_republisher_interfaces")
     },
 }
-
-
-def register_interfaces(registry: TypeRegistry) -> None:
-    """Register every message, service and action above in ``registry``."""
-    registry.register_many(
-        [("msg", n, t) for n, t in MESSAGES.items()]
-        + [("srv", n, t) for n, t in SERVICES.items()]
-        + [("action", n, t) for n, t in ACTIONS.items()]
-    )

@@ -143,11 +143,15 @@ class TypeRegistry:
         """Add simbridge's service/action interfaces (generated once per process, then copied)."""
         global _INTERFACES
         if _INTERFACES is None:
-            from simbridge.msgs.interfaces import register_interfaces
+            from simbridge.msgs.interfaces import ACTIONS, MESSAGES, SERVICES
 
             fresh = TypeRegistry(interfaces=False)
             before = set(fresh.store.fielddefs)
-            register_interfaces(fresh)
+            fresh.register_many(
+                [("msg", n, t) for n, t in MESSAGES.items()]
+                + [("srv", n, t) for n, t in SERVICES.items()]
+                + [("action", n, t) for n, t in ACTIONS.items()]
+            )
             added = set(fresh.store.fielddefs) - before
             _INTERFACES = (
                 {k: fresh.store.fielddefs[k] for k in added},

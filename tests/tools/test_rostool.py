@@ -7,9 +7,9 @@ import pytest
 import yaml
 from websockets.asyncio.client import connect
 
-from simbridge.client import ClientError
-from simbridge.rostool import describe_value, hz_report, parse_yaml
 from simbridge.runner import App
+from simbridge.tools.client import ClientError
+from simbridge.tools.rostool import describe_value, hz_report, parse_yaml
 from tests.helpers import (
     ROOT,
     finish_process,

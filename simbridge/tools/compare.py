@@ -28,9 +28,9 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from simbridge.bag import read_messages
 from simbridge.errors import SimbridgeError
 from simbridge.graph.cmdvel import twist_of
+from simbridge.tools.bag import read_messages
 
 
 __all__ = ["CompareError", "Comparison", "Run", "compare", "compare_main", "load_run", "plot"]

@@ -11,11 +11,11 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 from websockets.asyncio.client import connect
 
-from simbridge.bag import read_messages
-from simbridge.compare import load_run
 from simbridge.config import Params, RobotParams
-from simbridge.record import replay_headless
 from simbridge.runner import App
+from simbridge.tools.bag import read_messages
+from simbridge.tools.compare import load_run
+from simbridge.tools.record import replay_headless
 from tests.conftest import AppFactory
 from tests.helpers import (
     ROOT,

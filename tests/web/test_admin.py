@@ -7,8 +7,8 @@ from typing import Any
 
 import pytest
 
-from simbridge.admin import AdminRefused, check_admin_token, token_from_headers
 from simbridge.runner import App
+from simbridge.web.admin import AdminRefused, check_admin_token, token_from_headers
 from tests.conftest import AppFactory
 from tests.helpers import http_url
 

@@ -4,8 +4,8 @@ import asyncio
 
 import pytest
 
-from simbridge.client import ClientError, RosbridgeClient
 from simbridge.runner import App
+from simbridge.tools.client import ClientError, RosbridgeClient
 from tests.helpers import wait_for, ws_url
 
 

@@ -31,7 +31,7 @@ from typing import Any
 
 import yaml
 
-from simbridge.client import ClientError, RosbridgeClient
+from simbridge.tools.client import ClientError, RosbridgeClient
 
 
 __all__ = ["DEFAULT_URL", "param_main", "parse_yaml", "service_main", "topic_main"]

@@ -1,7 +1,7 @@
 """``simbridge record`` and ``simbridge replay``: rosbag2 MCAP bags of any rosbridge server.
 
 ``record`` subscribes (as a rosbridge client) to the given topics, or every topic with ``-a``,
-and writes what arrives to a rosbag2 MCAP bag (:class:`~simbridge.bag.BagWriter`), each
+and writes what arrives to a rosbag2 MCAP bag (:class:`~simbridge.tools.bag.BagWriter`), each
 message stamped with its receive time as ``ros2 bag record`` does. It stops on Ctrl-C or
 SIGTERM (then joins the bag into one ``NAME.mcap``) or after ``--stop-after`` seconds; killed
 outright, the bag still reads up to the last second.
@@ -26,13 +26,13 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from simbridge.bag import BagError, BagWriter, read_messages
-from simbridge.client import ClientError, RosbridgeClient
 from simbridge.errors import SimbridgeError
 from simbridge.graph import Graph
 from simbridge.graph.cmdvel import command_type, convert_twist
 from simbridge.msgs import Converter, TypeRegistry
-from simbridge.rostool import DEFAULT_URL
+from simbridge.tools.bag import BagError, BagWriter, read_messages
+from simbridge.tools.client import ClientError, RosbridgeClient
+from simbridge.tools.rostool import DEFAULT_URL
 
 
 __all__ = ["GraphRecorder", "record", "record_main", "replay_headless", "replay_main"]

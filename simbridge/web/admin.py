@@ -21,20 +21,21 @@ administrative entry points (services, CLI) reuse it.
 from __future__ import annotations
 
 import hmac
-from collections.abc import Callable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from typing import TYPE_CHECKING, Any
 
 import orjson
 
+from simbridge.config import ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
-from simbridge.graph import ROBOT_NODE
-from simbridge.sim import KinematicModel, MotionModel
+from simbridge.graph import ROBOT_NODE, Graph
+from simbridge.sim import KinematicModel, MotionModel, World
 from simbridge.sim.dynamics import DynamicModel
-from simbridge.web import HttpRequest, HttpResponse
+from simbridge.web.http import HttpRequest, HttpResponse, WebApp
 
 
 if TYPE_CHECKING:
-    from simbridge.runner import App
+    from simbridge.server import Client
 
 
 __all__ = [
@@ -105,15 +106,16 @@ def _body(request: HttpRequest) -> dict[str, Any]:
 
 
 class _Admin:
-    def __init__(self, app: App) -> None:
-        self.app = app
+    def __init__(self, graph: Graph, world: World, clients: Callable[[], Iterable[Client]]) -> None:
+        self.graph = graph
+        self.world = world
+        self.clients = clients
 
     def state(self) -> dict[str, Any]:
-        app = self.app
-        params = app.graph.params.node(ROBOT_NODE)
-        topics = app.graph.topics.topics.values()
+        params = self.graph.params.node(ROBOT_NODE)
+        topics = self.graph.topics.topics.values()
         clients = []
-        for c in sorted(app.server.clients, key=lambda c: c.session.client_id):
+        for c in sorted(self.clients(), key=lambda c: c.session.client_id):
             subs = sorted(t.name for t in topics if any(p is c for p, _ in t.subscriptions))
             clients.append(
                 {
@@ -131,10 +133,10 @@ class _Admin:
             "params": params.read(),
             "descriptions": params.descriptions,
             "read_only": sorted(params.read_only),
-            "motion_model": app.world.motion.name,
+            "motion_model": self.world.motion.name,
             "motion_models": sorted(MOTION_MODELS),
-            "estopped": app.world.estopped,
-            "sim_time_s": round(app.world.time, 3),
+            "estopped": self.world.estopped,
+            "sim_time_s": round(self.world.time, 3),
         }
 
     def params(self, body: dict[str, Any]) -> dict[str, Any]:
@@ -142,8 +144,8 @@ class _Admin:
         if not isinstance(changes, dict) or not changes:
             msg = 'expected {"changes": {"robot.mass": 3.0, ...}}'
             raise ServiceError(msg)
-        self.app.graph.params.set(ROBOT_NODE, changes)
-        return {"params": self.app.graph.params.node(ROBOT_NODE).read()}
+        self.graph.params.set(ROBOT_NODE, changes)
+        return {"params": self.graph.params.node(ROBOT_NODE).read()}
 
     def motion(self, body: dict[str, Any]) -> dict[str, Any]:
         name = body.get("model")
@@ -151,19 +153,34 @@ class _Admin:
         if factory is None:
             msg = f"unknown motion model {name!r}; choose one of {', '.join(sorted(MOTION_MODELS))}"
             raise ServiceError(msg)
-        self.app.world.motion = factory()
-        self.app.graph.log("info", f"motion model switched to '{name}' by the instructor")
+        self.world.motion = factory()
+        self.graph.log("info", f"motion model switched to '{name}' by the instructor")
         return {"motion_model": name}
 
     def reset(self, body: dict[str, Any]) -> dict[str, Any]:
-        self.app.world.reset()
-        self.app.graph.log("info", "world reset by the instructor")
+        self.world.reset()
+        self.graph.log("info", "world reset by the instructor")
         return {"reset": True}
 
 
-def install_admin(app: App) -> None:
-    """Add the ``/api/admin/*`` routes to ``app.web``."""
-    admin = _Admin(app)
+def install_admin(
+    web: WebApp,
+    *,
+    graph: Graph,
+    world: World,
+    clients: Callable[[], Iterable[Client]],
+    settings: ServerSettings,
+) -> None:
+    """Add the ``/api/admin/*`` routes to ``web``.
+
+    Args:
+        web: where the routes go.
+        graph: whose ``/virtual_robot`` parameters and clients the page shows.
+        world: what is reset and whose motion model is switched.
+        clients: the connected WebSocket clients, when asked.
+        settings: whose ``admin_token`` every request must present.
+    """
+    admin = _Admin(graph, world, clients)
     posts: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
         "/api/admin/params": admin.params,
         "/api/admin/motion": admin.motion,
@@ -178,7 +195,7 @@ def install_admin(app: App) -> None:
             response.headers["Allow"] = want
             return response
         try:
-            check_admin_token(app.settings.admin_token, token_from_headers(request.headers))
+            check_admin_token(settings.admin_token, token_from_headers(request.headers))
             if path == "/api/admin/state":
                 return HttpResponse.json(admin.state())
             return HttpResponse.json(posts[path](_body(request)))
@@ -188,4 +205,4 @@ def install_admin(app: App) -> None:
             return HttpResponse.json({"error": str(err)}, 400)
 
     for path in ("/api/admin/state", *posts):
-        app.web.routes[path] = route
+        web.routes[path] = route

@@ -6,8 +6,8 @@ import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
 
-from simbridge.bag import BagError, BagWriter, read_messages, to_dict, to_ros
 from simbridge.msgs import Converter, TypeRegistry
+from simbridge.tools.bag import BagError, BagWriter, read_messages, to_dict, to_ros
 
 
 @pytest.fixture(scope="module")

@@ -6,8 +6,8 @@ from pathlib import Path
 
 import pytest
 
-from simbridge.compare import CompareError, compare, compare_main, load_run
-from simbridge.record import replay_headless
+from simbridge.tools.compare import CompareError, compare, compare_main, load_run
+from simbridge.tools.record import replay_headless
 from tests.helpers import cmd_vel_bag
 
 

@@ -1,0 +1,113 @@
+"""The robot world's ROS graph, assembled in one place for the server and the headless API.
+
+:func:`build_robot_graph` is the only code that decides what a simbridge world offers: rosapi and
+the parameter services, the robots' topics and services (``/cmd_vel``, ``/odom``, ``/scan``,
+``/tf``, ``/spawn``...), the safety watchdog, the e-stop, ``/walls``, ``/clock`` and the sim-time
+services, and tf2_web_republisher. :class:`~simbridge.runner.App` drives it in real time and
+:class:`~simbridge.headless.Simulation` step by step, so the two cannot offer different graphs.
+
+Client access control (:class:`~simbridge.graph.guard.Guard`) is not part of it: it sits between
+the sockets and the graph, and the headless API has no clients.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+from simbridge.config import ServerSettings
+from simbridge.graph.bridge import RobotBridge
+from simbridge.graph.estop import EStop
+from simbridge.graph.graph import Graph
+from simbridge.graph.rosapi import install_rosapi
+from simbridge.graph.safety import Safety
+from simbridge.graph.simclock import SimClock
+from simbridge.graph.tfrepublisher import TfRepublisher, install_tf_republisher
+from simbridge.graph.walls import WallsPublisher
+from simbridge.sim import World
+
+
+__all__ = ["RobotGraph", "build_robot_graph"]
+
+
+@dataclass(eq=False)
+class RobotGraph:
+    """The parts of a robot world's graph, and what a loop does with them."""
+
+    #: The simulation.
+    world: World
+    #: Topics, services, parameters, actions.
+    graph: Graph
+    #: The robots' ROS interface.
+    bridge: RobotBridge
+    #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
+    simclock: SimClock
+    #: The latching emergency stop (/estop, /estop/reset, /estop/state).
+    estop: EStop
+    #: The walls as a latched /walls marker.
+    walls: WallsPublisher
+    #: tf2_web_republisher (/republish_tfs, /tf2_web_republisher).
+    tf_republisher: TfRepublisher
+    #: The /cmd_vel watchdog and stop-on-disconnect.
+    safety: Safety
+    #: Run after each tick's publishing, with ``now``; extensions may add theirs.
+    tick_hooks: list[Callable[[float], None]] = field(default_factory=list)
+
+    def publish_static(self, now: float) -> None:
+        """Publish what is latched once at start: ``/tf_static`` and ``/walls``."""
+        self.bridge.publish_static(now)
+        self.walls.publish(now)
+
+    def advance(self, now: float) -> None:
+        """Step the simulation once and publish the step."""
+        self.world.step()
+        self.publish(now)
+
+    def publish(self, now: float) -> None:
+        """Publish the last step: /odom, /tf, /scan (when due), /clock."""
+        self.bridge.publish(now)
+        self.simclock.publish(now)
+
+    def tick(self, now: float) -> None:
+        """Expire what timed out (service calls...), then run the tick hooks (watchdog, TF)."""
+        self.graph.tick(now)
+        for hook in self.tick_hooks:
+            hook(now)
+
+
+def build_robot_graph(
+    world: World,
+    advance: Callable[[], None],
+    *,
+    settings: ServerSettings | None = None,
+    use_sim_time: bool = False,
+) -> RobotGraph:
+    """Build the ROS graph of ``world``.
+
+    Args:
+        world: the simulation the graph exposes.
+        advance: steps the simulation once and publishes the step; ``/sim/step`` calls it (the
+            caller knows its clock: the real-time loop's or the headless sim time).
+        settings: server limits and timeouts (default: the defaults).
+        use_sim_time: stamp headers with sim time instead of the wall clock.
+    """
+    graph = Graph(settings=settings)
+    install_rosapi(graph)
+    bridge = RobotBridge(graph, world)
+    simclock = SimClock(graph, world, advance, use_sim_time=use_sim_time)
+    estop = EStop(graph, world)
+    walls = WallsPublisher(graph, world)
+    tf_republisher = install_tf_republisher(graph)
+    safety = Safety(graph, world)
+    bridge.on_robot_removed.append(safety.forget)
+    return RobotGraph(
+        world=world,
+        graph=graph,
+        bridge=bridge,
+        simclock=simclock,
+        estop=estop,
+        walls=walls,
+        tf_republisher=tf_republisher,
+        safety=safety,
+        tick_hooks=[tf_republisher.tick, safety.tick],
+    )

@@ -1,0 +1,151 @@
+"""The package layout of STYLE.md: dependencies point one way and no two modules import each other.
+
+Every ``import`` counts, including those under ``if TYPE_CHECKING:`` and inside functions: a
+cycle hidden behind a late import is still two modules that cannot be understood apart.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+from tests.helpers import ROOT
+
+
+PACKAGE = ROOT / "simbridge"
+#: The sans-I/O cores and what each may not import (STYLE.md: server/web/runner -> graph ->
+#: (protocol, sim, msgs)).
+CORES = {
+    "simbridge.sim": ("simbridge.protocol", "simbridge.graph", "simbridge.msgs"),
+    "simbridge.msgs": ("simbridge.protocol", "simbridge.graph", "simbridge.sim"),
+    "simbridge.protocol": ("simbridge.graph", "simbridge.sim"),
+    "simbridge.graph": (),
+}
+SHELL = (
+    "asyncio",
+    "websockets",
+    "simbridge.server",
+    "simbridge.runner",
+    "simbridge.web",
+    "simbridge.cli",
+    "simbridge.tools",
+    "simbridge.headless",
+)
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _modules() -> dict[str, Path]:
+    return {_module_name(p): p for p in PACKAGE.rglob("*.py")}
+
+
+def _imports(name: str, path: Path, known: set[str]) -> set[str]:
+    """Modules of simbridge (and others, by top name) that ``path`` imports anywhere."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text())):
+        if isinstance(node, ast.Import):
+            found.update(alias.name for alias in node.names)
+        elif isinstance(node, ast.ImportFrom):
+            base = node.module or ""
+            if node.level:
+                anchor = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
+                base = f"{anchor}.{base}" if base else anchor
+            found.add(base)
+            # `from simbridge.protocol import ops` imports the module simbridge.protocol.ops
+            found.update(f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in known)
+    return found
+
+
+def _graph() -> dict[str, set[str]]:
+    modules = _modules()
+    known = set(modules)
+    return {
+        name: {m for m in _imports(name, path, known) if m in known and m != name}
+        for name, path in modules.items()
+    }
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """Strongly connected components with more than one module (Tarjan)."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    on_stack: set[str] = set()
+    out: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        on_stack.add(v)
+        for w in graph[v]:
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in on_stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                on_stack.discard(w)
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                out.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return out
+
+
+def test_no_two_modules_import_each_other() -> None:
+    """No import cycle, counting TYPE_CHECKING and function-level imports."""
+    assert _cycles(_graph()) == []
+
+
+def test_the_cycle_check_finds_a_cycle() -> None:
+    """The check itself can fail: a made-up a -> b -> c -> a is reported."""
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+
+
+def test_cores_import_no_shell_and_point_one_way() -> None:
+    """protocol, msgs, sim and graph import no asyncio, websockets, server, web or tools."""
+    modules = _modules()
+    known = set(modules)
+    wrong = []
+    for name, path in modules.items():
+        core = next((c for c in CORES if name == c or name.startswith(c + ".")), None)
+        if core is None:
+            continue
+        for imported in _imports(name, path, known):
+            banned = (*SHELL, *CORES[core])
+            if any(imported == b or imported.startswith(b + ".") for b in banned):
+                wrong.append(f"{name} imports {imported}")
+    assert wrong == []
+
+
+def test_the_server_does_not_import_the_tools() -> None:
+    """The tools sit on top: nothing outside simbridge.tools (but the CLI) imports them."""
+    graph = _graph()
+    users = sorted(
+        name
+        for name, imported in graph.items()
+        if not name.startswith("simbridge.tools")
+        and name != "simbridge.cli"
+        and any(m.startswith("simbridge.tools") for m in imported)
+    )
+    assert users == []
+
+
+def test_top_level_holds_the_parts_and_the_entry_points() -> None:
+    """The top level of the package: the parts, and a handful of modules that join them."""
+    top = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem not in ("__init__", "__main__"))
+    packages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
+    assert packages == ["graph", "msgs", "protocol", "sim", "tools", "web"]
+    assert top == ["cli", "config", "errors", "headless", "runner", "server"]
