@@ -5,20 +5,9 @@ import time
 
 import numpy as np
 import pytest
-from websockets.asyncio.client import ClientConnection
 
 from simbridge.errors import ConversionError, ProtocolError, SimbridgeError
 from simbridge.headless import Simulation
-from tests.helpers import recv_until, send_json
-
-
-#: What a client lists of a graph: rosapi service -> the field of its reply.
-LISTINGS = {
-    "/rosapi/topics": "topics",
-    "/rosapi/services": "services",
-    "/rosapi/action_servers": "action_servers",
-    "/rosapi/nodes": "nodes",
-}
 
 
 def test_drives_straight_and_reports_odom_as_dicts() -> None:
@@ -102,28 +91,6 @@ def test_runs_much_faster_than_real_time() -> None:
     sim.run(20.0)
     wall = time.perf_counter() - start
     assert wall < 5.0, f"20 s of sim time took {wall:.2f} s"
-
-
-async def test_lists_the_same_topics_services_and_actions_as_the_server(
-    ws: ClientConnection,
-) -> None:
-    """One assembly: a client of the server and the headless API list the same graph."""
-    served: dict[str, list[str]] = {}
-    for service, field in LISTINGS.items():
-        await send_json(ws, {"op": "call_service", "service": service, "id": service})
-        reply = await recv_until(ws, lambda m, s=service: m.get("id") == s)
-        assert reply["result"] is True, reply
-        served[field] = sorted(reply["values"][field])
-    sim = Simulation()
-    headless = {
-        field: sorted(sim.call_service(service)[field]) for service, field in LISTINGS.items()
-    }
-    assert headless == served
-    for name in ("/estop", "/estop/reset", "/republish_tfs", "/spawn", "/sim/step"):
-        assert name in headless["services"]
-    for name in ("/estop/state", "/walls", "/clock", "/cmd_vel", "/odom", "/scan"):
-        assert name in headless["topics"]
-    assert "/tf2_web_republisher" in headless["action_servers"]
 
 
 def test_estop_latches_and_stops_the_robot_headless() -> None:
