@@ -5,7 +5,7 @@ VENV   ?= .venv
 BIN    := $(VENV)/bin
 HOST   ?= 0.0.0.0
 
-.PHONY: run test check lint format typecheck pytest bench deps clean
+.PHONY: run test check lint format typecheck pytest bench deps clean test-arm64
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -35,6 +35,12 @@ pytest:
 	$(BIN)/pytest -q
 
 test: deps lint typecheck pytest
+
+# The arm64 (Raspberry Pi 4B/5) image built and its compose stack run under qemu-user emulation
+# (root: registers qemu-aarch64 with binfmt_misc; the first run makes the arm64 base image,
+# about 10 minutes, later runs reuse it). Also part of `make test`.
+test-arm64: deps
+	$(BIN)/pytest -q tests/deploy/test_arm64.py
 
 format:
 	$(BIN)/ruff format simbridge tests bench examples

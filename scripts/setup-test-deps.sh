@@ -44,10 +44,12 @@ need_chromium() {
 need_chromium
 
 # --- Deployment tests (tests/deploy): Debian's nginx, Docker engine and docker-compose (v1, what
-# Debian ships), debootstrap for the local base image, and a `docker compose` v2 plugin. ---------
+# Debian ships), debootstrap for the local base images, qemu-user-static to build and run the arm64
+# image under emulation (tests/deploy/stack.py registers it with binfmt_misc), and a `docker
+# compose` v2 plugin. ------------------------------------------------------------------------------
 deploy_packages() {
   local missing=() pkg
-  for pkg in nginx docker.io docker-compose debootstrap; do
+  for pkg in nginx docker.io docker-compose debootstrap qemu-user-static; do
     dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || missing+=("$pkg")
   done
   [ ${#missing[@]} -eq 0 ] && return

@@ -6,6 +6,10 @@ FROM it (``--build-arg BASE_IMAGE``); the web-interface image is Debian's nginx 
 Everything is cached: a second run finds the engine running and the base images present, and
 rebuilds the project image from Docker's layer cache.
 
+The arm64 images (a Raspberry Pi 4B/5 with a 64-bit OS) are made the same way, with
+``debootstrap --arch arm64`` and ``docker build --platform linux/arm64``, and run here under
+Debian's qemu-user-static, registered with the kernel's binfmt_misc (:func:`enable_arm64`).
+
 Several test runs may share this machine and its engine at once: image creation is serialised by
 a file lock, each run uses its own compose project and free 127.0.0.1 ports, and a run that died
 leaves containers that the next run removes (its project name carries its process id).
@@ -41,6 +45,14 @@ NGINX_DOCKERFILE = HERE / "nginx.Dockerfile"
 BASE_IMAGE = "simbridge-test-base:bookworm-1"
 NGINX_IMAGE = "simbridge-test-nginx:bookworm-1"
 BASE_PACKAGES = ["python3", "python3-venv", "ca-certificates"]
+#: The arm64 twins of the two images (bump the suffix with the recipe, as above).
+ARM64_BASE_IMAGE = "simbridge-test-base:bookworm-arm64-1"
+ARM64_NGINX_IMAGE = "simbridge-test-nginx:bookworm-arm64-1"
+#: Debian's qemu-user-static: the emulator and its binfmt_misc entry (flag F: the kernel
+#: opens the emulator when the entry is registered, so it also runs binaries inside containers).
+QEMU_AARCH64 = Path("/usr/bin/qemu-aarch64-static")
+BINFMT_CONF = Path("/usr/lib/binfmt.d/qemu-aarch64.conf")
+BINFMT_DIR = Path("/proc/sys/fs/binfmt_misc")
 DEBIAN_MIRROR = os.environ.get("SIMBRIDGE_TEST_DEBIAN_MIRROR", "http://deb.debian.org/debian")
 #: Label of the project images the tests build (dangling ones are pruned).
 TEST_LABEL = "org.simbridge.test=1"
@@ -152,17 +164,59 @@ def image_exists(tag: str) -> bool:
     return run(["docker", "image", "inspect", tag], check=False).returncode == 0
 
 
-def ensure_base_image() -> None:
+def enable_arm64() -> str | None:
+    """Let this kernel run arm64 binaries (qemu-user); return why not, or None when it can.
+
+    Registers Debian's qemu-aarch64 entry with binfmt_misc (mounting binfmt_misc first where a
+    container sandbox has not), as ``update-binfmts``/systemd-binfmt would. An entry registered
+    without the F flag is replaced: without it the emulator is looked up inside each container.
+    """
+    if not QEMU_AARCH64.exists() or not BINFMT_CONF.exists():
+        return "qemu-user-static is not installed (`make deps` installs it as root)"
+    register = BINFMT_DIR / "register"
+    entry = BINFMT_DIR / "qemu-aarch64"
+    with machine_lock():
+        if not register.exists():
+            if os.geteuid() != 0:
+                return f"binfmt_misc is not mounted on {BINFMT_DIR} and only root can mount it"
+            mounted = run(
+                ["mount", "-t", "binfmt_misc", "binfmt_misc", str(BINFMT_DIR)], check=False
+            )
+            if mounted.returncode != 0:
+                return f"binfmt_misc cannot be mounted here: {mounted.stderr.strip()}"
+        if entry.exists():
+            lines = entry.read_text().splitlines()
+            flags = next((ln.split(":", 1)[1] for ln in lines if ln.startswith("flags:")), "")
+            if lines[:1] == ["enabled"] and "F" in flags:
+                return None
+            if os.geteuid() != 0:
+                return f"{entry} is disabled or lacks the F flag and only root can replace it"
+            try:
+                entry.write_text("-1")  # unregister, then register Debian's entry below
+            except OSError as err:
+                return f"cannot replace {entry}: {err}"
+        if os.geteuid() != 0:
+            return "qemu-aarch64 is not registered with binfmt_misc and only root can register it"
+        line = next(ln for ln in BINFMT_CONF.read_text().splitlines() if ln.startswith(":"))
+        try:
+            register.write_text(line)
+        except OSError as err:
+            return f"binfmt_misc refused the qemu-aarch64 entry: {err}"
+    return None
+
+
+def ensure_base_image(arch: str = "amd64") -> None:
     """Make the local base image (debootstrap, then ``docker import``) unless it exists.
 
     Debian bookworm minbase with Python 3.11 and its venv module: what the Dockerfile needs of a
     base. The machine's extra CA certificates go in, so that pip and apt work where outgoing
-    TLS is inspected.
+    TLS is inspected. ``arch="arm64"`` makes the arm64 one (:func:`enable_arm64` first).
     """
-    if image_exists(BASE_IMAGE):
+    tag = ARM64_BASE_IMAGE if arch == "arm64" else BASE_IMAGE
+    if image_exists(tag):
         return
     with machine_lock():
-        if image_exists(BASE_IMAGE):
+        if image_exists(tag):
             return
         if shutil.which("debootstrap") is None:
             msg = "debootstrap is not installed (`make deps` installs it as root)"
@@ -171,7 +225,12 @@ def ensure_base_image() -> None:
         with tempfile.TemporaryDirectory(prefix="simbridge-rootfs-", dir="/var/tmp") as tmp:
             rootfs = Path(tmp) / "rootfs"
             cmd = ["debootstrap", "--variant=minbase", f"--include={','.join(BASE_PACKAGES)}"]
-            run([*cmd, "bookworm", str(rootfs), DEBIAN_MIRROR], timeout=900)
+            if arch == "arm64":
+                cmd.append("--arch=arm64")
+            run(
+                [*cmd, "bookworm", str(rootfs), DEBIAN_MIRROR],
+                timeout=2400 if arch == "arm64" else 900,
+            )
             log(f"debootstrap: {time.monotonic() - started:.0f} s")
             for deb in (rootfs / "var/cache/apt/archives").glob("*.deb"):
                 deb.unlink()
@@ -182,34 +241,68 @@ def ensure_base_image() -> None:
                 shutil.copy(cert, rootfs / "usr/local/share/ca-certificates")
             if certs:
                 run(["chroot", str(rootfs), "update-ca-certificates"])
-            tar = subprocess.Popen(["tar", "-C", str(rootfs), "-c", "."], stdout=subprocess.PIPE)
-            assert tar.stdout is not None
-            imported = subprocess.run(
-                ["docker", "import", "--change", 'CMD ["/bin/bash"]', "-", BASE_IMAGE],
-                stdin=tar.stdout,
-                capture_output=True,
-                timeout=300,
-                check=False,
-            )
-            tar.stdout.close()
-            if tar.wait() != 0 or imported.returncode != 0:
-                msg = f"docker import failed: {imported.stderr.decode(errors='replace')}"
-                raise RuntimeError(msg)
-        log(f"base image {BASE_IMAGE}: {time.monotonic() - started:.0f} s")
+            if arch == "arm64":
+                _import_arm64(rootfs, Path(tmp), tag)
+            else:
+                _import(rootfs, tag)
+        log(f"base image {tag}: {time.monotonic() - started:.0f} s")
 
 
-def project_image_tag() -> str:
+def _import(rootfs: Path, tag: str) -> None:
+    """``docker import`` a root file system as the image ``tag`` (this host's architecture)."""
+    tar = subprocess.Popen(["tar", "-C", str(rootfs), "-c", "."], stdout=subprocess.PIPE)
+    assert tar.stdout is not None
+    imported = subprocess.run(
+        ["docker", "import", "--change", 'CMD ["/bin/bash"]', "-", tag],
+        stdin=tar.stdout,
+        capture_output=True,
+        timeout=300,
+        check=False,
+    )
+    tar.stdout.close()
+    if tar.wait() != 0 or imported.returncode != 0:
+        msg = f"docker import failed: {imported.stderr.decode(errors='replace')}"
+        raise RuntimeError(msg)
+
+
+def _import_arm64(rootfs: Path, tmp: Path, tag: str) -> None:
+    """Make an arm64 root file system the image ``tag``, recorded as linux/arm64.
+
+    Not ``docker import --platform``: an engine without experimental features ignores the
+    platform and records the host's, and a ``--platform linux/arm64`` build FROM it would then
+    look for an arm64 image in a registry. A build FROM scratch records the platform it is given.
+    """
+    context = tmp / "context"
+    context.mkdir()
+    run(["tar", "-C", str(rootfs), "-cf", str(context / "rootfs.tar"), "."], timeout=300)
+    (context / "Dockerfile").write_text('FROM scratch\nADD rootfs.tar /\nCMD ["/bin/bash"]\n')
+    run(["docker", "build", "--platform", "linux/arm64", "-t", tag, str(context)], timeout=600)
+
+
+def project_image_tag(arch: str = "amd64") -> str:
     """The project image of this checkout (several checkouts may share the engine)."""
-    return "simbridge-test:" + hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]
+    name = "simbridge-test-arm64:" if arch == "arm64" else "simbridge-test:"
+    return name + hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]
 
 
-def build_images() -> str:
+def build_images(arch: str = "amd64") -> str:
     """Build the project image (always; layers cached) and the nginx image (once), in parallel.
 
-    Returns the project image's tag.
+    ``arch="arm64"``: both for linux/arm64, from the arm64 base (Docker's classic builder, no
+    buildx: each RUN step runs under qemu). Returns the project image's tag.
     """
-    tag = project_image_tag()
-    build = ["docker", "build", "--network", "host", "--build-arg", f"BASE_IMAGE={BASE_IMAGE}"]
+    tag = project_image_tag(arch)
+    base, nginx = (
+        (ARM64_BASE_IMAGE, ARM64_NGINX_IMAGE)
+        if arch == "arm64"
+        else (
+            BASE_IMAGE,
+            NGINX_IMAGE,
+        )
+    )
+    build = ["docker", "build", "--network", "host", "--build-arg", f"BASE_IMAGE={base}"]
+    if arch == "arm64":
+        build += ["--platform", "linux/arm64"]
     jobs: list[tuple[str, subprocess.Popen[bytes], tempfile._TemporaryFileWrapper[bytes]]] = []
     started = time.monotonic()
 
@@ -225,15 +318,14 @@ def build_images() -> str:
         jobs.append((name, proc, out))
 
     with machine_lock():
-        nginx_needed = not image_exists(NGINX_IMAGE)
-        if nginx_needed:
+        if not image_exists(nginx):
             # a Dockerfile on stdin: no build context at all
-            spawn("nginx image", [*build, "-t", NGINX_IMAGE, "-"], NGINX_DOCKERFILE.read_bytes())
+            spawn("nginx image", [*build, "-t", nginx, "-"], NGINX_DOCKERFILE.read_bytes())
         spawn("project image", [*build, "--label", TEST_LABEL, "-t", tag, str(ROOT)])
         failures = []
         for name, proc, out in jobs:
             try:
-                code = proc.wait(timeout=600)
+                code = proc.wait(timeout=1200 if arch == "arm64" else 600)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 code = -1
@@ -290,7 +382,12 @@ class Stack:
     """One compose project of docker-compose.yml + tests/deploy/compose.test.yml."""
 
     def __init__(
-        self, compose: Sequence[str], image: str, suffix: str, extra: Sequence[Path] = ()
+        self,
+        compose: Sequence[str],
+        image: str,
+        suffix: str,
+        extra: Sequence[Path] = (),
+        nginx: str = NGINX_IMAGE,
     ) -> None:
         #: The compose command: ``docker-compose`` or ``docker compose``.
         self.compose = list(compose)
@@ -304,7 +401,7 @@ class Stack:
         self.env = dict(os.environ)
         self.env.update(
             SIMBRIDGE_TEST_IMAGE=image,
-            NGINX_IMAGE=NGINX_IMAGE,
+            NGINX_IMAGE=nginx,
             WS_PUBLISH=f"127.0.0.1:{self.ws_port}",
             WEB_PUBLISH=f"127.0.0.1:{self.web_port}",
         )
