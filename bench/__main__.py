@@ -30,6 +30,12 @@ DEPLOY = {
     "docker": "the ros2-web-bridge container: image size, RSS idle / 10 clients, CPU % vs native",
 }
 
+#: The Raspberry Pi 4B figures (issue 16; root, for a cgroup: ``python -m bench pi``, ~8 minutes,
+#: not in the default run): a Pi core's worth of CPU derived from published Pi 4B benchmarks.
+PI = {
+    "pi": "one page, 10 pages, the 30-robot classroom inside a Pi 4B core's CPU budget vs no "
+    "limit; where the budget runs out; cold start; idle RSS",
+}
 
 #: Reliability figures of issue 7, run by name (``python -m bench hostile stall churn soak``).
 RELIABILITY = {
