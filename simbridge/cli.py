@@ -16,8 +16,6 @@ import os
 import signal
 import ssl
 import sys
-import urllib.error
-import urllib.request
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -393,6 +391,10 @@ def _cmd_healthcheck(argv: Sequence[str]) -> int:
     parser.add_argument("--timeout", type=float, default=3.0, help="seconds (default: 3)")
     args = parser.parse_args(argv)
     url = args.url or f"http://127.0.0.1:{_env('PORT', '9090')}/healthz"
+    # here, not at the top: urllib.request brings http.client and email (2.6 MB a server never uses)
+    import urllib.error
+    import urllib.request
+
     try:
         with urllib.request.urlopen(url, timeout=args.timeout) as response:
             body = response.read()
