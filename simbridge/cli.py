@@ -317,6 +317,7 @@ async def _serve(
             print(f"simbridge: {err}", file=sys.stderr)
             return 2
         app.tick_hooks.append(recorder.tick)
+    _release_startup_memory()
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
@@ -331,6 +332,22 @@ async def _serve(
         recorder.close()
         print(f"simbridge: recorded {recorder.writer.count} messages to {record and record[0]}/")
     return 0
+
+
+def _release_startup_memory() -> None:
+    """Give the heap that start-up freed back to the system (glibc's ``malloc_trim``).
+
+    Building the world, the message types and the configuration allocates and frees a few MB that
+    glibc keeps for reuse; an idle server (a Pi runs it all day) need not hold them: about 2 MB
+    of its resident memory. A no-op where the C library has no ``malloc_trim`` (musl).
+    """
+    import ctypes  # numpy has imported it already
+
+    try:
+        trim = ctypes.CDLL(None).malloc_trim
+    except (AttributeError, OSError):
+        return
+    trim(0)
 
 
 def _cmd_run(argv: Sequence[str]) -> int:
