@@ -5,6 +5,10 @@
 #
 # Multi-arch (a Raspberry Pi 4B/5 with a 64-bit OS, and an x86-64 class server):
 #   docker buildx build --platform linux/amd64,linux/arm64 -t REGISTRY/simbridge:TAG --push .
+# or, without buildx (Debian's docker.io), the arm64 image alone on an x86-64 machine whose kernel
+# runs arm64 programs (qemu-user-static registered with binfmt_misc; docs/deploy.md):
+#   docker build --platform linux/arm64 -t simbridge:arm64 .
+# The tests build and run it that way (tests/deploy/test_arm64.py, `make test-arm64`).
 # 32-bit ARM (armv7, 32-bit Raspberry Pi OS) is NOT supported: numpy and PyYAML publish no
 # armv7 wheels, so pip would compile them (hours under emulation). Use a 64-bit OS on the Pi.
 #
