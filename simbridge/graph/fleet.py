@@ -104,7 +104,7 @@ def install_fleet(bridge: Fleet) -> None:
     if not registry.known(CONTACT_TYPE):
         registry.register_msg(CONTACT_TYPE, CONTACT_DEFINITION)
     for name, text in _SERVICES.items():
-        if name not in registry.services:
+        if not registry.has_service(name):
             registry.register_srv(name, text)
     world, graph = bridge.world, bridge.graph
 

@@ -73,7 +73,7 @@ class SimClock:
         self.topic = graph.advertise(CLOCK_TOPIC, "rosgraph_msgs/msg/Clock", SIM_NODE)
         graph.add_service("/sim/pause", "std_srvs/srv/SetBool", SIM_NODE, self._pause)
         graph.add_service("/sim/step", "std_srvs/srv/Trigger", SIM_NODE, self._step)
-        if RTF_TYPE not in graph.registry.services:
+        if not graph.registry.has_service(RTF_TYPE):
             graph.registry.register_srv(RTF_TYPE, RTF_DEFINITION)
         graph.add_service(
             "/sim/set_real_time_factor",

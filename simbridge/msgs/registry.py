@@ -8,12 +8,14 @@ simbridge's own) are registered from ``.msg``/``.srv`` text with :meth:`TypeRegi
 
 from __future__ import annotations
 
+import functools
 import re
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.msg import get_types_from_msg
+from rosbags.typesys.store import Typestore
 
 from simbridge.errors import TypeNotFoundError
 
@@ -123,20 +125,43 @@ class TypeRegistry:
     """Every interface type simbridge knows, looked up by any accepted spelling."""
 
     def __init__(self, store: Stores = Stores.LATEST, *, interfaces: bool = True) -> None:
-        #: The rosbags type store: definitions, CDR serializers, message classes.
-        self.store = get_typestore(store)
+        self._store = get_typestore(store)
         #: Compiled specs by canonical name, filled lazily.
         self._specs: dict[str, MessageSpec] = {}
-        #: Services: ``pkg/srv/Type`` -> (request message, response message).
-        self.services: dict[str, tuple[str, str]] = {}
-        #: Actions: ``pkg/action/Type`` -> (goal, result, feedback messages).
-        self.actions: dict[str, tuple[str, str, str]] = {}
+        self._services: dict[str, tuple[str, str]] = {}
+        self._actions: dict[str, tuple[str, str, str]] = {}
         #: The .msg text each registered (non-rosbags) message was defined with.
         self.texts: dict[str, str] = {}
         self._batch: dict[str, Any] | None = None
         #: definition_text results (rosapi topics_and_raw_types is polled every 3 s by Lichtblick).
         self._full_texts: dict[str, str] = {}
-        if interfaces:
+        # simbridge's service/action interfaces (simbridge.msgs.interfaces) are added by the first
+        # lookup that needs one of them or a full listing: an idle server never does, and their
+        # generated classes are 2.9 MB of its resident memory.
+        self._interfaces_pending = interfaces
+
+    @property
+    def store(self) -> Typestore:
+        """The rosbags type store: definitions, CDR serializers, message classes (all of them)."""
+        self._need()
+        return self._store
+
+    @property
+    def services(self) -> dict[str, tuple[str, str]]:
+        """Services: ``pkg/srv/Type`` -> (request message, response message)."""
+        self._need()
+        return self._services
+
+    @property
+    def actions(self) -> dict[str, tuple[str, str, str]]:
+        """Actions: ``pkg/action/Type`` -> (goal, result, feedback messages)."""
+        self._need()
+        return self._actions
+
+    def _need(self, canonical: str | None = None) -> None:
+        """Add the interfaces now, if ``canonical`` is one of their names (None: any listing)."""
+        if self._interfaces_pending and (canonical is None or canonical in _interface_names()):
+            self._interfaces_pending = False
             self._add_interfaces()
 
     def _add_interfaces(self) -> None:
@@ -146,26 +171,26 @@ class TypeRegistry:
             from simbridge.msgs.interfaces import ACTIONS, MESSAGES, SERVICES
 
             fresh = TypeRegistry(interfaces=False)
-            before = set(fresh.store.fielddefs)
+            before = set(fresh._store.fielddefs)
             fresh.register_many(
                 [("msg", n, t) for n, t in MESSAGES.items()]
                 + [("srv", n, t) for n, t in SERVICES.items()]
                 + [("action", n, t) for n, t in ACTIONS.items()]
             )
-            added = set(fresh.store.fielddefs) - before
+            added = set(fresh._store.fielddefs) - before
             _INTERFACES = (
-                {k: fresh.store.fielddefs[k] for k in added},
-                {k: fresh.store.types[k] for k in added},
-                fresh.services,
-                fresh.actions,
+                {k: fresh._store.fielddefs[k] for k in added},
+                {k: fresh._store.types[k] for k in added},
+                fresh._services,
+                fresh._actions,
                 fresh.texts,
             )
         fielddefs, types, services, actions, texts = _INTERFACES
-        for name in fielddefs.keys() - self.store.fielddefs.keys():
-            self.store.fielddefs[name] = fielddefs[name]
-            self.store.types[name] = types[name]
-        self.services.update(services)
-        self.actions.update(actions)
+        for name in fielddefs.keys() - self._store.fielddefs.keys():
+            self._store.fielddefs[name] = fielddefs[name]
+            self._store.types[name] = types[name]
+        self._services.update(services)
+        self._actions.update(actions)
         self.texts.update(texts)
 
     # -- lookup -----------------------------------------------------------------------------
@@ -173,9 +198,11 @@ class TypeRegistry:
     def known(self, name: str) -> bool:
         """Return whether the message type (any accepted spelling) is known."""
         try:
-            return normalize_type(name) in self.store.fielddefs
+            canonical = normalize_type(name)
         except TypeNotFoundError:
             return False
+        self._need(canonical)
+        return canonical in self._store.fielddefs
 
     def spec(self, name: str) -> MessageSpec:
         """Return the compiled spec of a message type.
@@ -187,8 +214,9 @@ class TypeRegistry:
         cached = self._specs.get(canonical)
         if cached is not None:
             return cached
+        self._need(canonical)
         try:
-            consts, fields = self.store.fielddefs[canonical]
+            consts, fields = self._store.fielddefs[canonical]
         except KeyError:
             msg = f"unknown message type '{name}'"
             raise TypeNotFoundError(msg) from None
@@ -202,7 +230,8 @@ class TypeRegistry:
 
     def types(self) -> list[str]:
         """Return every known message type name, sorted."""
-        return sorted(self.store.fielddefs)
+        self._need()
+        return sorted(self._store.fielddefs)
 
     def definition_text(self, name: str) -> str:
         """Return the full ``.msg`` text with each dependency in a ``MSG: pkg/Type`` section.
@@ -213,7 +242,7 @@ class TypeRegistry:
         canonical = self.spec(name).name
         cached = self._full_texts.get(canonical)
         if cached is None:
-            text, _digest = self.store.generate_msgdef(canonical, ros_version=2)
+            text, _digest = self._store.generate_msgdef(canonical, ros_version=2)
             cached = self._full_texts[canonical] = str(text)
         return cached
 
@@ -224,7 +253,8 @@ class TypeRegistry:
             TypeNotFoundError: the name is malformed or the service type is unknown.
         """
         canonical = normalize_type(name, "srv")
-        parts = self.services.get(canonical)
+        self._need(canonical)
+        parts = self._services.get(canonical)
         if parts is None:
             msg = f"unknown service type '{name}'"
             raise TypeNotFoundError(msg)
@@ -237,7 +267,8 @@ class TypeRegistry:
             TypeNotFoundError: the name is malformed or the action type is unknown.
         """
         canonical = normalize_type(name, "action")
-        parts = self.actions.get(canonical)
+        self._need(canonical)
+        parts = self._actions.get(canonical)
         if parts is None:
             msg = f"unknown action type '{name}'"
             raise TypeNotFoundError(msg)
@@ -246,6 +277,7 @@ class TypeRegistry:
     def message_text(self, name: str) -> str:
         """Return the .msg text of one message type (without its dependencies)."""
         canonical = normalize_type(name)
+        self._need(canonical)
         text = self.texts.get(canonical)
         if text is not None:
             return text
@@ -273,7 +305,7 @@ class TypeRegistry:
         if self._batch is not None:
             self._batch.update(renamed)
         else:
-            self.store.register(renamed)
+            self._store.register(renamed)
         self._specs.pop(name, None)
         self._full_texts.clear()
         self.texts[name] = text
@@ -293,9 +325,16 @@ class TypeRegistry:
             batch = self._batch
         finally:
             self._batch = None
-        self.store.register(batch)
+        self._store.register(batch)
         self._specs.clear()
         self._full_texts.clear()
+
+    def has_service(self, name: str) -> bool:
+        """Return whether the service type is known (without adding the interfaces for it)."""
+        canonical = normalize_type(name, "srv")
+        return canonical in self._services or (
+            self._interfaces_pending and canonical in _interface_names()
+        )
 
     def register_srv(self, name: str, text: str) -> str:
         """Register a service type from ``.srv`` text (request ``---`` response)."""
@@ -303,7 +342,7 @@ class TypeRegistry:
         request, response = _sections(text, 2, name)
         self.register_msg(f"{canonical}_Request", request)
         self.register_msg(f"{canonical}_Response", response)
-        self.services[canonical] = (f"{canonical}_Request", f"{canonical}_Response")
+        self._services[canonical] = (f"{canonical}_Request", f"{canonical}_Response")
         return canonical
 
     def register_action(self, name: str, text: str) -> str:
@@ -313,11 +352,23 @@ class TypeRegistry:
         names = (f"{canonical}_Goal", f"{canonical}_Result", f"{canonical}_Feedback")
         for part, body in zip(names, (goal, result, feedback), strict=True):
             self.register_msg(part, body)
-        self.actions[canonical] = names
+        self._actions[canonical] = names
         return canonical
 
 
 _INTERFACES: Any = None
+
+
+@functools.cache
+def _interface_names() -> frozenset[str]:
+    """Every type name simbridge.msgs.interfaces defines: messages, services, actions, parts."""
+    from simbridge.msgs.interfaces import ACTIONS, MESSAGES, SERVICES
+
+    names = set(MESSAGES) | set(SERVICES) | set(ACTIONS)
+    names.update(f"{srv}_{part}" for srv in SERVICES for part in ("Request", "Response"))
+    names.update(f"{act}_{part}" for act in ACTIONS for part in ("Goal", "Result", "Feedback"))
+    return frozenset(names)
+
 
 #: Parsed .msg texts, shared by every registry of the process (parsing is the slow part).
 _PARSED: dict[tuple[str, str], Any] = {}

@@ -91,3 +91,37 @@ def test_definition_text_is_cached_and_registration_invalidates_it() -> None:
     registry.register_msg("my_pkg/msg/Probe", "geometry_msgs/Point p")
     assert registry.definition_text("my_pkg/msg/Probe").startswith("geometry_msgs/Point p\n")
     assert registry.definition_text("nav_msgs/msg/Odometry") == first
+
+
+def test_interfaces_are_generated_only_when_a_lookup_needs_one() -> None:
+    """Standard lookups and has_service leave them pending; any interface lookup adds them all."""
+    registry = TypeRegistry()
+    assert registry.known("nav_msgs/Odometry")
+    assert registry.has_service("std_srvs/srv/Trigger")
+    assert "std_srvs/srv/Trigger_Request" not in registry._store.fielddefs
+    assert registry.service("std_srvs/Trigger") == (
+        "std_srvs/srv/Trigger_Request",
+        "std_srvs/srv/Trigger_Response",
+    )
+    assert registry.known("rosapi_msgs/msg/TypeDef")
+    assert "example_interfaces/action/Fibonacci" in registry.actions
+
+
+@pytest.mark.parametrize(
+    "first",
+    [
+        lambda r: r.known("rosapi_msgs/TypeDef"),
+        lambda r: r.spec("std_srvs/srv/SetBool_Request"),
+        lambda r: r.action("example_interfaces/action/Fibonacci"),
+        lambda r: r.types(),
+        lambda r: r.store,
+        lambda r: r.services,
+    ],
+)
+def test_any_first_lookup_of_an_interface_finds_it(first: object) -> None:
+    """Whichever lookup comes first, the interfaces are there for it and for the next ones."""
+    registry = TypeRegistry()
+    assert callable(first)
+    first(registry)
+    assert "std_srvs/srv/SetBool_Request" in registry.types()
+    assert registry.spec("std_srvs/srv/SetBool_Request").fields[0].name == "data"
