@@ -133,12 +133,16 @@ class App:
         self.web = WebApp(static_dir or resource_dir("static"), self.health)
         #: The WebSocket server.
         self.server = BridgeServer(self.graph, self.settings, self.web)
+        #: What each connection may do (/simbridge/access), for pages.
+        self.roles = self.robot.roles
         install_admin(
             self.web,
             graph=self.graph,
             world=self.world,
             clients=lambda: self.server.clients,
             settings=self.settings,
+            estop=self.estop,
+            roles=self.roles,
         )
         #: Loop timing.
         self.stats = LoopStats()

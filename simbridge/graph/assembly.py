@@ -19,6 +19,7 @@ from simbridge.config import ServerSettings
 from simbridge.graph.bridge import RobotBridge
 from simbridge.graph.estop import EStop
 from simbridge.graph.graph import Graph
+from simbridge.graph.roles import Roles
 from simbridge.graph.rosapi import install_rosapi
 from simbridge.graph.safety import Safety
 from simbridge.graph.simclock import SimClock
@@ -42,8 +43,11 @@ class RobotGraph:
     bridge: RobotBridge
     #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
     simclock: SimClock
-    #: The latching emergency stop (/estop, /estop/reset, /estop/state).
+    #: The latching emergency stops, each with a scope (/estop, /NAME/estop, their resets and
+    #: state topics).
     estop: EStop
+    #: What each connection may do (/simbridge/access), for pages.
+    roles: Roles
     #: The walls as a latched /walls marker.
     walls: WallsPublisher
     #: tf2_web_republisher (/republish_tfs, /tf2_web_republisher).
@@ -96,6 +100,9 @@ def build_robot_graph(
     bridge = RobotBridge(graph, world)
     simclock = SimClock(graph, world, advance, use_sim_time=use_sim_time)
     estop = EStop(graph, world)
+    bridge.on_robot_added.append(estop.add_robot)
+    bridge.on_robot_removed.append(estop.remove_robot)
+    roles = Roles(graph, world, estop)
     walls = WallsPublisher(graph, world)
     tf_republisher = install_tf_republisher(graph)
     safety = Safety(graph, world)
@@ -106,6 +113,7 @@ def build_robot_graph(
         bridge=bridge,
         simclock=simclock,
         estop=estop,
+        roles=roles,
         walls=walls,
         tf_republisher=tf_republisher,
         safety=safety,

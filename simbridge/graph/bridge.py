@@ -89,6 +89,8 @@ class RobotBridge:
         self.robots: dict[str, _RobotTopics] = {}
         #: Called with the name of each robot removed, after its topics are gone (extensions).
         self.on_robot_removed: list[Callable[[str], None]] = []
+        #: Called with a robot's name after its topics are created (spawned robots too).
+        self.on_robot_added: list[Callable[[str], None]] = []
         for robot in world.robots.values():
             self.add_robot(robot)
         graph.add_service("/reset", "std_srvs/srv/Empty", ROBOT_NODE, self._reset)
@@ -133,6 +135,8 @@ class RobotBridge:
             on_cmd_vel,
         )
         add_robot_services(self, robot)
+        for callback in self.on_robot_added:
+            callback(robot.name)
 
     def remove_robot(self, name: str) -> None:
         """Remove the topics and services of one robot (the world keeps its own list)."""

@@ -69,7 +69,6 @@ DEFAULT_ADMIN_SERVICES = frozenset(
         "/reset",
         "/rosapi/set_param",
         "/rosapi/delete_param",
-        "/estop/reset",
         "/spawn",
         "/kill",
         "/sim/pause",

@@ -21,6 +21,7 @@ import itertools
 import logging
 import math
 from collections.abc import Callable
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
 
@@ -36,6 +37,7 @@ __all__ = [
     "PendingCall",
     "Service",
     "ServiceTable",
+    "caller",
     "service_response",
     "typed_calls",
 ]
@@ -47,6 +49,9 @@ logger = logging.getLogger(__name__)
 #: ``args`` as sent (object, list or None). Raise :class:`ServiceError` to answer
 #: ``result: false`` with the error text.
 Handler = Callable[[Any], dict[str, Any]]
+#: The client whose call an in-process handler is answering (None outside a call): handlers
+#: whose answer depends on who asks (the e-stop's scope, ``/simbridge/access``) read it.
+caller: ContextVar[Peer | None] = ContextVar("caller", default=None)
 #: Turns ``(service type, args as sent)`` into the request to hand on, or raises
 #: :class:`ServiceError`; ``None`` from it means "type unknown: pass args through unchanged".
 Prepare = Callable[[str, Any], Any]
@@ -207,6 +212,7 @@ class ServiceTable:
             if prepared is not None:
                 request = prepared
         if service.handler is not None:
+            token = caller.set(peer)
             try:
                 values: Any = service.handler(request)
                 ok = True
@@ -215,6 +221,8 @@ class ServiceTable:
             except Exception as err:  # a handler bug must not break the connection
                 logger.exception("service %s failed", name)
                 values, ok = f"service {name} failed: {err}", False
+            finally:
+                caller.reset(token)
             self.reply(peer, service_response(op.service, values, result=ok, op_id=op.id))
             return
         provider = service.provider

@@ -20,12 +20,26 @@ from simbridge.sim.kinematics import RobotState, clamp_command, integrate, wrap_
 from simbridge.sim.lidar import FloatArray, beam_angles, raycast_batch, segments_array
 
 
-__all__ = ["KinematicModel", "MotionModel", "Robot", "World"]
+__all__ = ["PER_ROBOT_PARAMS", "KinematicModel", "MotionModel", "Robot", "World"]
 
 logger = logging.getLogger(__name__)
 
 #: Command magnitude (m/s or rad/s) refused outright rather than clamped to the limits.
 ABSURD_VELOCITY = 1000.0
+#: Robot parameters one robot may have of its own (:meth:`World.set_robot_params`). The
+#: footprint radius is shared (collisions and scans use one radius), and so is the cmd_vel type.
+PER_ROBOT_PARAMS = frozenset(
+    {
+        "mass",
+        "inertia",
+        "wheel_radius",
+        "wheelbase",
+        "max_linear_velocity",
+        "max_angular_velocity",
+        "max_wheel_torque",
+        "velocity_gain",
+    }
+)
 
 
 class MotionModel(Protocol):
@@ -62,6 +76,21 @@ class Robot:
     #: Last received command (finite, not yet clamped: limits may change at run time).
     cmd_v: float = 0.0
     cmd_omega: float = 0.0
+    #: This robot's own values of :data:`PER_ROBOT_PARAMS` (a heavier robot for one group),
+    #: over the shared ``params.robot``; empty: the shared parameters.
+    overrides: dict[str, float] = field(default_factory=dict)
+    #: The shared parameters and this robot's parameters made from them (rebuilt when the
+    #: shared ones are replaced).
+    cached: tuple[RobotParams, RobotParams] | None = None
+
+    def params(self, shared: RobotParams) -> RobotParams:
+        """Return the parameters this robot moves with: ``shared`` with its overrides."""
+        if not self.overrides:
+            return shared
+        if self.cached is None or self.cached[0] is not shared:
+            own = RobotParams.model_validate({**shared.model_dump(), **self.overrides})
+            self.cached = (shared, own)
+        return self.cached[1]
 
     def frame(self, frame: str) -> str:
         """Return the TF frame id ``frame`` of this robot (``r1/base_link`` when named)."""
@@ -104,9 +133,12 @@ class World:
         self.failures = 0
         #: Steps since start (or the last reset).
         self.steps = 0
-        #: Emergency stop latched: commands are ignored and every robot is held still until
-        #: :meth:`release_estop` (a world reset does not release it).
+        #: Emergency stop latched for every robot (also robots added later): commands are
+        #: ignored and every robot is held still until :meth:`release_estop` (a world reset
+        #: does not release it).
         self.estopped = False
+        #: Robots held still by an emergency stop of their own (see :meth:`hold`).
+        self.held: frozenset[str] = frozenset()
         #: Seeded noise source (LiDAR noise); reseeded by reset for repeatable runs.
         self._seed = seed
         self.rng = np.random.default_rng(seed)
@@ -143,10 +175,10 @@ class World:
             )
             raise ValueError(msg)
         robot = self.robots[name]
-        if self.estopped:
+        if self.halted(name):
             return 0.0, 0.0
         robot.cmd_v, robot.cmd_omega = v, omega
-        limits = self.params.robot
+        limits = self.robot_params(name)
         return clamp_command(v, omega, limits.max_linear_velocity, limits.max_angular_velocity)
 
     def step(self) -> None:
@@ -161,11 +193,12 @@ class World:
         its start pose, stopped; the other robots and the loop go on.
         """
         dt = self.dt
-        limits = self.params.robot
+        shared = self.params.robot
         robots = list(self.robots.values())
         p0 = [(r.state.x, r.state.y) for r in robots]
         for i, robot in enumerate(robots):
-            if self.estopped:
+            limits = robot.params(shared)
+            if self.estopped or robot.name in self.held:
                 robot.cmd_v = robot.cmd_omega = 0.0
                 robot.state.v = robot.state.omega = 0.0
                 continue
@@ -193,7 +226,7 @@ class World:
         if p1 != p0 and (len(robots) > 1 or self.segments.shape[0]):
             start = np.array(p0, dtype=np.float64).reshape(-1, 2)
             proposed = np.array(p1, dtype=np.float64)
-            final, contacts = resolve_moves(start, proposed, limits.radius, self.segments)
+            final, contacts = resolve_moves(start, proposed, shared.radius, self.segments)
             for c in contacts:
                 robot = robots[c.robot]
                 s = robot.state
@@ -278,6 +311,51 @@ class World:
     def release_estop(self) -> None:
         """Release the emergency stop; robots stay still until the next command."""
         self.estopped = False
+
+    def halted(self, name: str) -> bool:
+        """Whether robot ``name`` is held by an emergency stop (its own or everyone's)."""
+        return self.estopped or name in self.held
+
+    def hold(self, names: frozenset[str]) -> None:
+        """Hold exactly the robots ``names`` still (besides :attr:`estopped`).
+
+        Newly held robots halt at once; robots not named are released (they stay still until
+        commanded).
+        """
+        for name in names - self.held:
+            robot = self.robots.get(name)
+            if robot is not None:
+                robot.cmd_v = robot.cmd_omega = 0.0
+                robot.state.v = robot.state.omega = 0.0
+        self.held = frozenset(names)
+
+    def robot_params(self, name: str) -> RobotParams:
+        """Return the motion parameters robot ``name`` moves with (its own, or the shared)."""
+        robot = self.robots.get(name)
+        return self.params.robot if robot is None else robot.params(self.params.robot)
+
+    def set_robot_params(self, name: str, changes: dict[str, float | None]) -> RobotParams:
+        """Give robot ``name`` values of its own; return the parameters it now moves with.
+
+        ``changes`` are names of :data:`PER_ROBOT_PARAMS` (without ``robot.``), None meaning
+        back to the shared value; all or nothing.
+
+        Raises:
+            KeyError: no robot of that name.
+            ValueError: a name is not per-robot, or a value is out of range (nothing changes).
+        """
+        robot = self.robots[name]
+        unknown = sorted(set(changes) - PER_ROBOT_PARAMS)
+        if unknown:
+            allowed = ", ".join(f"robot.{n}" for n in sorted(PER_ROBOT_PARAMS))
+            msg = f"robot.{unknown[0]} is shared by every robot; a robot may have its own {allowed}"
+            raise ValueError(msg)
+        overrides = {**robot.overrides, **changes}
+        kept = {k: v for k, v in overrides.items() if v is not None}
+        own = RobotParams.model_validate({**self.params.robot.model_dump(), **kept})
+        robot.overrides = {k: getattr(own, k) for k in kept}
+        robot.cached = (self.params.robot, own) if kept else None
+        return own
 
     # -- robots at run time ----------------------------------------------------------------
 

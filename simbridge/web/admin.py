@@ -12,7 +12,16 @@ path                       method  what it does
 ``/api/admin/params``      POST    ``{"changes": {"robot.mass": 3.0}}``: all or nothing
 ``/api/admin/motion``      POST    ``{"model": "dynamic"}`` (or ``"kinematic"``)
 ``/api/admin/reset``       POST    every robot back to its start pose, stopped
+``/api/admin/estop``       POST    ``{"action": "latch"}`` (the global e-stop), ``{"action":
+                                  "release", "id": 3}`` (one latch, whoever latched it) or
+                                  ``{"action": "release_all"}``
+``/api/admin/robot``       POST    ``{"robot": "r1", "changes": {"robot.mass": 3.0}}``: that
+                                  robot's own values (``null``: back to the shared value)
 =========================  ======  ==========================================================
+
+The state lists each client by the robot it may drive and how it connected (``client 7 (r1's
+token)``), every latched e-stop with who latched it, each robot's own parameters, and for each
+parameter what it affects (``affects``): e.g. mass and inertia matter in the dynamic model only.
 
 :func:`check_admin_token` is the one place the token is compared (constant time); other
 administrative entry points (services, CLI) reuse it.
@@ -29,8 +38,12 @@ import orjson
 from simbridge.config import ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.graph import ROBOT_NODE, Graph
+from simbridge.graph.estop import INSTRUCTOR, EStop, connection_rights, describe_peer
+from simbridge.graph.guard import token_access
+from simbridge.graph.roles import Roles
 from simbridge.sim import KinematicModel, MotionModel, World
 from simbridge.sim.dynamics import DynamicModel
+from simbridge.sim.world import PER_ROBOT_PARAMS
 from simbridge.web.http import HttpRequest, HttpResponse, WebApp
 
 
@@ -51,6 +64,32 @@ MOTION_MODELS: dict[str, Callable[[], MotionModel]] = {
     "kinematic": KinematicModel,
     "dynamic": DynamicModel,
 }
+
+
+_DYNAMIC = "the dynamic motion model only (the kinematic model ignores it)"
+#: What each parameter changes, for the instructor (by dotted name or section prefix).
+AFFECTS: dict[str, str] = {
+    "robot.mass": _DYNAMIC,
+    "robot.inertia": _DYNAMIC,
+    "robot.wheel_radius": _DYNAMIC,
+    "robot.max_wheel_torque": _DYNAMIC,
+    "robot.velocity_gain": _DYNAMIC,
+    "robot.wheelbase": "the dynamic motion model (turning torque) and /tf_static wheel frames",
+    "robot.max_linear_velocity": "both motion models: /cmd_vel is clamped to it",
+    "robot.max_angular_velocity": "both motion models: /cmd_vel is clamped to it",
+    "robot.radius": "collisions, LiDAR returns off robots and the drawn footprint (all robots)",
+    "robot.cmd_vel_stamped": "the type of every /cmd_vel (startup only)",
+    "lidar.": "every robot's /scan",
+    "sim.": "the simulation loop",
+    "safety.": "the server's safety watchdog",
+}
+
+
+def affects(name: str) -> str:
+    """Return what parameter ``name`` changes, in words ('' when not known)."""
+    if name in AFFECTS:
+        return AFFECTS[name]
+    return next((text for prefix, text in AFFECTS.items() if name.startswith(prefix)), "")
 
 
 class AdminRefused(SimbridgeError):
@@ -93,6 +132,13 @@ def token_from_headers(headers: Mapping[str, str]) -> str | None:
     return headers.get("x-admin-token") or None
 
 
+def _first_line(err: Exception) -> str:
+    lines = [line.strip() for line in str(err).splitlines() if line.strip()]
+    if len(lines) >= 3 and "validation error" in lines[0]:
+        return f"{lines[1]}: {lines[2].split(' [')[0]}"  # pydantic: field, then the reason
+    return lines[0] if lines else type(err).__name__
+
+
 def _body(request: HttpRequest) -> dict[str, Any]:
     try:
         value = orjson.loads(request.body or b"{}")
@@ -106,21 +152,34 @@ def _body(request: HttpRequest) -> dict[str, Any]:
 
 
 class _Admin:
-    def __init__(self, graph: Graph, world: World, clients: Callable[[], Iterable[Client]]) -> None:
+    def __init__(
+        self,
+        graph: Graph,
+        world: World,
+        clients: Callable[[], Iterable[Client]],
+        estop: EStop,
+        roles: Roles,
+    ) -> None:
         self.graph = graph
         self.world = world
         self.clients = clients
+        self.estops = estop
+        self.roles = roles
 
     def state(self) -> dict[str, Any]:
         params = self.graph.params.node(ROBOT_NODE)
         topics = self.graph.topics.topics.values()
-        clients = []
+        clients: list[dict[str, Any]] = []
         for c in sorted(self.clients(), key=lambda c: c.session.client_id):
             subs = sorted(t.name for t in topics if any(p is c for p, _ in t.subscriptions))
+            robots = self.roles.robots_of(c)
             clients.append(
                 {
                     "id": c.session.client_id,
                     "label": c.label,
+                    "name": describe_peer(c),
+                    "robots": robots,
+                    "any_robot": connection_rights(c)[0] == "*",
                     "subscriptions": subs,
                     "publishing": sorted(c.session.advertisements),
                     "frames_sent": c.frames_sent,
@@ -128,14 +187,30 @@ class _Admin:
                     "dropped": c.queue.dropped,
                 }
             )
+        values = params.read()
+        robot_rows: dict[str, dict[str, Any]] = {}
+        for name, robot in sorted(self.world.robots.items()):
+            s = robot.state
+            robot_rows[name] = {
+                "own": {f"robot.{k}": v for k, v in sorted(robot.overrides.items())},
+                "pose": [round(s.x, 3), round(s.y, 3), round(s.theta, 3)],
+                "held": self.world.halted(name),
+                "clients": [
+                    c["name"] for c in clients if name in c["robots"] and not c["any_robot"]
+                ],
+            }
         return {
             "clients": clients,
-            "params": params.read(),
+            "params": values,
             "descriptions": params.descriptions,
+            "affects": {name: affects(name) for name in values},
             "read_only": sorted(params.read_only),
+            "per_robot": sorted(f"robot.{n}" for n in PER_ROBOT_PARAMS),
+            "robots": robot_rows,
             "motion_model": self.world.motion.name,
             "motion_models": sorted(MOTION_MODELS),
             "estopped": self.world.estopped,
+            "estops": [latch.summary() for latch in self.estops.latches.values()],
             "sim_time_s": round(self.world.time, 3),
         }
 
@@ -157,10 +232,95 @@ class _Admin:
         self.graph.log("info", f"motion model switched to '{name}' by the instructor")
         return {"motion_model": name}
 
+    def estop(self, body: dict[str, Any]) -> dict[str, Any]:
+        estop = self.estops
+        action = body.get("action")
+        if action == "latch":
+            latch = estop.latch_global(INSTRUCTOR)
+            return {"latched": latch.summary()}
+        if action == "release":
+            latch_id = body.get("id")
+            if not isinstance(latch_id, int) or isinstance(latch_id, bool):
+                msg = 'expected {"action": "release", "id": N} with the id of a latched e-stop'
+                raise ServiceError(msg)
+            return {"released": [estop.release_latch(latch_id).summary()]}
+        if action == "release_all":
+            released = [estop.release_latch(i).summary() for i in list(estop.latches)]
+            return {"released": released}
+        msg = (
+            f"unknown e-stop action {action!r}; use 'latch', 'release' (with an id) "
+            "or 'release_all'"
+        )
+        raise ServiceError(msg)
+
+    def robot(self, body: dict[str, Any]) -> dict[str, Any]:
+        name, changes = body.get("robot"), body.get("changes")
+        world = self.world
+        if not isinstance(name, str) or name not in world.robots:
+            known = ", ".join(repr(n) for n in sorted(world.robots))
+            msg = f"no robot {name!r}; robots: {known}"
+            raise ServiceError(msg)
+        if not isinstance(changes, dict) or not changes:
+            msg = 'expected {"robot": "r1", "changes": {"robot.mass": 3.0, ...}}'
+            raise ServiceError(msg)
+        own: dict[str, float | None] = {}
+        for key, value in changes.items():
+            if not key.startswith("robot."):
+                msg = f"{key}: only robot.* parameters may differ between robots"
+                raise ServiceError(msg)
+            if value is not None and (
+                isinstance(value, bool) or not isinstance(value, int | float)
+            ):
+                msg = f"{key}: expected a number (or null for the shared value), got {value!r}"
+                raise ServiceError(msg)
+            own[key.removeprefix("robot.")] = value
+        try:
+            world.set_robot_params(name, own)
+        except ValueError as err:
+            raise ServiceError(f"robot {name}: {_first_line(err)}") from None
+        shown = ", ".join(f"{k} = {v}" for k, v in changes.items())
+        self.graph.log("info", f"robot '{name}' parameters set by the instructor: {shown}")
+        robot = world.robots[name]
+        return {"robot": name, "own": {f"robot.{k}": v for k, v in robot.overrides.items()}}
+
     def reset(self, body: dict[str, Any]) -> dict[str, Any]:
         self.world.reset()
         self.graph.log("info", "world reset by the instructor")
         return {"reset": True}
+
+
+def connection_check(
+    settings: ServerSettings, clients: Callable[[], Iterable[Client]], request: HttpRequest
+) -> HttpResponse:
+    """``GET /api/access?token=T``: why a WebSocket upgrade would be refused, for a page.
+
+    A browser learns nothing from a refused upgrade (the HTTP 401 or 503 is hidden from
+    scripts: the socket just closes), so a page that could not connect asks here, on the
+    WebSocket port or the HTTP port, and says why in words: ``token`` is ``"accepted"``,
+    ``"refused"`` or ``"none"``; ``token_required`` whether a connection needs one; ``full``
+    whether ``max_clients`` are connected. It tells nothing the upgrade does not (a refused
+    token is refused there too). Readable from the page's origin (CORS, within
+    ``allowed_origins``).
+    """
+    s = settings
+    connected = len(list(clients()))
+    token = (request.query.get("token") or [""])[0]
+    granted = token_access(s, token) if token else None
+    body = {
+        "server": "simbridge",
+        "token": "none" if not token else ("refused" if granted is None else "accepted"),
+        "token_required": s.auth_required,
+        "full": connected >= s.max_clients,
+        "clients": connected,
+        "max_clients": s.max_clients,
+    }
+    response = HttpResponse.json(body)
+    origin = request.headers.get("origin")
+    if origin and (s.allowed_origins is None or origin in s.allowed_origins):
+        response.headers["Access-Control-Allow-Origin"] = origin
+        response.headers["Vary"] = "Origin"
+    response.headers["Cache-Control"] = "no-store"
+    return response
 
 
 def install_admin(
@@ -170,8 +330,10 @@ def install_admin(
     world: World,
     clients: Callable[[], Iterable[Client]],
     settings: ServerSettings,
+    estop: EStop,
+    roles: Roles,
 ) -> None:
-    """Add the ``/api/admin/*`` routes to ``web``.
+    """Add the ``/api/admin/*`` routes (and ``/api/access``) to ``web``.
 
     Args:
         web: where the routes go.
@@ -179,12 +341,17 @@ def install_admin(
         world: what is reset and whose motion model is switched.
         clients: the connected WebSocket clients, when asked.
         settings: whose ``admin_token`` every request must present.
+        estop: the e-stops the console lists, latches and releases.
+        roles: what each client may drive (the clients' list names their robots).
     """
-    admin = _Admin(graph, world, clients)
+    admin = _Admin(graph, world, clients, estop, roles)
+    web.routes["/api/access"] = lambda request: connection_check(settings, clients, request)
     posts: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
         "/api/admin/params": admin.params,
         "/api/admin/motion": admin.motion,
         "/api/admin/reset": admin.reset,
+        "/api/admin/estop": admin.estop,
+        "/api/admin/robot": admin.robot,
     }
 
     def route(request: HttpRequest) -> HttpResponse:

@@ -225,6 +225,9 @@ async def serve_http(
     """Start the HTTP server (HTTPS with ``ssl``); return it (``sockets`` tells the port)."""
 
     async def handler(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
-        await _serve_connection(app, reader, writer)
+        # a page's idle keep-alive connection is cancelled at shutdown (SIGTERM): end quietly
+        # (asyncio's stream callback would log the cancellation as an error with a traceback)
+        with contextlib.suppress(asyncio.CancelledError):
+            await _serve_connection(app, reader, writer)
 
     return await asyncio.start_server(handler, host, port, limit=_MAX_HEAD, ssl=ssl)

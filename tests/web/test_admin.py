@@ -10,7 +10,7 @@ import pytest
 from simbridge.runner import App
 from simbridge.web.admin import AdminRefused, check_admin_token, token_from_headers
 from tests.conftest import AppFactory
-from tests.helpers import http_url
+from tests.helpers import ROOT, http_url
 
 
 def test_check_admin_token_refuses_without_configured_token_missing_or_wrong() -> None:
@@ -94,3 +94,58 @@ async def _aio(fn: Any, *args: Any) -> Any:
     import asyncio
 
     return await asyncio.to_thread(fn, *args)
+
+
+async def test_admin_lists_and_releases_every_estop_with_who_latched_it(
+    make_app: AppFactory,
+) -> None:
+    app = await make_app(world=ROOT / "config" / "worlds" / "classroom.yaml", admin_token="s3cret")
+    student = app.estop.latch_for(None, "r2")  # as a connection's /r2/estop would
+    status, body = await _aio(request, app, "/api/admin/estop", {"action": "latch"}, "s3cret")
+    assert status == 200 and body["latched"]["global"] is True
+    assert all(app.world.halted(n) for n in app.world.robots)
+    _, state = await _aio(request, app, "/api/admin/state", None, "s3cret")
+    assert [(e["covers"], e["by"]) for e in state["estops"]] == [
+        ("r2", "the instructor (/admin)"),
+        ("every robot", "the instructor (/admin)"),
+    ]
+    glob = state["estops"][1]["id"]
+    status, _ = await _aio(
+        request, app, "/api/admin/estop", {"action": "release", "id": glob}, "s3cret"
+    )
+    assert status == 200 and not app.world.estopped
+    assert app.world.halted("r2") and not app.world.halted("r1")
+    status, body = await _aio(
+        request, app, "/api/admin/estop", {"action": "release", "id": glob}, "s3cret"
+    )
+    assert status == 400 and "released already" in body["error"]
+    await _aio(request, app, "/api/admin/estop", {"action": "release_all"}, "s3cret")
+    assert not app.world.halted("r2") and student.id not in app.estop.latches
+    status, _ = await _aio(request, app, "/api/admin/estop", {"action": "latch"}, "wrong")
+    assert status == 403 and not app.estop.latches
+
+
+async def test_admin_gives_one_robot_parameters_of_its_own(make_app: AppFactory) -> None:
+    app = await make_app(world=ROOT / "config" / "worlds" / "classroom.yaml", admin_token="s3cret")
+    change = {"robot": "r3", "changes": {"robot.mass": 4.5}}
+    status, body = await _aio(request, app, "/api/admin/robot", change, "s3cret")
+    assert status == 200 and body["own"] == {"robot.mass": 4.5}
+    assert app.world.robot_params("r3").mass == 4.5 and app.world.robot_params("r1").mass == 1.5
+    # a shared change reaches r3's other parameters, its own mass stays
+    await _aio(request, app, "/api/admin/params", {"changes": {"robot.inertia": 0.01}}, "s3cret")
+    assert app.world.robot_params("r3").inertia == 0.01 and app.world.robot_params("r3").mass == 4.5
+    _, state = await _aio(request, app, "/api/admin/state", None, "s3cret")
+    assert state["robots"]["r3"]["own"] == {"robot.mass": 4.5}
+    assert "dynamic" in state["affects"]["robot.mass"] and "robot.mass" in state["per_robot"]
+    for bad, why in [
+        ({"robot": "r3", "changes": {"robot.radius": 0.2}}, "shared by every robot"),
+        ({"robot": "r3", "changes": {"robot.mass": -1}}, "mass"),
+        ({"robot": "r9", "changes": {"robot.mass": 2}}, "no robot 'r9'"),
+    ]:
+        status, body = await _aio(request, app, "/api/admin/robot", bad, "s3cret")
+        assert status == 400 and why in body["error"], body
+    assert app.world.robot_params("r3").mass == 4.5
+    await _aio(
+        request, app, "/api/admin/robot", {"robot": "r3", "changes": {"robot.mass": None}}, "s3cret"
+    )
+    assert app.world.robot_params("r3").mass == 1.5 and not app.world.robots["r3"].overrides
