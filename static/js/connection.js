@@ -1,12 +1,20 @@
 // The link to a rosbridge server (roslib 1.4.1, global ROSLIB): reconnect with backoff,
-// re-subscribe after every reconnect, per-topic message rates and ages.
+// re-subscribe after every reconnect, per-topic message rates and ages, and a reason for every
+// state a student can see.
 //
 // roslib 1.x does not reconnect by itself (roslibjs #497), so each attempt makes a fresh
-// ROSLIB.Ros and the subscriptions recorded here are replayed on it.
+// ROSLIB.Ros and the subscriptions recorded here are replayed on it. A browser is told nothing
+// about a refused WebSocket upgrade (the socket just closes), so after a failed attempt the page
+// asks the server why (GET /api/access on the same host and port, simbridge only): a refused
+// token, a full server, or no server at all.
+//
+// The token is kept apart from the URL: the URL shown (status line, URL field, Link tab) never
+// carries it; only the socket's URL does.
 
 const BACKOFF_MIN_MS = 500;
 const BACKOFF_MAX_MS = 8000;
 const RATE_WINDOW_MS = 2000;
+const TOKEN_KEY = 'simbridge-token';
 
 /** Returns the rosbridge URL the page should use: ?url=, else ws://<page host>:9090. */
 export function defaultUrl(loc = window.location) {
@@ -15,6 +23,76 @@ export function defaultUrl(loc = window.location) {
   const host = loc.hostname || '127.0.0.1';
   const bracketed = host.includes(':') ? `[${host}]` : host;
   return `ws://${bracketed}:9090`;
+}
+
+/**
+ * Split a token out of a URL (`ws://h:9090/?token=T`): returns {url, token} with the URL
+ * free of it. A URL that does not parse is returned as it is.
+ */
+export function splitToken(url) {
+  try {
+    const u = new URL(url);
+    const token = u.searchParams.get('token');
+    if (token === null) return { url, token: null };
+    u.searchParams.delete('token');
+    let clean = u.toString();
+    if (!u.search && clean.endsWith('?')) clean = clean.slice(0, -1);
+    return { url: clean, token };
+  } catch (err) {
+    return { url, token: null };
+  }
+}
+
+/**
+ * The page's token, taken once from ?token= (or a ?url= carrying one) and then removed from the
+ * address bar; kept in sessionStorage (this tab only) so a reload keeps it.
+ */
+export function takeToken(loc = window.location, history = window.history, storage = window.sessionStorage) {
+  const params = new URLSearchParams(loc.search);
+  let token = params.get('token');
+  let changed = false;
+  if (token !== null) { params.delete('token'); changed = true; }
+  const url = params.get('url');
+  if (url) {
+    const split = splitToken(url);
+    if (split.token !== null) {
+      token = token ?? split.token;
+      params.set('url', split.url);
+      changed = true;
+    }
+  }
+  if (changed) {
+    const query = params.toString();
+    history.replaceState(null, '', `${loc.pathname}${query ? `?${query}` : ''}${loc.hash}`);
+  }
+  try {
+    if (token !== null) storage.setItem(TOKEN_KEY, token);
+    else token = storage.getItem(TOKEN_KEY);
+  } catch (err) { /* storage off: the token lives for this page only */ }
+  return token || '';
+}
+
+export function storeToken(token, storage = window.sessionStorage) {
+  try {
+    if (token) storage.setItem(TOKEN_KEY, token); else storage.removeItem(TOKEN_KEY);
+  } catch (err) { /* storage off */ }
+}
+
+/** Why `url` cannot be a rosbridge URL, or null when it can. */
+export function urlProblem(url) {
+  let u;
+  try { u = new URL(url); } catch (err) {
+    return `"${url}" is not a URL: use ws://HOST:9090 (the server's address and port)`;
+  }
+  if (u.protocol === 'http:' || u.protocol === 'https:') {
+    const ws = u.protocol === 'https:' ? 'wss' : 'ws';
+    return `"${url}" is a web address: the robot's link starts with ${ws}:// (${ws}://${u.host || 'HOST:9090'})`;
+  }
+  if (u.protocol !== 'ws:' && u.protocol !== 'wss:') {
+    return `"${url}" is not a WebSocket URL: use ws://HOST:9090 (or wss:// behind TLS)`;
+  }
+  if (!u.hostname) return `"${url}" names no host: use ws://HOST:9090`;
+  return null;
 }
 
 /** Per-topic message statistics. */
@@ -34,28 +112,36 @@ class TopicStats {
 }
 
 /**
- * Events (EventTarget): 'state' (detail: {state, url, attempt, retryInMs}), 'connected',
- * 'lost', 'refused' (detail: {topic, text}: the server refused to let the page publish it).
- * state is one of 'connecting', 'connected', 'reconnecting', 'disconnected'.
+ * Events (EventTarget): 'state' (detail: {state, url, attempt, retryInMs, reason}),
+ * 'connected', 'lost', 'refused' (detail: {topic, text}: the server refused to let the page
+ * publish it).
+ * state is one of 'connecting', 'connected', 'reconnecting' (a reason says why: the link was
+ * lost, no server answers, the server is full), 'refused' (the token was refused: no retry
+ * until a new token), 'badurl' (no retry until a new URL), 'disconnected'.
  */
 export class Connection extends EventTarget {
-  constructor(url) {
+  constructor(url, token = '') {
     super();
-    this.url = url;
+    this.url = url;            // as shown: never with the token
+    this.token = token;
     this.state = 'disconnected';
+    this.reason = '';
     this.attempt = 0;
     this.retryAt = 0;
     this.ros = null;
+    this.opened = false;       // the current attempt's socket opened
     this.subs = new Set();     // {name, type, callback, options, topic}
     this.pubs = new Map();     // name -> ROSLIB.Topic on the current ros
     this.stats = new Map();    // name -> TopicStats
     this.timer = null;
-    this.lastError = '';
+    this.generation = 0;
   }
 
-  /** (Re)connect to `url` (default: the current one), resetting the backoff. */
-  connect(url = this.url) {
-    this.url = url;
+  /** (Re)connect to `url` (default: the current one) with `token`, resetting the backoff. */
+  connect(url = this.url, token = this.token) {
+    const split = splitToken(url);
+    this.url = split.url;
+    this.token = split.token ?? token;
     this.attempt = 0;
     this._teardown();
     this._open('connecting');
@@ -64,17 +150,29 @@ export class Connection extends EventTarget {
   /** Close and stay closed. */
   disconnect() {
     this._teardown();
-    this._setState('disconnected');
+    this._setState('disconnected', { reason: '' });
   }
 
-  get connected() { return this.state === 'connected'; }
+  get connected() { return this.state === 'connected' && this.ros !== null; }
+
+  /** The socket's URL: the shown URL with the token. */
+  socketUrl() {
+    if (!this.token) return this.url;
+    const u = new URL(this.url);
+    u.searchParams.set('token', this.token);
+    return u.toString();
+  }
 
   _setState(state, extra = {}) {
     this.state = state;
-    this.dispatchEvent(new CustomEvent('state', { detail: { state, url: this.url, attempt: this.attempt, ...extra } }));
+    if (extra.reason !== undefined) this.reason = extra.reason;
+    this.dispatchEvent(new CustomEvent('state', {
+      detail: { state, url: this.url, attempt: this.attempt, reason: this.reason, ...extra },
+    }));
   }
 
   _teardown() {
+    this.generation += 1;
     clearTimeout(this.timer);
     this.timer = null;
     const ros = this.ros;
@@ -85,43 +183,87 @@ export class Connection extends EventTarget {
   }
 
   _open(state) {
+    const problem = urlProblem(this.url);
+    if (problem) { this._setState('badurl', { reason: problem }); return; }
     this._setState(state);
     let ros;
     try {
-      ros = new ROSLIB.Ros({ url: this.url });
+      ros = new ROSLIB.Ros({ url: this.socketUrl() });
     } catch (err) {
-      this.lastError = String(err.message || err);
-      this._scheduleRetry();
+      this._setState('badurl', { reason: `cannot open ${this.url}: ${err.message || err}` });
       return;
     }
     this.ros = ros;
+    this.opened = false;
     ros.on('connection', () => {
       if (this.ros !== ros) return;
+      this.opened = true;
       this.attempt = 0;
-      this.lastError = '';
       for (const sub of this.subs) this._attach(sub);
-      this._setState('connected');
+      this._setState('connected', { reason: '' });
       this.dispatchEvent(new CustomEvent('connected'));
     });
-    ros.on('error', () => {
-      if (this.ros === ros) this.lastError = 'cannot reach the server';
-    });
+    ros.on('error', () => { /* the close that follows says what happened */ });
     ros.on('close', () => {
       if (this.ros !== ros) return;
+      const wasOpen = this.opened;
+      // not connected any more before anyone hears of it: a publish from a 'lost' listener
+      // (the teleop's zero) must not reach the closed socket
       this.ros = null;
       this.pubs.clear();
       for (const sub of this.subs) sub.topic = null;
-      this.dispatchEvent(new CustomEvent('lost'));
-      this._scheduleRetry();
+      this.state = 'reconnecting';
+      if (wasOpen) {
+        this.dispatchEvent(new CustomEvent('lost'));
+        this._scheduleRetry('the link to the server was lost (server stopped or restarting, or the network dropped)');
+      } else {
+        this._diagnose();
+      }
     });
   }
 
-  _scheduleRetry() {
+  /** After an attempt that never opened: ask the server why, then retry or stop. */
+  async _diagnose() {
+    const generation = this.generation;
+    const u = new URL(this.url);
+    const where = u.host;
+    let reason = `no server answers at ${where} (is simbridge running? is the address right?)`;
+    let retry = true;
+    try {
+      const check = new URL(this.url);
+      check.protocol = u.protocol === 'wss:' ? 'https:' : 'http:';
+      check.pathname = '/api/access';
+      check.search = '';
+      if (this.token) check.searchParams.set('token', this.token);
+      const ctl = new AbortController();
+      const timer = setTimeout(() => ctl.abort(), 3000);
+      const res = await fetch(check, { cache: 'no-store', signal: ctl.signal });
+      clearTimeout(timer);
+      const info = res.ok ? await res.json() : null;
+      if (!info || info.server !== 'simbridge') {
+        reason = `the server at ${where} refused the connection`;
+      } else if (info.token === 'refused') {
+        reason = 'the server refused this token: check the token your instructor gave you';
+        retry = false;
+      } else if (info.full) {
+        reason = `the server is full (${info.clients} of ${info.max_clients} connections): trying again`;
+      } else {
+        reason = `the server at ${where} refused the connection`;
+      }
+    } catch (err) {
+      // no answer at all (the fetch failed): a dead server or a wrong address
+    }
+    if (generation !== this.generation) return; // connect() was called meanwhile
+    if (retry) this._scheduleRetry(reason);
+    else this._setState('refused', { reason });
+  }
+
+  _scheduleRetry(reason) {
     const base = Math.min(BACKOFF_MAX_MS, BACKOFF_MIN_MS * 2 ** this.attempt);
     const delay = Math.round(base * (0.75 + Math.random() * 0.5));
     this.attempt += 1;
     this.retryAt = performance.now() + delay;
-    this._setState('reconnecting', { retryInMs: delay });
+    this._setState('reconnecting', { retryInMs: delay, reason });
     this.timer = setTimeout(() => { this.timer = null; this._open('reconnecting'); }, delay);
   }
 
@@ -150,7 +292,7 @@ export class Connection extends EventTarget {
     if (this.connected) this._attach(sub);
     return () => {
       this.subs.delete(sub);
-      if (sub.topic) { try { sub.topic.unsubscribe(); } catch (e) { /* closed */ } }
+      if (sub.topic && this.ros) { try { sub.topic.unsubscribe(); } catch (e) { /* closed */ } }
       sub.topic = null;
     };
   }

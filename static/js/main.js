@@ -1,17 +1,19 @@
 // The simbridge page: wires the connection, view, teleop, plots and PID lab together.
-import { Connection, defaultUrl } from './connection.js';
+import { Connection, defaultUrl, takeToken, storeToken } from './connection.js';
 import { View, scanToWorld, markerSegments, yawOf } from './view.js';
 import {
   TeleopDriver, installKeyboard, installJoystick, installGamepad, gamepadSettingsFromUrl,
   gamepadSettingsToUrl, parseSetting, formatSetting,
 } from './teleop.js';
-import { TimeSeriesPlot } from './plots.js';
-import { PidLab, exampleCode } from './pid.js';
+import { LivePlot, download } from './plots.js';
+import { PidLab, exampleCode, wrapAngle } from './pid.js';
 import { spawnNear } from './spawn.js';
 import { CmdVelType, TWIST, choiceFromUrl, velocityMessage, twistOf } from './cmdvel.js';
 
 const $ = (id) => document.getElementById(id);
 const NODE = '/virtual_robot';
+const STALE_MS = 1500;              // /odom older than this while connected: greyed
+const OTHERS_THROTTLE_MS = 250;     // other robots' /odom for the view: 4 Hz is plenty
 
 const state = {
   ns: '',                       // robot namespace ('' = the un-namespaced robot)
@@ -22,29 +24,51 @@ const state = {
   meas: { v: 0, w: 0 },
   nearest: null,
   estopped: false,
-  robots: [''],
+  robots: [''],                 // robots found on the server
   walls: 0,
+  access: null,                 // /simbridge/access (null: unknown, e.g. a real robot's rosbridge)
+  needsToken: false,
+  lastOdomAt: 0,
+  t0: null,                     // stamp (s) of the plots' t = 0
+  heading: null,                // {raw, unwrapped} (deg) for the heading plot
 };
 const topic = (name) => (state.ns ? `/${state.ns}/${name}` : `/${name}`);
-const now = () => performance.now() / 1000;
+const stampSeconds = (h) => h.stamp.sec + h.stamp.nanosec * 1e-9;
+const stampText = (h) => `${h.stamp.sec}.${String(h.stamp.nanosec).padStart(9, '0')}`;
 
-const conn = new Connection(defaultUrl());
+const token = takeToken();      // removes ?token= from the address bar
+const conn = new Connection(defaultUrl(), token);
 const view = new View($('view'));
 
 // ---- status --------------------------------------------------------------------------------
 const statusEl = $('status');
 $('url').value = conn.url;
+$('token').value = conn.token;
 $('linkUrl').textContent = conn.url;
-function showState(detail) {
-  statusEl.className = `status ${detail.state}`;
-  let text = detail.state;
-  if (detail.state === 'reconnecting' && detail.retryInMs !== undefined) {
-    text = `reconnecting (try ${detail.attempt}, in ${(detail.retryInMs / 1000).toFixed(1)} s)`;
+const STATE_WORDS = {
+  connecting: 'connecting…', connected: 'connected', reconnecting: 'reconnecting',
+  refused: 'token refused', badurl: 'wrong URL', disconnected: 'disconnected',
+};
+function showState(detail = { state: conn.state, url: conn.url, reason: conn.reason }) {
+  let kind = detail.state;
+  let text = STATE_WORDS[kind] || kind;
+  let reason = detail.reason || '';
+  if (kind === 'connected' && state.needsToken) {
+    kind = 'refused';
+    text = 'token needed';
+    reason = 'this server needs a token: enter the one your instructor gave you under Server';
+  } else if (kind === 'reconnecting' && detail.retryInMs !== undefined) {
+    text = `reconnecting in ${(detail.retryInMs / 1000).toFixed(1)} s (try ${detail.attempt})`;
   }
+  statusEl.className = `status ${kind}`;
   $('statusText').textContent = text;
+  $('statusInfo').textContent = reason;
+  $('statusInfo').dataset.reason = reason ? '1' : '';
   $('linkUrl').textContent = detail.url;
+  // a link that needs the user (a token, a URL) opens the server form
+  if (kind === 'refused' || kind === 'badurl') $('server').open = true;
 }
-conn.addEventListener('state', (e) => showState(e.detail));
+conn.addEventListener('state', (e) => { showState(e.detail); markStale(); });
 $('urlForm').addEventListener('submit', (e) => {
   e.preventDefault();
   const url = $('url').value.trim();
@@ -52,23 +76,38 @@ $('urlForm').addEventListener('submit', (e) => {
   const params = new URLSearchParams(location.search);
   params.set('url', url);
   history.replaceState(null, '', `${location.pathname}?${params}`);
+  storeToken($('token').value.trim());
   releaseInputs();
   cmdVel.forget(); // another server (a real robot?) may take another type: ask it again
   subscribeCmd();
-  conn.connect(url);
+  state.needsToken = false;
+  conn.connect(url, $('token').value.trim());
+  $('url').value = conn.url; // a token pasted into the URL moves to the token field
+  $('token').value = conn.token;
+  $('server').open = false;
 });
 
 function fmtAge(ms) {
   if (!Number.isFinite(ms)) return '–';
   return ms < 1000 ? `${Math.round(ms)} ms` : `${(ms / 1000).toFixed(1)} s`;
 }
+function markStale() {
+  const stale = !conn.connected || state.needsToken || !state.pose
+    || performance.now() - state.lastOdomAt > STALE_MS;
+  document.body.classList.toggle('stale', stale);
+  view.setStale(stale && state.pose !== null);
+}
 setInterval(() => {
+  markStale();
   const rows = conn.rates();
-  const odom = rows.find((r) => r.name === topic('odom'));
-  $('statusInfo').textContent = conn.connected && odom
-    ? `${conn.url} · odom ${odom.rate.toFixed(0)} Hz, ${fmtAge(odom.ageMs)} old`
-      + (state.simTime !== undefined ? ` · sim ${state.simTime.toFixed(1)} s` : '')
-    : conn.url;
+  if (!$('statusInfo').dataset.reason) {
+    const odom = rows.find((r) => r.name === topic('odom'));
+    $('statusInfo').textContent = conn.connected && odom
+      ? `${conn.url} · odom ${odom.rate.toFixed(0)} Hz, ${fmtAge(odom.ageMs)} old`
+        + (state.simTime !== undefined ? ` · sim ${state.simTime.toFixed(1)} s` : '')
+      : conn.url;
+  }
+  if ($('tab-link').hidden) return; // the rates table only while it is shown
   $('rates').replaceChildren(...rows.map((r) => {
     const tr = document.createElement('tr');
     for (const text of [r.name, r.rate.toFixed(1), fmtAge(r.ageMs)]) {
@@ -85,7 +124,7 @@ function toast(text) {
   const el = $('toast');
   el.textContent = text; el.hidden = false;
   clearTimeout(toastTimer);
-  toastTimer = setTimeout(() => { el.hidden = true; }, 4000);
+  toastTimer = setTimeout(() => { el.hidden = true; }, 5000);
 }
 
 // ---- driving -------------------------------------------------------------------------------
@@ -176,10 +215,62 @@ conn.addEventListener('refused', (e) => toast(`${e.detail.topic} refused: ${e.de
 conn.addEventListener('lost', () => {
   releaseInputs();
   lab.stop(false);
+  showCmd(0, 0);
+  state.meas = { v: 0, w: 0 };
   cmdVel.forget();
   subscribeCmd();
   showCmdVelType();
+  view.breakTrail();
+  for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.gap(plotTime());
+  markStale();
 });
+
+// ---- roles: what this connection may do ----------------------------------------------------
+async function loadAccess() {
+  if (!conn.connected) return;
+  let access = null;
+  try {
+    const res = await conn.call('/simbridge/access', 'std_srvs/srv/Trigger', {});
+    access = JSON.parse(res.message);
+    state.needsToken = false;
+  } catch (err) {
+    // a server that wants a token refuses every call; a real robot's rosbridge has no such
+    // service (then the page shows everything, as it cannot know)
+    state.needsToken = /not authenticated/.test(err.message);
+  }
+  state.access = access;
+  showRole();
+  showState();
+  markStale();
+  return access;
+}
+function mayDrive(ns) {
+  const a = state.access;
+  return !a || a.any_robot || a.robots.includes(ns);
+}
+function showRole() {
+  const a = state.access;
+  const admin = !a || a.admin;
+  for (const el of document.querySelectorAll('.admin-only')) el.hidden = !admin || state.needsToken;
+  const role = $('role');
+  role.hidden = !a;
+  if (a) {
+    role.textContent = a.admin ? 'instructor' : (a.any_robot ? 'any robot' : `your robot: ${a.robots.join(', ') || 'none'}`);
+    role.title = a.client;
+  }
+  showRobotInfo();
+}
+function showRobotInfo() {
+  const a = state.access;
+  const info = a && a.robot_info ? a.robot_info[state.ns] : null;
+  if (!info) { $('robotInfo').textContent = a ? `model ${a.motion_model}` : 'model – · mass –'; return; }
+  const own = info.own_params ? ' (this robot’s own)' : '';
+  $('robotInfo').textContent = `model ${a.motion_model} · mass ${info.mass} kg${own} · `
+    + `limits ${info.max_linear_velocity} m/s, ${info.max_angular_velocity} rad/s`
+    + (a.motion_model === 'kinematic' ? ' · mass matters in the dynamic model only' : '');
+  $('putBack').hidden = !mayDrive(state.ns) || !info.start;
+  if (info.radius > 0) view.radius = info.radius;
+}
 
 // ---- e-stop and reset ----------------------------------------------------------------------
 async function estop() {
@@ -189,7 +280,8 @@ async function estop() {
   publishTwist(0, 0); // a zero first, then the latch (joy2twist #15)
   if (!conn.connected) { toast('Not connected: the robot cannot be reached.'); return; }
   try {
-    await conn.call('/estop', 'std_srvs/srv/Trigger', {});
+    const res = await conn.call('/estop', 'std_srvs/srv/Trigger', {});
+    if (res && res.message) toast(res.message.split(';')[0] + '.');
   } catch (err) {
     toast(`E-stop service failed (${err.message}); sent a zero velocity instead.`);
   }
@@ -200,17 +292,46 @@ function showEstop(latched) {
   if (latched) releaseInputs();
   document.body.classList.toggle('estopped', latched);
   $('estopBanner').hidden = !latched;
+  if (latched) describeEstop();
+}
+async function describeEstop() {
+  const a = await loadAccess();
+  const est = a && a.estop;
+  if (!est || !state.estopped) {
+    $('estopText').textContent = 'EMERGENCY STOP latched: the robot ignores /cmd_vel.';
+    $('release').hidden = false;
+    return;
+  }
+  const who = est.latches.map((l) => `${l.by}${l.global ? ' (every robot)' : ''}`).join('; ');
+  $('estopText').textContent = `EMERGENCY STOP: ${state.ns || 'the robot'} is held by ${who || 'an e-stop'}; it ignores /cmd_vel.`;
+  const mine = est.latches.length > 0 && est.latches.every((l) => est.releasable.includes(l.id));
+  $('release').hidden = !mine;
+  if (!mine) $('estopText').textContent += ' Only the instructor (or whoever latched it) can release it.';
 }
 $('estop').addEventListener('click', () => estop());
 $('release').addEventListener('click', async () => {
-  try { await conn.call('/estop/reset', 'std_srvs/srv/Trigger', {}); } catch (err) { toast(err.message); }
+  try {
+    const service = state.access && !state.access.any_robot && state.ns ? `/${state.ns}/estop/reset` : '/estop/reset';
+    const res = await conn.call(service, 'std_srvs/srv/Trigger', {});
+    if (res && res.success === false) toast(res.message);
+  } catch (err) { toast(err.message); }
 });
 $('reset').addEventListener('click', async () => {
   try {
     await conn.call('/reset', 'std_srvs/srv/Empty', {});
-    view.clearTrail();
+    view.breakTrail();
     toast('World reset.');
   } catch (err) { toast(`Reset failed: ${err.message}`); }
+});
+$('putBack').addEventListener('click', async () => {
+  const info = state.access && state.access.robot_info && state.access.robot_info[state.ns];
+  if (!info) return;
+  const [x, y, theta] = info.start;
+  try {
+    await conn.call(topic('teleport_absolute'), 'turtlesim/srv/TeleportAbsolute', { x, y, theta });
+    view.breakTrail();
+    toast('Your robot is back at its start pose.');
+  } catch (err) { toast(`Could not put the robot back: ${err.message}`); }
 });
 
 // ---- view ----------------------------------------------------------------------------------
@@ -218,47 +339,87 @@ $('zoomIn').addEventListener('click', () => view.zoom(1.25));
 $('zoomOut').addEventListener('click', () => view.zoom(0.8));
 $('follow').addEventListener('click', () => view.setFollow(!view.follow));
 $('fit').addEventListener('click', () => view.fit());
+$('rays').addEventListener('click', () => {
+  const on = !view.showRays;
+  view.setLayers({ rays: on, range: on });
+  $('rays').setAttribute('aria-pressed', String(on));
+});
 $('view').addEventListener('followchange', () => $('follow').setAttribute('aria-pressed', String(view.follow)));
 
 // ---- plots ---------------------------------------------------------------------------------
+const ODOM_COLUMNS = ['odom stamp'];
 const plots = {
-  v: new TimeSeriesPlot($('plotV'), [{ label: 'v cmd', color: '#94a3b8', dash: [5, 3] }, { label: 'v meas', color: '#2563eb' }], { unit: 'm/s' }),
-  w: new TimeSeriesPlot($('plotW'), [{ label: 'ω cmd', color: '#94a3b8', dash: [5, 3] }, { label: 'ω meas', color: '#ea580c' }], { unit: 'rad/s' }),
-  heading: new TimeSeriesPlot($('plotHeading'), [{ label: 'heading', color: '#15803d' }], { unit: 'deg' }),
-  range: new TimeSeriesPlot($('plotRange'), [{ label: 'nearest range', color: '#dc2626' }], { unit: 'm', min: 0 }),
-  step: new TimeSeriesPlot($('plotStep'), [{ label: 'setpoint', color: '#94a3b8', dash: [5, 3] }, { label: 'measured', color: '#2563eb', width: 2 }], { window: 10, anchored: true, maxPoints: 6000 }),
+  v: new LivePlot($('plotV'), [{ label: 'v cmd', color: '#94a3b8', dash: [5, 3] }, { label: 'v meas', color: '#2563eb' }],
+    { title: 'linear velocity', unit: 'm/s', file: 'linear-velocity', columns: ODOM_COLUMNS }),
+  w: new LivePlot($('plotW'), [{ label: 'ω cmd', color: '#94a3b8', dash: [5, 3] }, { label: 'ω meas', color: '#ea580c' }],
+    { title: 'angular velocity', unit: 'rad/s', file: 'angular-velocity', columns: ODOM_COLUMNS }),
+  heading: new LivePlot($('plotHeading'), [{ label: 'heading', color: '#15803d' }],
+    { title: 'heading (unwrapped)', unit: 'deg', file: 'heading', columns: ODOM_COLUMNS }),
+  range: new LivePlot($('plotRange'), [{ label: 'nearest range', color: '#c026d3' }],
+    { title: 'nearest LiDAR range', unit: 'm', min: 0, file: 'nearest-range', columns: ['scan stamp'] }),
+  step: new LivePlot($('plotStep'), [{ label: 'setpoint', color: '#94a3b8', dash: [5, 3] }, { label: 'measured', color: '#2563eb', width: 2 }],
+    { title: 'step response', window: 10, anchored: true, maxPoints: 6000, file: 'step-response', columns: ['command'] }),
 };
+const liveTime = () => performance.now() / 1000;
+/** The plots' time (s) for a stamp: from the first stamp seen; a stamp going back restarts. */
+function plotTime(stamp) {
+  if (stamp === undefined) return state.t0 === null ? 0 : (state.lastStamp ?? state.t0) - state.t0;
+  if (state.t0 === null || stamp < (state.lastStamp ?? stamp) - 1) {
+    if (state.t0 !== null) for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.clear();
+    state.t0 = stamp;
+    state.heading = null;
+  }
+  state.lastStamp = stamp;
+  return stamp - state.t0;
+}
+function showPlotsTab(on) {
+  for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.setVisible(on);
+}
 
 // ---- subscriptions -------------------------------------------------------------------------
 let robotSubs = [];
 function subscribeRobot() {
   for (const off of robotSubs) off();
   view.clear();
-  for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.clear();
+  const t = plotTime();
+  for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.gap(t);
   state.pose = null;
+  state.heading = null;
   robotSubs = [
     conn.subscribe(topic('odom'), 'nav_msgs/msg/Odometry', (m) => {
       const p = m.pose.pose;
       const theta = yawOf(p.orientation);
       state.pose = { x: p.position.x, y: p.position.y, theta };
       state.meas = { v: m.twist.twist.linear.x, w: m.twist.twist.angular.z };
-      state.odomStamp = `${m.header.stamp.sec}.${String(m.header.stamp.nanosec).padStart(9, '0').slice(0, 3)}`;
+      state.odomStamp = stampText(m.header).slice(0, -6);
+      state.lastOdomAt = performance.now();
       view.setPose(p.position.x, p.position.y, theta);
       $('odomLine').textContent = `x ${p.position.x.toFixed(2)}  y ${p.position.y.toFixed(2)}  θ ${(theta * 180 / Math.PI).toFixed(0)}°`;
-      const t = now();
-      plots.v.push(t, [state.cmd.v, state.meas.v]);
-      plots.w.push(t, [state.cmd.w, state.meas.w]);
-      plots.heading.push(t, [theta * 180 / Math.PI]);
+      const t = plotTime(stampSeconds(m.header)); // first: a restarted clock resets the heading
+      const deg = (theta * 180) / Math.PI;
+      state.heading = state.heading === null
+        ? { raw: deg, unwrapped: deg }
+        : { raw: deg, unwrapped: state.heading.unwrapped + (wrapAngle((theta - (state.heading.raw * Math.PI) / 180)) * 180) / Math.PI };
+      const stamp = [stampText(m.header)];
+      plots.v.push(t, [state.cmd.v, state.meas.v], stamp);
+      plots.w.push(t, [state.cmd.w, state.meas.w], stamp);
+      plots.heading.push(t, [state.heading.unwrapped], stamp);
+      if (document.body.classList.contains('stale')) markStale();
     }),
     conn.subscribe(topic('scan'), 'sensor_msgs/msg/LaserScan', (m) => {
       const mount = state.mounts.get(m.header.frame_id) || { x: 0, y: 0, yaw: 0 };
-      const { points, nearest } = scanToWorld(m, mount, state.pose);
+      const { points, nearest, laser } = scanToWorld(m, mount, state.pose);
       state.nearest = Number.isFinite(nearest) ? nearest : null;
-      view.setScan(points);
-      plots.range.push(now(), [state.nearest]);
+      view.setScan(points, laser, m.range_max);
+      if (state.t0 !== null) plots.range.push(plotTime(stampSeconds(m.header)), [state.nearest], [stampText(m.header)]);
+    }, { compression: 'cbor' }), // ranges as float32: a fifth of the JSON bytes
+    conn.subscribe(topic('contact'), 'simbridge_msgs/msg/Contact', (m) => {
+      view.setContact({ x: m.point.x, y: m.point.y, other: m.other });
     }),
+    conn.subscribe(state.ns ? `/${state.ns}/estop/state` : '/estop/state', 'std_msgs/msg/Bool', (m) => showEstop(Boolean(m.data))),
   ];
   subscribeCmd();
+  subscribeOthers();
 }
 // /cmd_vel (any publisher) for the plots, in the type it has: subscribing with the other type
 // would be refused, so only once the type is known
@@ -291,11 +452,9 @@ conn.subscribe('/walls', 'visualization_msgs/msg/Marker', (m) => {
 });
 conn.subscribe('/clock', 'rosgraph_msgs/msg/Clock', (m) => {
   state.simTime = m.clock.sec + m.clock.nanosec * 1e-9;
-}, { throttle_rate: 200 });
-conn.subscribe('/estop/state', 'std_msgs/msg/Bool', (m) => showEstop(Boolean(m.data)));
-subscribeRobot();
+}, { throttle_rate: 1000 });
 
-// the other robots, drawn in grey (10 Hz is plenty for that)
+// the other robots, drawn in grey (throttled: the view needs no more)
 const otherSubs = new Map();
 function subscribeOthers() {
   for (const [ns, off] of otherSubs) {
@@ -307,13 +466,41 @@ function subscribeOthers() {
     otherSubs.set(ns, conn.subscribe(name, 'nav_msgs/msg/Odometry', (m) => {
       const p = m.pose.pose;
       if (ns !== state.ns) view.setOther(ns, { x: p.position.x, y: p.position.y, theta: yawOf(p.orientation) });
-    }, { throttle_rate: 100, queue_length: 1 }));
+    }, { throttle_rate: OTHERS_THROTTLE_MS, queue_length: 1 }));
   }
+}
+
+/** The one place the page changes robot: inputs released, subscriptions, limits, picker. */
+function switchRobot(ns) {
+  releaseInputs();
+  lab.stop();
+  state.ns = ns;
+  const sel = $('robot');
+  if (![...sel.options].some((o) => o.value === ns)) sel.append(new Option(ns || '(default)', ns));
+  sel.value = ns;
+  const params = new URLSearchParams(location.search);
+  if (ns && state.access && state.access.robots.length > 1) params.set('robot', ns);
+  history.replaceState(null, '', `${location.pathname}?${params}`);
+  detectCmdVel();
+  subscribeRobot();
+  loadLimits();
+  showRobotInfo();
+}
+
+/** The robot to open on: ?robot= if this connection may drive it, else its own. */
+function preferredRobot(found) {
+  const wanted = new URLSearchParams(location.search).get('robot');
+  if (wanted !== null && found.includes(wanted) && mayDrive(wanted)) return wanted;
+  if (found.includes(state.ns) && mayDrive(state.ns) && state.nsChosen) return state.ns;
+  const a = state.access;
+  if (a && a.robots.length && !a.any_robot) return a.robots[0];
+  if (found.includes('')) return '';
+  return found[0] ?? '';
 }
 
 // robots: every /<ns>/odom (and /odom) of type nav_msgs/Odometry
 async function discoverRobots() {
-  if (!conn.connected) return;
+  if (!conn.connected || state.needsToken) return;
   try {
     const res = await conn.call('/rosapi/topics', 'rosapi/Topics', {});
     const found = [];
@@ -331,29 +518,26 @@ async function discoverRobots() {
       } catch (err) { /* a rosapi without publishers: keep it */ }
     }
     found.sort();
-    if (found.join('|') === state.robots.join('|')) return;
+    const changed = found.join('|') !== state.robots.join('|');
     state.robots = found;
-    subscribeOthers();
+    // the picker lists the robots this connection may drive
+    const mine = found.filter(mayDrive);
     const sel = $('robot');
-    sel.replaceChildren(...found.map((ns) => new Option(ns || '(default)', ns)));
-    if (!found.includes(state.ns)) {
-      state.ns = found.includes('') || !found.length ? '' : found[0];
-      detectCmdVel();
-      subscribeRobot();
-      subscribeOthers();
+    if (changed || sel.options.length !== mine.length) {
+      sel.replaceChildren(...mine.map((ns) => new Option(ns || '(default)', ns)));
+      sel.value = state.ns;
     }
-    sel.value = state.ns;
-  } catch (err) { /* a server without rosapi: keep the default robot */ }
-}
-// spawn: a robot of one's own, selected at once
-function selectRobot(ns) {
-  releaseInputs();
-  lab.stop();
-  state.ns = ns;
-  $('robot').value = ns;
-  detectCmdVel();
-  subscribeRobot();
-  loadLimits();
+    $('robot').closest('label').hidden = mine.length <= 1;
+    const target = preferredRobot(found);
+    if (!state.nsChosen || !found.includes(state.ns)) {
+      state.nsChosen = true;
+      if (target !== state.ns || !robotSubs.length) switchRobot(target);
+    }
+    if (changed) subscribeOthers();
+  } catch (err) {
+    // a server without rosapi: the default robot
+    if (!robotSubs.length) switchRobot(state.ns);
+  }
 }
 $('spawnForm').addEventListener('submit', async (e) => {
   e.preventDefault();
@@ -362,34 +546,29 @@ $('spawnForm').addEventListener('submit', async (e) => {
   try {
     const name = await spawnNear(conn, input.value.trim(), state.pose, state.wallSegments || []);
     input.value = '';
+    await loadAccess();
     await discoverRobots();
-    if (!state.robots.includes(name)) {
-      state.robots = [...state.robots, name].sort();
-      $('robot').append(new Option(name, name));
-    }
-    selectRobot(name);
+    if (!state.robots.includes(name)) state.robots = [...state.robots, name].sort();
+    switchRobot(name);
     toast(`Spawned robot '${name}': you are driving it.`);
   } catch (err) { toast(`Spawn failed: ${err.message}`); }
 });
-$('robot').addEventListener('change', (e) => {
-  releaseInputs();
-  lab.stop();
-  state.ns = e.target.value;
-  detectCmdVel();
-  subscribeRobot();
-  subscribeOthers();
-  loadLimits();
-});
+$('robot').addEventListener('change', (e) => switchRobot(e.target.value));
 
 async function loadLimits() {
-  if (!conn.connected) return;
-  try {
-    const [v, w, radius] = await Promise.all(['robot.max_linear_velocity', 'robot.max_angular_velocity', 'robot.radius']
-      .map((p) => conn.getParam(`${NODE}:${p}`)));
-    if (typeof v === 'number' && v > 0) state.limits.v = v;
-    if (typeof w === 'number' && w > 0) state.limits.w = w;
-    if (typeof radius === 'number' && radius > 0) view.radius = radius;
-  } catch (err) { /* a real robot may have no such parameters: keep the defaults */ }
+  if (!conn.connected || state.needsToken) return;
+  const info = state.access && state.access.robot_info && state.access.robot_info[state.ns];
+  if (info) {
+    state.limits = { v: info.max_linear_velocity, w: info.max_angular_velocity };
+  } else {
+    try {
+      const [v, w, radius] = await Promise.all(['robot.max_linear_velocity', 'robot.max_angular_velocity', 'robot.radius']
+        .map((p) => conn.getParam(`${NODE}:${p}`)));
+      if (typeof v === 'number' && v > 0) state.limits.v = v;
+      if (typeof w === 'number' && w > 0) state.limits.w = w;
+      if (typeof radius === 'number' && radius > 0) view.radius = radius;
+    } catch (err) { /* a real robot may have no such parameters: keep the defaults */ }
+  }
   for (const [id, max] of [['speedV', state.limits.v], ['speedW', state.limits.w]]) {
     const el = $(id);
     const old = Number(el.max);
@@ -398,8 +577,19 @@ async function loadLimits() {
   }
   showSpeeds();
 }
-conn.addEventListener('connected', () => { detectCmdVel(); discoverRobots(); loadLimits(); });
-setInterval(() => { discoverRobots(); loadLimits(); }, 3000);
+conn.addEventListener('connected', async () => {
+  state.nsChosen = false;
+  await loadAccess();
+  detectCmdVel();
+  await discoverRobots();
+  loadLimits();
+});
+setInterval(async () => {
+  if (!conn.connected) return;
+  await loadAccess();
+  discoverRobots();
+  loadLimits();
+}, 3000);
 
 // ---- PID lab -------------------------------------------------------------------------------
 const lab = new PidLab(publishTwist, () => state.limits);
@@ -421,9 +611,9 @@ $('pidMode').addEventListener('change', () => {
 $('pidForm').addEventListener('input', showExample);
 showExample();
 const scale = () => (lab.mode === 'heading' ? 180 / Math.PI : 1);
-lab.onSample = ([t, y, ys]) => {
+lab.onSample = ([t, y, ys, u]) => {
   const k = scale();
-  plots.step.push(t, [ys * k, y * k]);
+  plots.step.push(t, [ys * k, y * k], [u]);
   const f = lab.figures();
   plots.step.bands = [{ lo: (lab.ys - f.band) * k, hi: (lab.ys + f.band) * k }];
   const unit = lab.mode === 'heading' ? '°' : ' m';
@@ -441,6 +631,7 @@ $('pidForm').addEventListener('submit', (e) => {
   const { mode, gains, setpoint } = pidInputs();
   plots.step.clear();
   plots.step.unit = mode === 'heading' ? 'deg' : 'm along the line';
+  plots.step.u.axes[1].label = plots.step.unit;
   lab.start(mode, setpoint, gains, () => state.pose);
   $('pidFigures').textContent = 'running…';
 });
@@ -463,10 +654,13 @@ for (const tab of document.querySelectorAll('.tabs button')) {
       other.setAttribute('aria-selected', String(on));
       $(`tab-${other.dataset.tab}`).hidden = !on;
     }
-    for (const p of Object.values(plots)) p.dirty = true;
+    showPlotsTab(tab.dataset.tab === 'plots');
+    plots.step.setVisible(tab.dataset.tab === 'pid');
   });
 }
+showPlotsTab(false);
+plots.step.setVisible(false);
 
 // for tests and curious students: the page's parts
-window.simbridge = { conn, view, driver, lab, plots, state, cmdVel };
+window.simbridge = { conn, view, driver, lab, plots, state, cmdVel, download, liveTime };
 conn.connect();

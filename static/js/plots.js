@@ -1,141 +1,272 @@
-// Small live time-series plots on Canvas 2D (no library): a rolling window of samples, one
-// line per series, autoscaled y with optional fixed bounds, crisp on high-DPI screens.
+// Live time-series plots a lab report can use, on uPlot (static/vendor, global uPlot): a time
+// axis in seconds, readable ticks, a legend with the values under the cursor, pause, drag to
+// zoom (double-click: back to live), CSV and PNG export. Drawn only while visible and at most
+// ten times a second; nothing is drawn while nothing changed.
 
-export class TimeSeriesPlot {
+const DRAW_INTERVAL_MS = 100;
+
+/** One CSV field: numbers in full precision, text quoted when needed. */
+function field(v) {
+  if (v === null || v === undefined || (typeof v === 'number' && !Number.isFinite(v))) return '';
+  if (typeof v === 'number') return String(v);
+  const s = String(v);
+  return /[",\n]/.test(s) ? `"${s.replace(/"/g, '""')}"` : s;
+}
+
+/** Save `content` (a string or a data: URL) as a download called `name`. */
+export function download(name, content, type = 'text/csv') {
+  const a = document.createElement('a');
+  a.download = name;
+  if (typeof content === 'string' && content.startsWith('data:')) a.href = content;
+  else a.href = URL.createObjectURL(new Blob([content], { type }));
+  document.body.append(a);
+  a.click();
+  a.remove();
+  if (a.href.startsWith('blob:')) setTimeout(() => URL.revokeObjectURL(a.href), 1000);
+}
+
+export class LivePlot {
   /**
-   * @param canvas  the <canvas>
-   * @param series  [{label, color, dash?}]
-   * @param opts    {window: seconds shown, unit, min, max (fixed bounds, optional)}
+   * @param box     the element the plot lives in (a toolbar and the chart are added to it)
+   * @param series  [{label, color, dash?, width?}]
+   * @param opts    {title, unit, window (s shown while live), min (a floor of the y range),
+   *                 anchored (x from 0: a step response), maxPoints (kept for export),
+   *                 file (CSV/PNG name stem), columns (extra CSV columns, e.g. ['stamp'])}
    */
-  constructor(canvas, series, opts = {}) {
-    this.canvas = canvas;
+  constructor(box, series, opts = {}) {
+    this.box = box;
     this.series = series;
-    this.window = opts.window ?? 20;
+    this.title = opts.title ?? '';
     this.unit = opts.unit ?? '';
-    this.fixed = { min: opts.min, max: opts.max };
-    this.anchored = opts.anchored ?? false; // x axis from t = 0 (a step response), not rolling
-    this.data = [];  // [t, v0, v1, ...] (t in seconds)
-    this.marks = []; // [{t, label}] vertical markers
-    this.bands = []; // [{lo, hi}] shaded y ranges
+    this.window = opts.window ?? 20;
+    this.floor = opts.min;
+    this.anchored = opts.anchored ?? false;
+    this.maxPoints = opts.maxPoints ?? 6000;
+    this.file = opts.file ?? 'plot';
+    this.columns = opts.columns ?? [];
+    this.xs = [];
+    this.ys = series.map(() => []);
+    this.extra = this.columns.map(() => []);
+    this.bands = [];          // [{lo, hi}] shaded y ranges
+    this.marks = [];          // [{t, label}] vertical markers
+    this.paused = false;
+    this.zoomed = false;
+    this.visible = true;
     this.dirty = true;
-    this.maxPoints = opts.maxPoints ?? 2000;
-    new ResizeObserver(() => { this.dirty = true; }).observe(canvas);
-    const loop = () => { if (this.dirty) this.draw(); requestAnimationFrame(loop); };
-    requestAnimationFrame(loop);
+    this.draws = 0;
+    this._last = 0;
+    this._timer = null;
+    this._build();
   }
 
-  push(t, values) {
-    this.data.push([t, ...values]);
-    const cutoff = this.anchored ? -Infinity : t - this.window * 1.5;
-    let drop = 0;
-    while (drop < this.data.length && this.data[drop][0] < cutoff) drop++;
-    if (drop) this.data.splice(0, drop);
-    if (this.data.length > this.maxPoints) this.data.splice(0, this.data.length - this.maxPoints);
-    this.dirty = true;
+  _build() {
+    const bar = document.createElement('div');
+    bar.className = 'plotbar';
+    const title = document.createElement('strong');
+    title.textContent = this.title;
+    const button = (text, hint, fn) => {
+      const b = document.createElement('button');
+      b.type = 'button'; b.textContent = text; b.title = hint;
+      b.addEventListener('click', fn);
+      bar.append(b);
+      return b;
+    };
+    bar.append(title);
+    this.pauseButton = button('Pause', 'freeze the plot (data keeps being recorded)', () => this.setPaused(!this.paused));
+    button('Live', 'back to the last seconds, zoom reset', () => { this.zoomed = false; this.setPaused(false); });
+    button('CSV', 'download the recorded samples as CSV', () => download(`${this.file}.csv`, this.csv()));
+    button('PNG', 'download the plot as a PNG image', () => download(`${this.file}.png`, this.png(), 'image/png'));
+    this.chartBox = document.createElement('div');
+    this.chartBox.className = 'chart';
+    this.box.append(bar, this.chartBox);
+    const floor = this.floor;
+    const opts = {
+      width: Math.max(200, this.chartBox.clientWidth || 300),
+      height: Math.max(80, this.chartBox.clientHeight || 130),
+      pxAlign: 0,
+      legend: { live: true },
+      cursor: { drag: { x: true, y: false, setScale: true }, points: { size: 5 } },
+      scales: {
+        x: { time: false },
+        y: {
+          range: (u, lo, hi) => {
+            let a = Number.isFinite(lo) ? lo : -1, b = Number.isFinite(hi) ? hi : 1;
+            for (const band of this.bands) { a = Math.min(a, band.lo); b = Math.max(b, band.hi); }
+            if (floor !== undefined) a = Math.max(floor, Math.min(a, floor));
+            if (b - a < 1e-6) { a -= 0.5; b += 0.5; }
+            const pad = (b - a) * 0.08;
+            const out = uPlot.rangeNum(a - pad, b + pad, 0.1, true);
+            if (floor !== undefined && out[0] < floor) out[0] = floor;
+            return out;
+          },
+        },
+      },
+      axes: [
+        { label: 't (s)', labelSize: 16, size: 34, font: '11px system-ui', labelFont: '11px system-ui' },
+        { label: this.unit, labelSize: 16, size: 48, font: '11px system-ui', labelFont: '11px system-ui' },
+      ],
+      series: [
+        { label: 't (s)', value: (u, v) => (v === null || v === undefined ? '–' : v.toFixed(2)) },
+        ...this.series.map((s) => ({
+          label: s.label, stroke: s.color, width: s.width ?? 1.5, dash: s.dash, spanGaps: false,
+          value: (u, v) => (v === null || v === undefined ? '–' : v.toFixed(3)),
+        })),
+      ],
+      hooks: {
+        setSelect: [(u) => { if (u.select.width > 0) { this.zoomed = true; this._showPause(); } }],
+        draw: [(u) => this._decorate(u)],
+      },
+    };
+    this.u = new uPlot(opts, [this.xs, ...this.ys], this.chartBox);
+    this.u.over.addEventListener('dblclick', () => { this.zoomed = false; this.setPaused(false); });
+    new ResizeObserver(() => {
+      const w = this.chartBox.clientWidth, h = this.chartBox.clientHeight;
+      if (w > 0 && h > 0 && w !== this.u.width) {
+        const legend = this.u.root.querySelector('.u-legend');
+        this.u.setSize({ width: w, height: Math.max(80, h - (legend ? legend.offsetHeight : 28)) });
+      }
+    }).observe(this.chartBox);
   }
 
-  clear() { this.data = []; this.marks = []; this.bands = []; this.dirty = true; }
+  _decorate(u) {
+    const ctx = u.ctx;
+    const { left, top, width, height } = u.bbox;
+    ctx.save();
+    for (const b of this.bands) {
+      const y1 = u.valToPos(b.hi, 'y', true), y2 = u.valToPos(b.lo, 'y', true);
+      ctx.fillStyle = 'rgba(34, 197, 94, 0.14)';
+      ctx.fillRect(left, Math.max(top, y1), width, Math.min(top + height, y2) - Math.max(top, y1));
+    }
+    for (const m of this.marks) {
+      const x = u.valToPos(m.t, 'x', true);
+      if (x < left || x > left + width) continue;
+      ctx.strokeStyle = '#a855f7';
+      ctx.setLineDash([4, 3]);
+      ctx.beginPath(); ctx.moveTo(x, top); ctx.lineTo(x, top + height); ctx.stroke();
+      ctx.setLineDash([]);
+      ctx.fillStyle = '#7e22ce';
+      ctx.font = `${Math.round(11 * devicePixelRatio)}px system-ui`;
+      ctx.fillText(m.label, x + 4, top + 12 * devicePixelRatio);
+    }
+    ctx.restore();
+  }
+
+  _showPause() {
+    this.pauseButton.textContent = this.paused || this.zoomed ? 'Resume' : 'Pause';
+    this.pauseButton.setAttribute('aria-pressed', String(this.paused || this.zoomed));
+  }
+
+  setPaused(on) {
+    this.paused = on;
+    if (!on) this.zoomed = false;
+    this._showPause();
+    this.dirty = true;
+    this._schedule();
+  }
+
+  setVisible(on) {
+    this.visible = on;
+    if (on) { this.dirty = true; this._schedule(); }
+  }
+
+  /** Add one sample at time t (s): values per series (null: no value), extra CSV columns. */
+  push(t, values, extra = []) {
+    this.xs.push(t);
+    values.forEach((v, i) => this.ys[i].push(v === null || v === undefined || !Number.isFinite(v) ? null : v));
+    this.extra.forEach((col, i) => col.push(extra[i] ?? ''));
+    if (this.xs.length > this.maxPoints) this._drop(this.xs.length - this.maxPoints);
+    this.dirty = true;
+    this._schedule();
+  }
+
+  /** A gap: the line breaks here (a reset, a reconnect, another robot). */
+  gap(t) {
+    if (!this.xs.length || this.ys[0][this.ys[0].length - 1] === null) return;
+    this.push(t, this.series.map(() => null));
+  }
+
+  _drop(n) {
+    this.xs.splice(0, n);
+    for (const y of this.ys) y.splice(0, n);
+    for (const c of this.extra) c.splice(0, n);
+  }
+
+  clear() {
+    this._drop(this.xs.length);
+    this.marks = []; this.bands = [];
+    this.zoomed = false;
+    this.dirty = true;
+    this._schedule();
+  }
 
   /** The latest value of series i, or null. */
   latest(i) {
-    for (let k = this.data.length - 1; k >= 0; k--) {
-      const v = this.data[k][i + 1];
-      if (v !== null && Number.isFinite(v)) return v;
-    }
+    const y = this.ys[i];
+    for (let k = y.length - 1; k >= 0; k--) if (y[k] !== null) return y[k];
     return null;
   }
 
+  _schedule() {
+    if (this._timer !== null || !this.visible || this.paused || this.zoomed) return;
+    const wait = Math.max(0, DRAW_INTERVAL_MS - (performance.now() - this._last));
+    this._timer = setTimeout(() => {
+      this._timer = null;
+      requestAnimationFrame(() => this.draw());
+    }, wait);
+  }
+
   draw() {
+    if (!this.dirty || !this.visible || this.paused || this.zoomed) return;
     this.dirty = false;
-    const c = this.canvas, ctx = c.getContext('2d');
+    this._last = performance.now();
+    this.draws += 1;
+    const tLast = this.xs.length ? this.xs[this.xs.length - 1] : 0;
+    const first = this.xs.length ? this.xs[0] : 0;
+    const min = this.anchored ? 0 : Math.max(first, tLast - this.window);
+    const max = this.anchored ? Math.max(this.window, tLast) : tLast;
+    this.u.batch(() => {
+      this.u.setData([this.xs, ...this.ys], false);
+      this.u.setScale('x', { min, max: Math.max(max, min + 1e-3) });
+    });
+  }
+
+  /** Every recorded sample as CSV: t_s, the extra columns, then one column per series. */
+  csv() {
+    const unit = this.unit ? ` (${this.unit})` : '';
+    const head = ['t_s', ...this.columns, ...this.series.map((s) => `${s.label}${unit}`)];
+    const rows = [head.map(field).join(',')];
+    for (let k = 0; k < this.xs.length; k++) {
+      if (this.ys.every((y) => y[k] === null)) continue; // a gap
+      rows.push([this.xs[k], ...this.extra.map((c) => c[k]), ...this.ys.map((y) => y[k])].map(field).join(','));
+    }
+    return `${rows.join('\n')}\n`;
+  }
+
+  /** The plot as a PNG data URL: white background, title, legend, axes and lines. */
+  png() {
+    const src = this.u.ctx.canvas;
     const dpr = window.devicePixelRatio || 1;
-    const { width, height } = c.getBoundingClientRect();
-    const pw = Math.max(1, Math.round(width * dpr)), ph = Math.max(1, Math.round(height * dpr));
-    if (c.width !== pw || c.height !== ph) { c.width = pw; c.height = ph; }
-    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-    ctx.fillStyle = '#ffffff';
-    ctx.fillRect(0, 0, width, height);
-    const left = 44, right = 6, top = 18, bottom = 16;
-    const w = width - left - right, h = height - top - bottom;
-    if (w <= 0 || h <= 0) return;
-    const tLast = this.data.length ? this.data[this.data.length - 1][0] : 0;
-    const span = this.anchored ? Math.max(this.window, tLast) : this.window;
-    const tStart = this.anchored ? 0 : tLast - span;
-    let lo = Infinity, hi = -Infinity;
-    for (const row of this.data) {
-      if (row[0] < tStart) continue;
-      for (let i = 1; i < row.length; i++) {
-        const v = row[i];
-        if (v !== null && Number.isFinite(v)) { lo = Math.min(lo, v); hi = Math.max(hi, v); }
-      }
-    }
-    for (const b of this.bands) { lo = Math.min(lo, b.lo); hi = Math.max(hi, b.hi); }
-    if (this.fixed.min !== undefined) lo = Math.min(lo, this.fixed.min);
-    if (this.fixed.max !== undefined) hi = Math.max(hi, this.fixed.max);
-    if (!Number.isFinite(lo)) { lo = -1; hi = 1; }
-    if (hi - lo < 1e-6) { lo -= 0.5; hi += 0.5; }
-    const pad = (hi - lo) * 0.08;
-    lo -= pad; hi += pad;
-    const X = (t) => left + ((t - tStart) / span) * w;
-    const Y = (v) => top + (1 - (v - lo) / (hi - lo)) * h;
-    // axes and ticks
-    ctx.strokeStyle = '#e5e7eb';
-    ctx.fillStyle = '#64748b';
-    ctx.font = '11px system-ui, sans-serif';
-    ctx.lineWidth = 1;
-    ctx.beginPath();
-    for (let k = 0; k <= 4; k++) {
-      const v = lo + ((hi - lo) * k) / 4;
-      const y = Y(v);
-      ctx.moveTo(left, y); ctx.lineTo(left + w, y);
-      ctx.fillText(v.toFixed(Math.abs(hi - lo) < 2 ? 2 : 1), 2, y + 4);
-    }
-    ctx.stroke();
-    if (lo < 0 && hi > 0) {
-      ctx.strokeStyle = '#94a3b8';
-      ctx.beginPath(); ctx.moveTo(left, Y(0)); ctx.lineTo(left + w, Y(0)); ctx.stroke();
-    }
-    for (const b of this.bands) {
-      ctx.fillStyle = 'rgba(34, 197, 94, 0.12)';
-      ctx.fillRect(left, Y(b.hi), w, Y(b.lo) - Y(b.hi));
-    }
-    for (const m of this.marks) {
-      if (m.t < tStart) continue;
-      ctx.strokeStyle = '#a855f7';
-      ctx.setLineDash([4, 3]);
-      ctx.beginPath(); ctx.moveTo(X(m.t), top); ctx.lineTo(X(m.t), top + h); ctx.stroke();
-      ctx.setLineDash([]);
-      ctx.fillStyle = '#7e22ce';
-      ctx.fillText(m.label, Math.min(X(m.t) + 3, left + w - 60), top + h - 4);
-    }
-    // series
-    this.series.forEach((s, i) => {
-      ctx.strokeStyle = s.color;
-      ctx.lineWidth = s.width ?? 1.6;
-      ctx.setLineDash(s.dash ?? []);
-      ctx.beginPath();
-      let pen = false;
-      for (const row of this.data) {
-        const v = row[i + 1];
-        if (row[0] < tStart - 1 || v === null || !Number.isFinite(v)) { pen = false; continue; }
-        if (pen) ctx.lineTo(X(row[0]), Y(v)); else { ctx.moveTo(X(row[0]), Y(v)); pen = true; }
-      }
-      ctx.stroke();
-      ctx.setLineDash([]);
-    });
-    // legend
-    let x = left;
-    this.series.forEach((s, i) => {
-      const val = this.latest(i);
-      const text = `${s.label}${val === null ? '' : ` ${val.toFixed(2)}`}`;
+    const head = Math.round(24 * dpr);
+    const out = document.createElement('canvas');
+    out.width = src.width; out.height = src.height + head;
+    const ctx = out.getContext('2d');
+    ctx.fillStyle = '#fff';
+    ctx.fillRect(0, 0, out.width, out.height);
+    ctx.font = `${Math.round(12 * dpr)}px system-ui, sans-serif`;
+    ctx.fillStyle = '#111';
+    let x = Math.round(8 * dpr);
+    const y = Math.round(16 * dpr);
+    ctx.fillText(this.title, x, y);
+    x += ctx.measureText(this.title).width + 14 * dpr;
+    for (const s of this.series) {
       ctx.fillStyle = s.color;
-      ctx.fillRect(x, 5, 10, 3);
-      ctx.fillStyle = '#334155';
-      ctx.fillText(text, x + 13, 11);
-      x += ctx.measureText(text).width + 24;
-    });
-    ctx.fillStyle = '#64748b';
-    if (this.anchored) ctx.fillText(`${span.toFixed(0)} s`, left + w - 24, top + h + 12);
-    if (this.unit) ctx.fillText(this.unit, left + w - ctx.measureText(this.unit).width, 11);
+      ctx.fillRect(x, y - 8 * dpr, 14 * dpr, 3 * dpr);
+      x += 18 * dpr;
+      ctx.fillStyle = '#111';
+      ctx.fillText(s.label, x, y);
+      x += ctx.measureText(s.label).width + 12 * dpr;
+    }
+    ctx.drawImage(src, 0, head);
+    return out.toDataURL('image/png');
   }
 }

@@ -82,15 +82,27 @@ const KEYS = {
   ArrowLeft: 'left', KeyA: 'left', ArrowRight: 'right', KeyD: 'right',
 };
 
+const TEXT_TYPES = new Set(['text', 'number', 'url', 'password', 'search', 'email', 'tel', '']);
+
+/** Whether keys typed at `target` are text (Space types a space there, letters letters). */
 function typingIn(target) {
   if (!target || !target.tagName) return false;
-  const tag = target.tagName;
-  return tag === 'INPUT' || tag === 'TEXTAREA' || tag === 'SELECT' || target.isContentEditable;
+  if (target.isContentEditable || target.tagName === 'TEXTAREA') return true;
+  return target.tagName === 'INPUT' && TEXT_TYPES.has((target.getAttribute('type') || '').toLowerCase());
+}
+
+/** Whether arrow keys have a use at `target` (a slider, a picker): they keep it. */
+function arrowsUsedBy(target) {
+  if (!target || !target.tagName) return false;
+  return target.tagName === 'SELECT' || (target.tagName === 'INPUT' && target.type === 'range');
 }
 
 /**
  * Keyboard: WASD (by physical key) and arrows. Auto-repeat is ignored: the held set changes only
  * on the first keydown and on keyup. speeds() returns {v, w} magnitudes (m/s, rad/s).
+ * Esc is the e-stop wherever the focus is; Space too, but in a text field (where it types a
+ * space). W/A/S/D drive wherever the focus is but in a text field; the arrows also but on a
+ * slider or a picker, whose values they change.
  */
 export function installKeyboard(driver, speeds, onEstop) {
   const held = new Set();
@@ -103,24 +115,28 @@ export function installKeyboard(driver, speeds, onEstop) {
     driver.set('keyboard', { v: lin * v, w: ang * w });
   };
   window.addEventListener('keydown', (e) => {
-    if (typingIn(e.target) || e.ctrlKey || e.metaKey || e.altKey) return;
-    if (e.code === 'Space' || e.key === 'Escape') {
-      e.preventDefault();
+    if (e.ctrlKey || e.metaKey || e.altKey) return;
+    const typing = typingIn(e.target);
+    if (e.key === 'Escape' || (e.code === 'Space' && !typing)) {
+      e.preventDefault(); // a focused button or checkbox must not also be pressed
       if (!e.repeat) onEstop();
       return;
     }
+    if (typing) return;
     const code = KEYS[e.code] ? e.code : (KEYS[e.key] ? e.key : null);
     if (!code) return;
+    if (code.startsWith('Arrow') && arrowsUsedBy(e.target)) return;
     e.preventDefault();
     if (e.repeat || held.has(code)) return;
     held.add(code);
     apply();
-  });
+  }, true);
   window.addEventListener('keyup', (e) => {
+    if (e.code === 'Space' && !typingIn(e.target)) e.preventDefault(); // no click on keyup
     const code = KEYS[e.code] ? e.code : (KEYS[e.key] ? e.key : null);
     if (!code || !held.delete(code)) return;
     apply();
-  });
+  }, true);
   return { release: () => { held.clear(); } , reapply: apply, held };
 }
 

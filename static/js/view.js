@@ -1,8 +1,17 @@
-// Top-down Canvas 2D view: grid and axes, walls, odometry trail, scan points, robot.
+// Top-down Canvas 2D view: grid and axes, walls, odometry trail, scan points, robot, contacts.
 // World frame = odom (REP-103: x forward/right on screen, y up on screen, angles CCW).
+// Drawn only when something shown changed; greyed while the data is stale.
 
 const TRAIL_MAX = 2000;
 const TRAIL_STEP_M = 0.02;
+// a pose this far from the last one between two odometry messages is a jump (a teleport, a
+// reset): the trail breaks instead of drawing a line across the map
+const TRAIL_JUMP_M = 0.4;
+// LiDAR returns: a colour no map element has (walls dark slate, grid grey, axes red/green,
+// robot green, trail blue, other robots grey)
+export const SCAN_COLOUR = '#c026d3';
+const CONTACT_MS = 600;      // a contact stays drawn this long after the last report
+const MIN_ROBOT_PX = 8;      // a robot is never drawn smaller than this radius on screen
 
 export class View {
   constructor(canvas) {
@@ -14,6 +23,13 @@ export class View {
     this.radius = 0.105;
     this.trail = [];            // [x, y]
     this.scan = [];             // [x, y] in world
+    this.laser = null;          // {x, y}: where the scan was taken (for rays)
+    this.rangeMax = 0;          // the LiDAR's range_max (for the range circle)
+    this.showRays = false;
+    this.showRange = false;
+    this.contact = null;        // {x, y, other, at}: the last contact, drawn for a moment
+    this.contacts = 0;          // contacts reported so far
+    this.stale = false;         // data no longer live: drawn greyed
     this.scale = 80;            // px per metre (CSS px)
     this.center = { x: 0, y: 0 };
     this.follow = true;
@@ -21,13 +37,24 @@ export class View {
     this.frames = 0;
     this.pointers = new Map();
     this._installInput();
-    new ResizeObserver(() => { this.dirty = true; }).observe(canvas);
-    const loop = () => { if (this.dirty) this.draw(); requestAnimationFrame(loop); };
-    requestAnimationFrame(loop);
+    new ResizeObserver(() => this.requestDraw()).observe(canvas);
+    this._frame = null;
+    this.requestDraw();
   }
 
-  setWalls(segments) { this.walls = segments; this.dirty = true; }
+  /** Draw at the next animation frame (once, however many changes come before it). */
+  requestDraw() {
+    this.dirty = true;
+    if (this._frame === null) {
+      this._frame = requestAnimationFrame(() => { this._frame = null; if (this.dirty) this.draw(); });
+    }
+  }
+
+  setWalls(segments) { this.walls = segments; this.requestDraw(); }
   setPose(x, y, theta) {
+    const p = this.pose;
+    if (p && p.x === x && p.y === y && p.theta === theta) return; // parked: nothing to draw
+    if (p && Math.hypot(x - p.x, y - p.y) > TRAIL_JUMP_M) this.breakTrail();
     this.pose = { x, y, theta };
     const last = this.trail[this.trail.length - 1];
     if (!last || Math.hypot(x - last[0], y - last[1]) >= TRAIL_STEP_M) {
@@ -35,14 +62,53 @@ export class View {
       if (this.trail.length > TRAIL_MAX) this.trail.splice(0, this.trail.length - TRAIL_MAX);
     }
     if (this.follow) this.center = { x, y };
-    this.dirty = true;
+    this.requestDraw();
   }
-  setScan(points) { this.scan = points; this.dirty = true; }
-  clearTrail() { this.trail = []; this.dirty = true; }
-  clear() { this.pose = null; this.scan = []; this.trail = []; this.others.clear(); this.dirty = true; }
+  /** Scan points in world (flat [x0, y0, x1, y1, ...]) and where the laser was. */
+  setScan(points, laser = null, rangeMax = 0) {
+    const old = this.scan;
+    const same = old.length === points.length && old.every((v, i) => v === points[i])
+      && (!laser || (this.laser && laser.x === this.laser.x && laser.y === this.laser.y));
+    this.rangeMax = rangeMax;
+    if (same) return;
+    this.scan = points;
+    this.laser = laser;
+    this.requestDraw();
+  }
+  /** The trail stops here; the next pose starts a new piece (reset, reconnect, teleport). */
+  breakTrail() {
+    if (this.trail.length && this.trail[this.trail.length - 1] !== null) this.trail.push(null);
+    this.requestDraw();
+  }
+  clearTrail() { this.trail = []; this.requestDraw(); }
+  clear() {
+    this.pose = null; this.scan = []; this.laser = null; this.trail = []; this.contact = null;
+    this.requestDraw();
+  }
   setOther(name, pose) {
+    const o = this.others.get(name);
+    if (pose && o && o.x === pose.x && o.y === pose.y && o.theta === pose.theta) return;
+    if (!pose && !o) return;
     if (pose) this.others.set(name, pose); else this.others.delete(name);
-    this.dirty = true;
+    this.requestDraw();
+  }
+  setContact(c) {
+    if (c) this.contacts += 1;
+    this.contact = c ? { ...c, at: performance.now() } : null;
+    this.requestDraw();
+    if (c) {
+      clearTimeout(this._contactTimer);
+      this._contactTimer = setTimeout(() => { this.contact = null; this.requestDraw(); }, CONTACT_MS);
+    }
+  }
+  setStale(on) {
+    if (this.stale === on) return;
+    this.stale = on;
+    this.requestDraw();
+  }
+  setLayers({ rays, range }) {
+    this.showRays = Boolean(rays); this.showRange = Boolean(range);
+    this.requestDraw();
   }
 
   /** Fit the walls (or a 4 m square) in view. */
@@ -55,7 +121,7 @@ export class View {
     this.scale = Math.max(5, Math.min((width - 20) / Math.max(maxX - minX, 0.5), (height - 20) / Math.max(maxY - minY, 0.5)));
     this.center = { x: (minX + maxX) / 2, y: (minY + maxY) / 2 };
     this.follow = false;
-    this.dirty = true;
+    this.requestDraw();
     this.canvas.dispatchEvent(new CustomEvent('followchange'));
   }
 
@@ -67,13 +133,13 @@ export class View {
       this.center.x += before.x - after.x;
       this.center.y += before.y - after.y;
     }
-    this.dirty = true;
+    this.requestDraw();
   }
 
   setFollow(on) {
     this.follow = on;
     if (on && this.pose) this.center = { x: this.pose.x, y: this.pose.y };
-    this.dirty = true;
+    this.requestDraw();
     this.canvas.dispatchEvent(new CustomEvent('followchange'));
   }
 
@@ -97,7 +163,7 @@ export class View {
           if (this.follow) this.setFollow(false);
           this.center.x -= dx / this.scale;
           this.center.y += dy / this.scale;
-          this.dirty = true;
+          this.requestDraw();
         }
       } else if (this.pointers.size === 2) {
         const [a, b] = [...this.pointers.entries()];
@@ -143,20 +209,39 @@ export class View {
     ctx.beginPath();
     for (const [x1, y1, x2, y2] of this.walls) { ctx.moveTo(x1, y1); ctx.lineTo(x2, y2); }
     ctx.stroke();
-    // trail
+    // trail, in pieces (it breaks at resets, reconnects and jumps)
     if (this.trail.length > 1) {
       ctx.strokeStyle = 'rgba(37, 99, 235, 0.55)';
       ctx.lineWidth = 2 * px;
       ctx.beginPath();
-      ctx.moveTo(this.trail[0][0], this.trail[0][1]);
-      for (const [x, y] of this.trail) ctx.lineTo(x, y);
-      if (this.pose) ctx.lineTo(this.pose.x, this.pose.y);
+      let pen = false;
+      for (const p of this.trail) {
+        if (p === null) { pen = false; continue; }
+        if (pen) ctx.lineTo(p[0], p[1]); else { ctx.moveTo(p[0], p[1]); pen = true; }
+      }
+      if (pen && this.pose) ctx.lineTo(this.pose.x, this.pose.y);
       ctx.stroke();
     }
-    // scan
-    ctx.fillStyle = '#dc2626';
-    const dot = Math.max(2.5 * px, 0.012);
-    for (const [x, y] of this.scan) ctx.fillRect(x - dot / 2, y - dot / 2, dot, dot);
+    const r = Math.max(this.radius, MIN_ROBOT_PX * px);
+    // LiDAR: range circle, rays, returns
+    if (this.laser && this.showRange && this.rangeMax > 0) {
+      ctx.strokeStyle = 'rgba(192, 38, 211, 0.45)';
+      ctx.lineWidth = px;
+      ctx.setLineDash([6 * px, 4 * px]);
+      ctx.beginPath(); ctx.arc(this.laser.x, this.laser.y, this.rangeMax, 0, 2 * Math.PI); ctx.stroke();
+      ctx.setLineDash([]);
+    }
+    const scan = this.scan;
+    if (this.laser && this.showRays) {
+      ctx.strokeStyle = 'rgba(192, 38, 211, 0.18)';
+      ctx.lineWidth = px;
+      ctx.beginPath();
+      for (let i = 0; i + 1 < scan.length; i += 2) { ctx.moveTo(this.laser.x, this.laser.y); ctx.lineTo(scan[i], scan[i + 1]); }
+      ctx.stroke();
+    }
+    ctx.fillStyle = SCAN_COLOUR;
+    const dot = Math.max(3 * px, 0.014);
+    for (let i = 0; i + 1 < scan.length; i += 2) ctx.fillRect(scan[i] - dot / 2, scan[i + 1] - dot / 2, dot, dot);
     // other robots: grey footprints with their names
     for (const [name, o] of this.others) {
       ctx.save();
@@ -165,18 +250,27 @@ export class View {
       ctx.strokeStyle = '#475569';
       ctx.lineWidth = 2 * px;
       ctx.beginPath();
-      ctx.arc(0, 0, this.radius, 0, 2 * Math.PI);
+      ctx.arc(0, 0, r, 0, 2 * Math.PI);
       ctx.fill();
       ctx.stroke();
       ctx.beginPath();
       ctx.moveTo(0, 0);
-      ctx.lineTo(this.radius * Math.cos(o.theta), this.radius * Math.sin(o.theta));
+      ctx.lineTo(r * Math.cos(o.theta), r * Math.sin(o.theta));
       ctx.stroke();
       ctx.scale(px, -px);
       ctx.fillStyle = '#334155';
       ctx.font = '11px system-ui, sans-serif';
-      ctx.fillText(name || '(default)', this.radius * s + 3, -this.radius * s - 3);
+      ctx.fillText(name || '(default)', r * s + 3, -r * s - 3);
       ctx.restore();
+    }
+    // a contact: an orange ring on the robot and a mark where it touched
+    const hit = this.contact;
+    if (hit && this.pose) {
+      ctx.strokeStyle = '#ea580c';
+      ctx.lineWidth = 4 * px;
+      ctx.beginPath(); ctx.arc(this.pose.x, this.pose.y, r + 4 * px, 0, 2 * Math.PI); ctx.stroke();
+      ctx.fillStyle = '#ea580c';
+      ctx.beginPath(); ctx.arc(hit.x, hit.y, 5 * px, 0, 2 * Math.PI); ctx.fill();
     }
     // robot
     if (this.pose) {
@@ -187,7 +281,7 @@ export class View {
       ctx.strokeStyle = '#15803d';
       ctx.lineWidth = 2 * px;
       ctx.beginPath();
-      ctx.arc(0, 0, this.radius, 0, 2 * Math.PI);
+      ctx.arc(0, 0, r, 0, 2 * Math.PI);
       ctx.fill();
       ctx.stroke();
       // heading: a dark arrow from the centre past the footprint
@@ -195,12 +289,12 @@ export class View {
       ctx.lineWidth = Math.max(3 * px, 0.015);
       ctx.beginPath();
       ctx.moveTo(0, 0);
-      ctx.lineTo(this.radius * 1.2, 0);
+      ctx.lineTo(r * 1.2, 0);
       ctx.stroke();
       ctx.beginPath();
-      ctx.moveTo(this.radius * 1.6, 0);
-      ctx.lineTo(this.radius * 1.1, this.radius * 0.35);
-      ctx.lineTo(this.radius * 1.1, -this.radius * 0.35);
+      ctx.moveTo(r * 1.6, 0);
+      ctx.lineTo(r * 1.1, r * 0.35);
+      ctx.lineTo(r * 1.1, -r * 0.35);
       ctx.closePath();
       ctx.fillStyle = '#052e16';
       ctx.fill();
@@ -210,6 +304,19 @@ export class View {
     ctx.fillStyle = '#475569';
     ctx.font = '12px system-ui, sans-serif';
     ctx.fillText(`1 m = ${Math.round(s)} px`, 8, height - 8);
+    if (hit && hit.other !== undefined) {
+      ctx.fillStyle = '#9a3412';
+      ctx.font = '600 13px system-ui, sans-serif';
+      ctx.fillText(`contact: ${hit.other === 'wall' ? 'a wall' : `robot ${hit.other}`}`, 8, height - 26);
+    }
+    if (this.stale) {
+      // the data is old (link lost): grey everything and say so
+      ctx.fillStyle = 'rgba(241, 245, 249, 0.72)';
+      ctx.fillRect(0, 0, width, height);
+      ctx.fillStyle = '#475569';
+      ctx.font = '600 15px system-ui, sans-serif';
+      ctx.fillText('no live data: last known positions', 12, 72);
+    }
   }
 
   _grid(ctx, width, height, px) {
@@ -234,11 +341,14 @@ export class View {
   }
 }
 
-/** Scan ranges -> world points, using the laser mount (base_link -> laser) and the robot pose. */
+/**
+ * Scan ranges -> world points (flat [x0, y0, x1, y1, ...]), using the laser mount
+ * (base_link -> laser) and the robot pose; also the laser's position and the nearest range.
+ */
 export function scanToWorld(scan, mount, pose) {
   const out = [];
   let nearest = Infinity;
-  if (!pose) return { points: out, nearest };
+  if (!pose) return { points: out, nearest, laser: null };
   const { ranges, angle_min: amin, angle_increment: inc, range_min: rmin, range_max: rmax } = scan;
   const cm = Math.cos(mount.yaw), sm = Math.sin(mount.yaw);
   const cp = Math.cos(pose.theta), sp = Math.sin(pose.theta);
@@ -250,9 +360,10 @@ export function scanToWorld(scan, mount, pose) {
     const a = amin + i * inc;
     const lx = r * Math.cos(a), ly = r * Math.sin(a);
     const bx = mount.x + cm * lx - sm * ly, by = mount.y + sm * lx + cm * ly;
-    out.push([pose.x + cp * bx - sp * by, pose.y + sp * bx + cp * by]);
+    out.push(pose.x + cp * bx - sp * by, pose.y + sp * bx + cp * by);
   }
-  return { points: out, nearest };
+  const laser = { x: pose.x + cp * mount.x - sp * mount.y, y: pose.y + sp * mount.x + cp * mount.y };
+  return { points: out, nearest, laser };
 }
 
 /** LINE_LIST marker points -> [x1, y1, x2, y2] segments (marker pose assumed identity). */

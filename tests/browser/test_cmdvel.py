@@ -105,6 +105,7 @@ async def test_pointing_the_page_at_a_stamped_robot_switches_the_type(
     plain = await make_app()
     page, log = await open_ready(open_page, plain)
     assert await page.evaluate("window.simbridge.cmdVel.type") == "geometry_msgs/msg/Twist"
+    await page.click("#server summary")  # the server form
     await page.fill("#url", ws_url(app))
     await page.click("#urlForm button[type=submit]")
     await page.wait_for_function(

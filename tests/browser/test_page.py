@@ -46,7 +46,7 @@ async def canvas_colours(page: Page) -> dict[str, int]:
             const [r, g, b] = [d[i], d[i + 1], d[i + 2]];
             if (r < 70 && g < 70 && b < 90) n.wall++;
             else if (g > 100 && r < 60 && b < 90) n.robot++;
-            else if (r > 200 && g < 60 && b < 60) n.scan++;
+            else if (r > 160 && g < 90 && b > 170) n.scan++;  // LiDAR: fuchsia, no map colour
             else n.other++;
           }
           return n;
@@ -109,7 +109,10 @@ async def test_canvas_draws_walls_robot_and_scan(app: App, open_page: OpenPage) 
             return Math.hypot(p[0] - x1 - t * dx, p[1] - y1 - t * dy);
           };
           const near = (p) => Math.min(...view.walls.map((w) => dist(p, w)));
-          return view.scan.filter((p) => near(p) > 0.05).length;
+          const pts = [];
+          const s = view.scan;  // flat: x0, y0, x1, y1, ...
+          for (let i = 0; i + 1 < s.length; i += 2) pts.push([s[i], s[i + 1]]);
+          return pts.filter((p) => near(p) > 0.05).length;
         }"""
     )
     assert far == 0
@@ -229,6 +232,14 @@ async def test_pid_lab_settles_a_90_degree_heading_step(
     example = await page.text_content("#example")
     assert "class PID" in example and "update(error, dt)" in example  # type: ignore[operator]
     await screenshot(page, "pid-heading-step")
+    # the step response exports for a lab report: CSV of every sample, and a PNG
+    rows = (await page.evaluate("window.simbridge.plots.step.csv()")).splitlines()
+    assert rows[0] == "t_s,command,setpoint (deg),measured (deg)"
+    last = [float(v) for v in rows[-1].split(",")]
+    assert len(rows) > 10 and last[2] == pytest.approx(90, abs=0.01)
+    assert abs(last[3] - 90) < 2
+    png = await page.evaluate("window.simbridge.plots.step.png()")
+    assert png.startswith("data:image/png;base64,") and len(png) > 2000
     await page.click("#pidStop")
     await watcher.wait(lambda: watcher.odom()["w"] == 0.0)  # type: ignore[index]
     assert abs(watcher.odom()["theta"] - target) < tolerance  # type: ignore[index]
