@@ -502,14 +502,17 @@ function preferredRobot(found) {
 async function discoverRobots() {
   if (!conn.connected || state.needsToken) return;
   try {
-    const res = await conn.call('/rosapi/topics', 'rosapi/Topics', {});
     const found = [];
+    const info = state.access && state.access.robot_info;
+    // simbridge lists its robots in /simbridge/access: no need for the (long) topic list
+    const res = info ? { topics: Object.keys(info).map((ns) => (ns ? `/${ns}/odom` : '/odom')) }
+      : await conn.call('/rosapi/topics', 'rosapi/Topics', {});
     res.topics.forEach((name, i) => {
       const type = res.types ? res.types[i] : '';
       const match = /^(?:\/([^/]+))?\/odom$/.exec(name);
       if (match && (!type || type.replace('/msg/', '/') === 'nav_msgs/Odometry')) found.push(match[1] || '');
     });
-    if (found.includes('') && found.length > 1) {
+    if (!info && found.includes('') && found.length > 1) {
       // '/odom' may only be our own subscription (a world of named robots): keep it only if
       // something publishes it.
       try {
@@ -589,7 +592,7 @@ setInterval(async () => {
   await loadAccess();
   discoverRobots();
   loadLimits();
-}, 3000);
+}, 5000);
 
 // ---- PID lab -------------------------------------------------------------------------------
 const lab = new PidLab(publishTwist, () => state.limits);
