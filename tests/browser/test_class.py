@@ -148,10 +148,11 @@ async def test_each_student_lands_on_their_own_robot_without_admin_controls_or_t
         assert await page.text_content("#statusText") == "connected"
         await screenshot(page, f"class-student-{robot}")
         assert log.errors == []
-    # nothing moves: the view is not redrawn (the plots are not shown)
+    # nothing moves: the view is not redrawn (the plots are not shown); it was 20 times a
+    # second. At most a frame or two: a loaded machine may delay /odom past the stale mark.
     frames = await page.evaluate("window.simbridge.view.frames")
     await asyncio.sleep(1.0)
-    assert await page.evaluate("window.simbridge.view.frames") == frames
+    assert await page.evaluate("window.simbridge.view.frames") - frames <= 2
     console = await admin_console(app, browser, contexts)
     await console.wait_for_function(
         "['r1', 'r2', 'r3'].every((r) =>"
@@ -191,7 +192,8 @@ async def test_a_students_estop_stops_only_their_robot_and_they_release_it(
         await alice.wait_for_selector("#estopBanner", state="visible")
         assert "held by client" in (await alice.text_content("#estopText") or "")
         await asyncio.sleep(0.3)  # bob drives on, unaffected
-        assert speed(w, "r2") > 0.25 and not app.world.halted("r2")
+        await w.wait(lambda: speed(w, "r2") > 0.25)
+        assert not app.world.halted("r2")
         assert await bob.is_hidden("#estopBanner")
         await screenshot(alice, "class-estop-own-robot")
         for page in (alice, bob):
