@@ -346,6 +346,32 @@ async def test_plot_csv_rows_match_the_recorded_odom(
         png = (await (await png_info.value).path()).read_bytes()  # type: ignore[union-attr]
         heading_csv = await page.evaluate("window.simbridge.plots.heading.csv()")
         await screenshot(page, "class-plots")
+        # pause: the plot is frozen (no draw) while samples keep being recorded; Live resumes
+        plot = "window.simbridge.plots.v"
+        await page.click("#plotV .plotbar button:has-text('Pause')")
+        draws, samples = await page.evaluate(f"[{plot}.draws, {plot}.xs.length]")
+        await page.wait_for_function(f"{plot}.xs.length > {samples + 10}")
+        assert await page.evaluate(f"{plot}.draws") == draws
+        await page.click("#plotV .plotbar button:has-text('Live')")
+        await page.wait_for_function(f"{plot}.draws > {draws}")
+        # zoom: dragging across the plot selects a time span and stops following
+        over = page.locator("#plotV .u-over")
+        box = await over.bounding_box()
+        assert box is not None
+        await page.mouse.move(box["x"] + 0.3 * box["width"], box["y"] + 20)
+        await page.mouse.down()
+        await page.mouse.move(box["x"] + 0.6 * box["width"], box["y"] + 20, steps=4)
+        await page.mouse.up()
+        await page.wait_for_function(f"{plot}.zoomed")
+        span = await page.evaluate(f"{plot}.u.scales.x.max - {plot}.u.scales.x.min")
+        assert 0 < span < 20 * 0.5, span
+        await page.dblclick("#plotV .u-over")
+        await page.wait_for_function(f"!{plot}.zoomed")
+        # the other robots' odometry comes throttled for the view (4 Hz, not 20)
+        rate = await page.evaluate(
+            "window.simbridge.conn.rates().find((r) => r.name === '/r1/odom').rate"
+        )
+        assert 1 < rate < 6, rate
     assert png.startswith(b"\x89PNG")
     recorded = {}
     for _, m in w.history["/r2/odom"]:
