@@ -12,6 +12,7 @@ const TRAIL_JUMP_M = 0.4;
 export const SCAN_COLOUR = '#c026d3';
 const CONTACT_MS = 600;      // a contact stays drawn this long after the last report
 const MIN_ROBOT_PX = 8;      // a robot is never drawn smaller than this radius on screen
+const MIN_DATA_FRAME_MS = 45; // data redraws at most ~22 a second (odometry comes at 20 Hz)
 
 export class View {
   constructor(canvas) {
@@ -37,17 +38,32 @@ export class View {
     this.frames = 0;
     this.pointers = new Map();
     this._installInput();
-    new ResizeObserver(() => this.requestDraw()).observe(canvas);
+    new ResizeObserver(() => this.requestDraw(true)).observe(canvas);
     this._frame = null;
+    this._wait = null;
+    this._lastDraw = 0;
     this.requestDraw();
   }
 
-  /** Draw at the next animation frame (once, however many changes come before it). */
-  requestDraw() {
+  /**
+   * Draw once for however many changes come: at the next animation frame, but data (odometry,
+   * scans, other robots: about 30 changes a second, 40 in a class) at most every
+   * MIN_DATA_FRAME_MS; `now` (pan, zoom, resize) at once.
+   */
+  requestDraw(now = false) {
     this.dirty = true;
-    if (this._frame === null) {
-      this._frame = requestAnimationFrame(() => { this._frame = null; if (this.dirty) this.draw(); });
-    }
+    if (this._frame !== null) return;
+    if (this._wait !== null && !now) return;
+    clearTimeout(this._wait);
+    const wait = now ? 0 : Math.max(0, this._lastDraw + MIN_DATA_FRAME_MS - performance.now());
+    const frame = () => {
+      this._wait = null;
+      this._frame = requestAnimationFrame(() => {
+        this._frame = null;
+        if (this.dirty) { this._lastDraw = performance.now(); this.draw(); }
+      });
+    };
+    if (wait > 0) this._wait = setTimeout(frame, wait); else frame();
   }
 
   setWalls(segments) { this.walls = segments; this.requestDraw(); }
@@ -121,7 +137,7 @@ export class View {
     this.scale = Math.max(5, Math.min((width - 20) / Math.max(maxX - minX, 0.5), (height - 20) / Math.max(maxY - minY, 0.5)));
     this.center = { x: (minX + maxX) / 2, y: (minY + maxY) / 2 };
     this.follow = false;
-    this.requestDraw();
+    this.requestDraw(true);
     this.canvas.dispatchEvent(new CustomEvent('followchange'));
   }
 
@@ -133,13 +149,13 @@ export class View {
       this.center.x += before.x - after.x;
       this.center.y += before.y - after.y;
     }
-    this.requestDraw();
+    this.requestDraw(true);
   }
 
   setFollow(on) {
     this.follow = on;
     if (on && this.pose) this.center = { x: this.pose.x, y: this.pose.y };
-    this.requestDraw();
+    this.requestDraw(true);
     this.canvas.dispatchEvent(new CustomEvent('followchange'));
   }
 
@@ -163,7 +179,7 @@ export class View {
           if (this.follow) this.setFollow(false);
           this.center.x -= dx / this.scale;
           this.center.y += dy / this.scale;
-          this.requestDraw();
+          this.requestDraw(true);
         }
       } else if (this.pointers.size === 2) {
         const [a, b] = [...this.pointers.entries()];
