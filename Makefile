@@ -37,8 +37,9 @@ pytest:
 test: deps lint typecheck pytest
 
 # The arm64 (Raspberry Pi 4B/5) image built and its compose stack run under qemu-user emulation
-# (root: registers qemu-aarch64 with binfmt_misc; the first run makes the arm64 base image,
-# about 10 minutes, later runs reuse it). Also part of `make test`.
+# (root: registers qemu-aarch64 with binfmt_misc; the first run makes the arm64 base and images,
+# about 20 minutes on a busy 2-core machine; later runs reuse them: 0.5-2 minutes). Also part of
+# `make test`.
 test-arm64: deps
 	$(BIN)/pytest -q tests/deploy/test_arm64.py
 
