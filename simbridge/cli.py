@@ -158,6 +158,62 @@ def _add_security_options(parser: argparse.ArgumentParser) -> None:
     )
 
 
+def _add_zenoh_options(parser: argparse.ArgumentParser) -> None:
+    """Options of ROS 2 over Zenoh (the ``[zenoh]`` extra; see the README)."""
+    group = parser.add_argument_group(
+        'ROS 2 through Zenoh, as rmw_zenoh (needs: pip install "simbridge[zenoh]")'
+    )
+    group.add_argument(
+        "--zenoh",
+        action="store_true",
+        default=(_env("ZENOH", "") or "").lower() in ("1", "true", "yes"),
+        help="join the ROS 2 graph as an rmw_zenoh node does: peer, router tcp/localhost:7447, "
+        "domain ROS_DOMAIN_ID (default 0); ZENOH_SESSION_CONFIG_URI and ZENOH_CONFIG_OVERRIDE "
+        "apply as for rmw_zenoh [SIMBRIDGE_ZENOH]",
+    )
+    group.add_argument(
+        "--zenoh-connect",
+        metavar="ENDPOINT",
+        action="append",
+        default=[],
+        help="connect to this Zenoh endpoint instead, e.g. tcp/192.168.1.10:7447 (repeatable)",
+    )
+    group.add_argument(
+        "--zenoh-listen",
+        metavar="ENDPOINT",
+        action="append",
+        default=[],
+        help="listen on this Zenoh endpoint instead of tcp/localhost:0 (repeatable)",
+    )
+    group.add_argument(
+        "--ros-distro",
+        choices=["humble", "jazzy", "kilted"],
+        default=None,
+        help="match this distribution's rmw_zenoh: humble has no type hashes, jazzy and "
+        "kilted use RIHS01 (default: $ROS_DISTRO, else jazzy)",
+    )
+
+
+def _zenoh_options(args: argparse.Namespace) -> Any:
+    """Return the ZenohOptions of ``--zenoh``, or None without it.
+
+    Raises:
+        ConfigError: the extra is not installed, or a setting is invalid.
+    """
+    if not args.zenoh:
+        if args.zenoh_connect or args.zenoh_listen or args.ros_distro:
+            msg = "--zenoh-connect, --zenoh-listen and --ros-distro need --zenoh"
+            raise ConfigError(msg)
+        return None
+    from simbridge.zenoh.config import ZenohOptions
+    from simbridge.zenoh.link import import_zenoh
+
+    import_zenoh()  # exits at once, with the install command, when the extra is missing
+    return ZenohOptions.from_env(
+        distro=args.ros_distro, connect=args.zenoh_connect, listen=args.zenoh_listen
+    )
+
+
 def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
     """Return the ServerSettings fields of the security options (files read and checked).
 
@@ -245,6 +301,7 @@ def _run_parser() -> argparse.ArgumentParser:
     )
     _add_config_options(parser)
     _add_security_options(parser)
+    _add_zenoh_options(parser)
     parser.add_argument(
         "--admin-token",
         metavar="TOKEN",
@@ -287,10 +344,11 @@ async def _serve(
     world: str | None,
     params: str | None,
     record: tuple[str, list[str] | None] | None = None,
+    zenoh: Any = None,
 ) -> int:
     from simbridge.runner import App  # imported late: `simbridge --help` stays fast
 
-    app = App(settings, world=world, params=params)
+    app = App(settings, world=world, params=params, zenoh=zenoh)
     try:
         await app.start()
     except OSError as err:
@@ -367,7 +425,8 @@ def _cmd_run(argv: Sequence[str]) -> int:
         load_world(args.world)
         load_params(args.params)
         record = (args.record, args.record_topics) if args.record else None
-        return asyncio.run(_serve(settings, args.world, args.params, record))
+        zenoh = _zenoh_options(args)
+        return asyncio.run(_serve(settings, args.world, args.params, record, zenoh))
     except ConfigError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 2
@@ -441,6 +500,12 @@ def _cmd_param(argv: Sequence[str]) -> int:
     return param_main(argv)
 
 
+def _cmd_zenohd(argv: Sequence[str]) -> int:
+    from simbridge.zenoh.router import zenohd_main
+
+    return zenohd_main(argv)
+
+
 def _cmd_record(argv: Sequence[str]) -> int:
     from simbridge.tools.record import record_main
 
@@ -469,6 +534,10 @@ COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "record": ("record topics of any rosbridge URL into a rosbag2 MCAP bag", _cmd_record),
     "replay": ("replay a bag's /cmd_vel into a server or a headless simulation", _cmd_replay),
     "compare": ("compare the odometry of a simulated and a real run (RMSE, drift)", _cmd_compare),
+    "zenohd": (
+        "run a Zenoh router for ROS 2 over Zenoh (as rmw_zenohd; [zenoh] extra)",
+        _cmd_zenohd,
+    ),
 }
 
 

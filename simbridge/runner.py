@@ -16,7 +16,7 @@ import time
 from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from simbridge import __version__
 from simbridge.config import (
@@ -33,6 +33,11 @@ from simbridge.server import BridgeServer, tls_context
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
 from simbridge.web.admin import install_admin
+
+
+if TYPE_CHECKING:
+    from simbridge.zenoh.config import ZenohOptions
+    from simbridge.zenoh.link import ZenohLink
 
 
 __all__ = ["MAX_CATCH_UP", "App", "LoopStats"]
@@ -99,6 +104,7 @@ class App:
         params: Params | Path | str | None = None,
         static_dir: Path | None = None,
         seed: int = 0,
+        zenoh: ZenohOptions | None = None,
     ) -> None:
         #: Network settings.
         self.settings = settings or ServerSettings()
@@ -160,6 +166,13 @@ class App:
                 "parameters (set --admin-token or SIMBRIDGE_ADMIN_TOKEN)",
                 self.settings.host,
             )
+        #: The ROS 2 graph through Zenoh (``--zenoh``), or None.
+        self.zenoh: ZenohLink | None = None
+        if zenoh is not None:
+            from simbridge.zenoh.link import ZenohLink  # the [zenoh] extra, only when asked
+
+            self.zenoh = ZenohLink(self.graph, zenoh)
+            self.tick_hooks.append(self.zenoh.tick)
 
     # -- facts ----------------------------------------------------------------------------
 
@@ -186,6 +199,7 @@ class App:
             "loop_rate_hz": self.world.params.sim.rate,
             **self.server.stats(),
             "loop": self.stats.summary(),
+            **({"zenoh": self.zenoh.health()} if self.zenoh is not None else {}),
         }
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -200,6 +214,8 @@ class App:
         loop = asyncio.get_running_loop()
         self.robot.publish_static(loop.time())
         self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
+        if self.zenoh is not None:
+            await self.zenoh.start()
         self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
         self.ready.set()
 
@@ -209,6 +225,8 @@ class App:
             self._loop_task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._loop_task
+        if self.zenoh is not None:
+            await self.zenoh.close()
         if self._http is not None:
             self._http.close()
             await self._http.wait_closed()

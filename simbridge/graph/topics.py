@@ -121,6 +121,9 @@ class TopicTable:
         self.cdr_factory: Callable[[str, Any], Callable[[], bytes]] | None = None
         #: Bumped by every subscription change: the delivery plans of topics are rebuilt.
         self.generation = 0
+        #: Called with ``(topic, message, sending peer or None)`` before each delivery
+        #: (extensions: the Zenoh link forwards messages to ROS 2 subscribers).
+        self.taps: list[Callable[[Topic, Outgoing, Peer | None], None]] = []
 
     # -- declaration ----------------------------------------------------------------------------
 
@@ -270,6 +273,8 @@ class TopicTable:
             ProtocolError: an in-process subscriber refused the message (after every client
                 subscriber got it); the caller reports it to ``source``.
         """
+        for tap in self.taps:
+            tap(topic, out, source)
         if topic.latch:
             topic.latched = out
         if topic.subscriptions:

@@ -39,8 +39,19 @@ class CdrWriter:
         return bytes(self.registry.store.serialize_cdr(obj, canonical, little_endian=True))
 
     def factory(self, typename: str, msg: Any) -> Callable[[], bytes]:
-        """Return a function computing the CDR bytes of ``msg`` when first needed."""
-        return lambda: self.serialize(typename, msg)
+        """Return a function computing the CDR bytes of ``msg`` when first needed (then kept).
+
+        Every consumer of one message (``cbor-raw`` subscribers, ROS 2 over Zenoh) shares the
+        one serialization.
+        """
+        kept: list[bytes] = []
+
+        def cdr() -> bytes:
+            if not kept:
+                kept.append(self.serialize(typename, msg))
+            return kept[0]
+
+        return cdr
 
     def _builder(self, typename: str) -> Builder:
         builder = self._builders.get(typename)

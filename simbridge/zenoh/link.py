@@ -1,0 +1,820 @@
+"""simbridge on the ROS 2 graph through Zenoh, as an rmw_zenoh process.
+
+:class:`ZenohLink` keeps a Zenoh session beside the graph and maps both ways:
+
+* **outward**: every in-process node (``/virtual_robot``, ``/sim``, ...) and the rosbridge
+  clients (as ``/rosbridge_websocket``, like rosbridge_suite) get rmw_zenoh liveliness tokens
+  for their publishers, subscriptions and services. Messages go out on the topic's key
+  expression with rmw_zenoh's attachment, serialized to CDR once (the bytes are shared with
+  ``cbor-raw`` subscribers) and only while a ROS 2 subscriber exists; latched topics are
+  transient-local advanced publishers with a one-sample cache, as rmw_zenoh declares them.
+  Services are queryables; a call runs through the graph's service table as a rosbridge call
+  does (in-process handlers and services advertised by rosbridge clients alike);
+* **inward**: publishers and services of other rmw_zenoh processes (found from their tokens,
+  gone with them) join the graph, so rosapi lists them and rosbridge clients subscribe, publish
+  and call. Data is subscribed only while a rosbridge client or an in-process node listens.
+
+Zenoh runs its callbacks on its own threads; they only hand the sample to the event loop
+(``call_soon_threadsafe``). Bad input from the network (a payload that is not CDR of its type,
+an unknown type, a name that clashes, a token that vanishes mid-call) becomes a failed service
+response or one rate-limited log line, never an exception in the loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import importlib
+import itertools
+import logging
+import time
+from collections import Counter
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from typing import Any
+
+import orjson
+
+from simbridge.bag import to_dict
+from simbridge.errors import ConfigError, SimbridgeError
+from simbridge.graph import BRIDGE_NODE, Graph, Topic
+from simbridge.graph.topics import Peer
+from simbridge.msgs.cdr import CdrWriter
+from simbridge.protocol import Frame, Outgoing, Session
+from simbridge.protocol.ops import CallService, ServiceResponse
+from simbridge.zenoh.attachment import Attachment
+from simbridge.zenoh.config import ZenohOptions, session_config
+from simbridge.zenoh.names import (
+    ADMIN_SPACE,
+    DEFAULT_QOS,
+    LATCHED_QOS,
+    Entity,
+    Qos,
+    dds_type,
+    entity_gid,
+    split_node,
+)
+from simbridge.zenoh.typehash import TypeHasher
+
+
+__all__ = ["RemoteNode", "ZenohLink", "import_zenoh"]
+
+logger = logging.getLogger(__name__)
+
+INSTALL_HINT = 'pip install "simbridge[zenoh]"'
+#: Seconds between two full comparisons of the graph with what is declared.
+RECONCILE_PERIOD = 0.5
+#: Seconds between two log lines about the same problem.
+LOG_EVERY = 30.0
+#: Seconds a call from ROS 2 waits for a rosbridge client that provides the service.
+SERVICE_TIMEOUT = 10.0
+
+
+def import_zenoh() -> Any:
+    """Import eclipse-zenoh.
+
+    Raises:
+        ConfigError: it is not installed (the message gives the install command).
+    """
+    try:
+        return importlib.import_module("zenoh")
+    except ImportError:
+        msg = f"--zenoh needs the Zenoh extra: {INSTALL_HINT}"
+        raise ConfigError(msg) from None
+
+
+class RemoteNode(str):
+    """A node of another process, as the owner of a topic's publisher in the graph.
+
+    It reads as the node's name (rosapi lists it so) but is never equal to a local node of the
+    same name, nor to a node of that name in a third process.
+    """
+
+    zid: str
+
+    def __new__(cls, name: str, zid: str) -> RemoteNode:
+        """Make the owner for node ``name`` of the Zenoh session ``zid``."""
+        node = super().__new__(cls, name)
+        node.zid = zid
+        return node
+
+    def __eq__(self, other: object) -> bool:
+        return isinstance(other, RemoteNode) and str.__eq__(self, other) and self.zid == other.zid
+
+    def __ne__(self, other: object) -> bool:
+        return not self.__eq__(other)
+
+    def __hash__(self) -> int:
+        return hash(("remote", str(self), self.zid))
+
+
+@dataclass(eq=False, slots=True)
+class _Declared:
+    """An entity simbridge declared: its token and its Zenoh object."""
+
+    entity: Entity
+    token: Any
+    gid: bytes
+    #: Publisher, queryable or subscriber (None for nodes and subscriptions' tokens).
+    handle: Any = None
+    latched: bool = False
+    sequence: itertools.count[int] = field(default_factory=lambda: itertools.count(1))
+
+
+class _Caller:
+    """The peer that makes a ROS 2 call through the graph's service table."""
+
+    label = "ROS 2 (Zenoh)"
+
+    def __init__(self, link: ZenohLink, session: Session) -> None:
+        self.link = link
+        self.session = session
+
+    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
+        self.link._service_answer(frame)
+
+
+class _Provider:
+    """The peer that provides a remote ROS 2 service to the graph (calls become queries)."""
+
+    def __init__(self, link: ZenohLink, session: Session, entity: Entity) -> None:
+        self.link = link
+        self.session = session
+        self.entity = entity
+        self.label = f"ROS 2 service {entity.name} of {entity.node_fqn} (Zenoh)"
+
+    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
+        self.link._remote_call(self, frame)
+
+
+class ZenohLink:
+    """One Zenoh session joining simbridge's graph to the ROS 2 graph (see the module doc)."""
+
+    def __init__(self, graph: Graph, options: ZenohOptions) -> None:
+        #: The graph mapped onto ROS 2.
+        self.graph = graph
+        #: Domain, distribution, endpoints.
+        self.options = options
+        self.zenoh = import_zenoh()
+        self.config = session_config(self.zenoh, options)
+        self.hasher = TypeHasher(graph.registry, options.distro)
+        self.cdr = CdrWriter(graph.registry)
+        #: "starting", "connecting" (no router or peer yet), "connected", "closed", "failed".
+        self.state = "starting"
+        self.error: str | None = None
+        self.session: Any = None
+        self.zid = ""
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._ids = itertools.count(0)
+        self._node_ids: dict[str, str] = {}
+        #: What simbridge declared, by (kind, node, name).
+        self._declared: dict[tuple[str, str, str], _Declared] = {}
+        #: Outward publishers by topic name (one per topic, under its first local node).
+        self._publishers: dict[str, _Declared] = {}
+        #: Remote entities by token.
+        self._remote: dict[str, Entity] = {}
+        self._remote_dirty = True
+        #: Remote subscriptions per topic name (publish only while there is one).
+        self._remote_subs: Counter[str] = Counter()
+        #: Inward: topic owners and services simbridge added to the graph for remote entities.
+        self._imported_pubs: dict[tuple[str, RemoteNode], str] = {}  # (topic, owner) -> type
+        self._providers: dict[str, _Provider] = {}
+        #: Remote subscriptions stand in the graph as in-process subscribers that do nothing
+        #: (so that the simulation publishes what only ROS 2 listens to, and rosapi lists them).
+        self._markers: dict[tuple[str, RemoteNode], Callable[[Any, Any], None]] = {}
+        self._marker_ids: set[int] = set()
+        #: Inward data subscribers by topic name.
+        self._subscribers: dict[str, Any] = {}
+        #: Calls from ROS 2 waiting for the graph's answer: op id -> (query, type, attachment).
+        self._queries: dict[str, tuple[Any, str, Attachment]] = {}
+        #: Calls to ROS 2 waiting for a reply: server id -> (provider, response type).
+        self._calls: dict[str, tuple[_Provider, str]] = {}
+        self._caller = _Caller(self, graph.new_session())
+        self._call_ids = itertools.count(1)
+        self._forwarding = False
+        self._next_reconcile = 0.0
+        self._generation = -1
+        self._logged: dict[str, float] = {}
+        #: Counters for /healthz.
+        self.stats: Counter[str] = Counter()
+        self._liveliness_sub: Any = None
+        graph.topics.taps.append(self._on_deliver)
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Open the session (in a thread: it may wait for the network) and start watching."""
+        self._loop = asyncio.get_running_loop()
+        try:
+            self.session = await self._loop.run_in_executor(None, self.zenoh.open, self.config)
+        except Exception as err:  # Zenoh refuses the configuration or cannot listen
+            self.state, self.error = "failed", str(err)
+            logger.error("Zenoh session could not open: %s", err)
+            return
+        self.zid = str(self.session.info.zid())
+        self.state = "connecting"
+        self._liveliness_sub = self.session.liveliness().declare_subscriber(
+            f"{ADMIN_SPACE}/{self.options.domain}/**", self._on_token, history=True
+        )
+        self._update_state()
+        logger.info(
+            "Zenoh: session %s, domain %d, ROS 2 %s, connecting to %s",
+            self.zid,
+            self.options.domain,
+            self.options.distro,
+            ", ".join(self.options.connect) or "the configured endpoints",
+        )
+        self.reconcile(force=True)
+
+    async def close(self) -> None:
+        """Withdraw every token and close the session."""
+        session, self.session = self.session, None
+        if session is None:
+            return
+        self.state = "closed"
+        for entry in list(self._declared.values()):
+            self._undeclare(entry)
+        self._declared.clear()
+        self._publishers.clear()
+        for sub in self._subscribers.values():
+            _quietly(sub.undeclare)
+        self._subscribers.clear()
+        loop = asyncio.get_running_loop()
+        await loop.run_in_executor(None, session.close)
+
+    def health(self) -> dict[str, Any]:
+        """Return the ``zenoh`` part of ``/healthz``."""
+        self._update_state()
+        out: dict[str, Any] = {
+            "state": self.state,
+            "zid": self.zid,
+            "domain": self.options.domain,
+            "ros_distro": self.options.distro,
+            "declared": len(self._declared),
+            "remote_entities": len(self._remote),
+            **dict(self.stats),
+        }
+        if self.session is not None:
+            info = self.session.info
+            out["routers"] = len(list(info.routers_zid()))
+            out["peers"] = len(list(info.peers_zid()))
+        if self.error:
+            out["error"] = self.error
+        return out
+
+    def _update_state(self) -> None:
+        if self.session is None or self.state in ("closed", "failed"):
+            return
+        info = self.session.info
+        linked = bool(list(info.routers_zid())) or bool(list(info.peers_zid()))
+        new = "connected" if linked else "connecting"
+        if new != self.state:
+            self.state = new
+            logger.info("Zenoh: %s", new)
+
+    # -- the periodic pass ------------------------------------------------------------------
+
+    def tick(self, now: float) -> None:
+        """Bring what is declared in line with the graph (often enough, cheaply)."""
+        if self.session is None:
+            return
+        changed = self.graph.topics.generation != self._generation
+        if now >= self._next_reconcile or ((changed or self._remote_dirty) and self._due(now)):
+            self.reconcile()
+            self._next_reconcile = now + RECONCILE_PERIOD
+
+    def _due(self, now: float) -> bool:
+        return now >= self._next_reconcile - RECONCILE_PERIOD + 0.05
+
+    def reconcile(self, *, force: bool = False) -> None:
+        """Declare what the graph has and Zenoh lacks, undeclare what went, both ways."""
+        if self.session is None:
+            return
+        self._generation = self.graph.topics.generation
+        if self._remote_dirty or force:
+            self._remote_dirty = False
+            self._import_remote()
+        self._export_local()
+        self._update_subscribers()
+        self._update_state()
+
+    # -- outward ----------------------------------------------------------------------------
+
+    def _local_owner(self, owner: object) -> str | None:
+        """Return the node name an owner stands for, or None when it is not local."""
+        if isinstance(owner, RemoteNode):
+            return None
+        if isinstance(owner, str):
+            return owner
+        if isinstance(owner, _Provider | _Caller):
+            return None
+        return BRIDGE_NODE  # a rosbridge client
+
+    def _wanted(self) -> dict[tuple[str, str, str], tuple[str, str, Qos]]:
+        """Return the local entities: (kind, node, name) -> (kind, type, QoS)."""
+        want: dict[tuple[str, str, str], tuple[str, str, Qos]] = {}
+        for node in self.graph.nodes:
+            want[("NN", node, "")] = ("NN", "", DEFAULT_QOS)
+        for topic in self.graph.topics.topics.values():
+            if topic.type is None or not topic.known:
+                continue
+            qos = LATCHED_QOS if topic.latch else DEFAULT_QOS
+            for owner in topic.publishers:
+                local = self._local_owner(owner)
+                if local is not None:
+                    want[("MP", local, topic.name)] = ("MP", topic.type, qos)
+            for node, callback in topic.internal:
+                if id(callback) not in self._marker_ids:
+                    want[("MS", node, topic.name)] = ("MS", topic.type, DEFAULT_QOS)
+            if topic.subscriptions:
+                want[("MS", BRIDGE_NODE, topic.name)] = ("MS", topic.type, DEFAULT_QOS)
+        for service in self.graph.services.services.values():
+            if service.provider is not None and isinstance(service.provider, _Provider):
+                continue
+            if service.type not in self.graph.registry.services:
+                continue
+            node = service.node if service.handler is not None else BRIDGE_NODE
+            want[("SS", node, service.name)] = ("SS", service.type, DEFAULT_QOS)
+        for key in list(want):
+            if key[0] != "NN":
+                want.setdefault(("NN", key[1], ""), ("NN", "", DEFAULT_QOS))
+        return want
+
+    def _export_local(self) -> None:
+        want = self._wanted()
+        for key in [k for k in self._declared if k not in want]:
+            self._undeclare(self._declared.pop(key))
+        # nodes first: their ids are the endpoints' node ids
+        for key in sorted(want, key=lambda k: k[0] != "NN"):
+            if key in self._declared:
+                continue
+            kind, type_name, qos = want[key]
+            try:
+                self._declare(key, kind, type_name, qos)
+            except (SimbridgeError, ValueError) as err:
+                self._log(f"declare {key}", f"Zenoh: cannot declare {key[2] or key[1]}: {err}")
+        publishers: dict[str, _Declared] = {}
+        for key, entry in self._declared.items():
+            if key[0] == "MP":
+                publishers.setdefault(key[2], entry)
+        self._publishers = publishers
+
+    def _declare(self, key: tuple[str, str, str], kind: str, type_name: str, qos: Qos) -> None:
+        _, node, name = key
+        namespace, short = split_node(node)
+        nid = self._node_ids.get(node)
+        if nid is None:
+            nid = self._node_ids[node] = str(next(self._ids))
+        if kind == "NN":
+            entity = Entity(self.options.domain, self.zid, nid, nid, "NN", namespace, short)
+        else:
+            type_hash = (
+                self.hasher.service(type_name) if kind == "SS" else self.hasher.message(type_name)
+            )
+            entity = Entity(
+                self.options.domain,
+                self.zid,
+                nid,
+                str(next(self._ids)),
+                kind,  # type: ignore[arg-type]
+                namespace,
+                short,
+                name=name,
+                type=type_name,
+                type_hash=type_hash,
+                qos=qos,
+            )
+        z, session = self.zenoh, self.session
+        handle = None
+        if kind == "MP":
+            if qos.transient_local:
+                ext = importlib.import_module("zenoh.ext")
+                handle = ext.declare_advanced_publisher(
+                    session,
+                    entity.keyexpr(),
+                    cache=ext.CacheConfig(max_samples=qos.depth),
+                    publisher_detection=True,
+                    sample_miss_detection=ext.MissDetectionConfig(sporadic_heartbeat=0.5),
+                )
+            else:
+                handle = session.declare_publisher(
+                    entity.keyexpr(), congestion_control=z.CongestionControl.DROP
+                )
+        elif kind == "SS":
+            handle = session.declare_queryable(
+                entity.keyexpr(),
+                self._query_handler(name, type_name),
+                complete=True,
+                allowed_origin=z.Locality.REMOTE,
+            )
+        token_key = entity.token()
+        token = session.liveliness().declare_token(token_key)
+        self._declared[key] = _Declared(
+            entity, token, entity_gid(token_key), handle, latched=qos.transient_local
+        )
+        self.stats["declared_total"] += 1
+        if kind == "MP" and qos.transient_local:
+            self._prime_latched(name)
+
+    def _prime_latched(self, name: str) -> None:
+        """Put a latched topic's last message into the new publisher's cache."""
+        topic = self.graph.topics.topics.get(name)
+        if topic is not None and topic.latched is not None:
+            entry = self._declared.get(("MP", self._first_owner(topic), name))
+            if entry is not None:
+                self._put(entry, topic.latched)
+
+    def _first_owner(self, topic: Topic) -> str:
+        for owner in topic.publishers:
+            node = self._local_owner(owner)
+            if node is not None:
+                return node
+        return ""
+
+    def _undeclare(self, entry: _Declared) -> None:
+        if entry.handle is not None:
+            _quietly(entry.handle.undeclare)
+        _quietly(entry.token.undeclare)
+
+    def _on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
+        """Tap on every delivery in the graph: forward it to ROS 2 subscribers."""
+        if self._forwarding or isinstance(source, _Provider | _Caller):
+            return
+        entry = self._publishers.get(topic.name)
+        if entry is None or not (entry.latched or self._remote_subs[topic.name]):
+            return
+        self._put(entry, out)
+
+    def _put(self, entry: _Declared, out: Outgoing) -> None:
+        try:
+            payload = out.cdr() if out.cdr is not None else None
+            if payload is None:
+                payload = self.cdr.serialize(entry.entity.type, out.msg)
+        except Exception as err:  # a message the CDR writer cannot encode: skip, say so once
+            self._log(f"cdr {entry.entity.name}", f"Zenoh: {entry.entity.name} not sent: {err}")
+            return
+        attachment = Attachment(next(entry.sequence), time.time_ns(), entry.gid).pack()
+        try:
+            entry.handle.put(payload, attachment=attachment)
+            self.stats["published"] += 1
+        except Exception as err:
+            self._log(f"put {entry.entity.name}", f"Zenoh: put on {entry.entity.name}: {err}")
+
+    # -- calls from ROS 2 ---------------------------------------------------------------------
+
+    def _query_handler(self, name: str, type_name: str) -> Callable[[Any], None]:
+        def on_query(query: Any) -> None:  # a Zenoh thread
+            loop = self._loop
+            if loop is not None:
+                loop.call_soon_threadsafe(self._on_query, name, type_name, query)
+
+        return on_query
+
+    def _on_query(self, name: str, type_name: str, query: Any) -> None:
+        self.stats["calls_in"] += 1
+        try:
+            raw = query.attachment
+            attachment = Attachment.unpack(bytes(raw.to_bytes()) if raw is not None else b"")
+        except ValueError as err:
+            self._fail_query(query, f"service {name}: request without a valid attachment ({err})")
+            return
+        if name in self.graph.admin_services and self.graph.settings.admin_token is not None:
+            self._fail_query(query, f"service {name} needs admin rights; call it from /admin")
+            return
+        try:
+            request_type, _ = self.graph.registry.service(type_name)
+            payload = bytes(query.payload.to_bytes()) if query.payload is not None else b""
+            args = self._decode(request_type, payload)
+        except (SimbridgeError, ValueError, KeyError, IndexError, AssertionError) as err:
+            self._fail_query(query, f"service {name}: request is not CDR of {type_name}: {err}")
+            return
+        op_id = f"zenoh:{next(self._call_ids)}"
+        self._queries[op_id] = (query, type_name, attachment)
+        op = CallService(service=name, args=args, id=op_id, timeout=SERVICE_TIMEOUT)
+        self.graph.services.call(self._caller, op, name, asyncio.get_running_loop().time())
+
+    def _service_answer(self, frame: Frame) -> None:
+        """The graph answered a call from ROS 2: reply to the query."""
+        body = orjson.loads(frame.data)
+        pending = self._queries.pop(str(body.get("id")), None)
+        if pending is None:
+            return
+        query, type_name, attachment = pending
+        if not body.get("result"):
+            self._fail_query(query, str(body.get("values")))
+            return
+        try:
+            _, response_type = self.graph.registry.service(type_name)
+            msg = self.graph.converter.from_json(response_type, body.get("values") or {})
+            payload = self.cdr.serialize(response_type, msg)
+        except SimbridgeError as err:
+            self._fail_query(query, f"response does not fit {type_name}: {err}")
+            return
+        reply = Attachment(attachment.sequence, time.time_ns(), attachment.gid).pack()
+        try:
+            query.reply(query.key_expr, payload, attachment=reply)
+        except Exception as err:
+            self._log("reply", f"Zenoh: reply to {body.get('service')}: {err}")
+        finally:
+            _quietly(query.drop)
+
+    def _fail_query(self, query: Any, text: str) -> None:
+        self.stats["calls_failed"] += 1
+        self._log(f"query {text[:40]}", f"Zenoh: a ROS 2 call failed: {text}")
+        try:
+            query.reply_err(text.encode())
+        except Exception as err:
+            logger.debug("reply_err: %s", err)
+        finally:
+            _quietly(query.drop)
+
+    # -- inward ----------------------------------------------------------------------------
+
+    def _on_token(self, sample: Any) -> None:  # a Zenoh thread
+        loop = self._loop
+        if loop is not None:
+            put = sample.kind == self.zenoh.SampleKind.PUT
+            loop.call_soon_threadsafe(self._token_changed, str(sample.key_expr), put)
+
+    def _token_changed(self, token: str, alive: bool) -> None:
+        try:
+            entity = Entity.parse(token)
+        except ValueError as err:
+            self._log("token", f"Zenoh: ignoring a graph token: {err}")
+            return
+        if entity.zid == self.zid:
+            return
+        if alive:
+            if token in self._remote:
+                return
+            self._remote[token] = entity
+            if entity.kind == "MS":
+                self._remote_subs[entity.name] += 1
+        else:
+            if self._remote.pop(token, None) is None:
+                return
+            if entity.kind == "MS":
+                self._remote_subs[entity.name] -= 1
+                if self._remote_subs[entity.name] <= 0:
+                    del self._remote_subs[entity.name]
+        self._remote_dirty = True
+
+    def _import_remote(self) -> None:
+        """Make the graph hold exactly the remote publishers and services the tokens show."""
+        registry = self.graph.registry
+        topics = self.graph.topics
+        pubs: dict[tuple[str, RemoteNode], tuple[str, bool]] = {}
+        subs: dict[tuple[str, RemoteNode], str] = {}
+        services: dict[str, Entity] = {}
+        for entity in self._remote.values():
+            if entity.kind == "MP":
+                owner = RemoteNode(entity.node_fqn, entity.zid)
+                pubs[(entity.name, owner)] = (entity.type, entity.qos.transient_local)
+            elif entity.kind == "MS":
+                subs[(entity.name, RemoteNode(entity.node_fqn, entity.zid))] = entity.type
+            elif entity.kind == "SS":
+                services.setdefault(entity.name, entity)
+        self._import_subscriptions(subs)
+        for name, owner in list(self._imported_pubs):
+            if (name, owner) not in pubs:
+                del self._imported_pubs[(name, owner)]
+                topics.unadvertise(name, owner, None)
+        for (name, node), (type_name, latched) in pubs.items():
+            if (name, node) in self._imported_pubs:
+                continue
+            if not registry.known(type_name):
+                self._log(
+                    f"type {type_name}",
+                    f"Zenoh: {name} from {node} has type {type_name}, unknown here: not bridged",
+                )
+                self.stats["unknown_types"] += 1
+                continue
+            try:
+                topics.advertise(name, type_name, node, latch=latched)
+            except SimbridgeError as err:
+                self._log(f"clash {name}", f"Zenoh: {name} from {node} not bridged: {err}")
+                self.stats["name_clashes"] += 1
+                continue
+            self._imported_pubs[(name, node)] = type_name
+        for name in [n for n in self._providers if n not in services]:
+            provider = self._providers.pop(name)
+            self.graph.services.unadvertise(provider, name)  # fails its pending calls
+        for name, entity in services.items():
+            if name in self._providers:
+                continue
+            existing = self.graph.services.services.get(name)
+            if existing is not None:
+                self._log(
+                    f"clash {name}",
+                    f"Zenoh: service {name} of {entity.node_fqn} not bridged: "
+                    f"{existing.node} here already provides it",
+                )
+                self.stats["name_clashes"] += 1
+                continue
+            if entity.type not in registry.services:
+                self._log(
+                    f"type {entity.type}",
+                    f"Zenoh: service {name} has type {entity.type}, unknown here: not bridged",
+                )
+                self.stats["unknown_types"] += 1
+                continue
+            provider = _Provider(self, self.graph.new_session(), entity)
+            service = self.graph.services.advertise(provider, name, entity.type)
+            service.node = entity.node_fqn
+            self._providers[name] = provider
+
+    def _import_subscriptions(self, subs: dict[tuple[str, RemoteNode], str]) -> None:
+        topics = self.graph.topics
+        for key in [k for k in self._markers if k not in subs]:
+            callback = self._markers.pop(key)
+            self._marker_ids.discard(id(callback))
+            topics.unsubscribe_internal(key[0], callback)
+        for key, type_name in subs.items():
+            if key in self._markers or not self.graph.registry.known(type_name):
+                continue
+
+            def marker(msg: Any, source: Any) -> None:
+                """A ROS 2 subscription: the message goes out through the delivery tap."""
+
+            try:
+                topics.subscribe_internal(key[0], type_name, key[1], marker)
+            except SimbridgeError as err:
+                self._log(f"clash {key[0]}", f"Zenoh: {key[0]} of {key[1]} not bridged: {err}")
+                self.stats["name_clashes"] += 1
+                continue
+            self._markers[key] = marker
+            self._marker_ids.add(id(marker))
+
+    def _update_subscribers(self) -> None:
+        """Subscribe to remote data exactly while something here listens to it."""
+        wanted: dict[str, tuple[str, bool]] = {}
+        for name, _node in self._imported_pubs:
+            topic = self.graph.topics.topics.get(name)
+            if topic is None or topic.type is None:
+                continue
+            local = any(id(cb) not in self._marker_ids for _n, cb in topic.internal)
+            if topic.subscriptions or local:
+                wanted[name] = (topic.type, topic.latch)
+        for name in [n for n in self._subscribers if n not in wanted]:
+            _quietly(self._subscribers.pop(name).undeclare)
+        for name, (type_name, latched) in wanted.items():
+            if name in self._subscribers:
+                continue
+            # any type hash: a Humble publisher feeds a Jazzy simbridge and vice versa
+            keyexpr = f"{self.options.domain}/{name.strip('/')}/{dds_type(type_name)}/*"
+            handler = self._sample_handler(name)
+            try:
+                if latched:
+                    ext = importlib.import_module("zenoh.ext")
+                    sub = ext.declare_advanced_subscriber(
+                        self.session,
+                        keyexpr,
+                        handler,
+                        allowed_origin=self.zenoh.Locality.REMOTE,
+                        history=ext.HistoryConfig(detect_late_publishers=True, max_samples=1),
+                    )
+                else:
+                    sub = self.session.declare_subscriber(
+                        keyexpr, handler, allowed_origin=self.zenoh.Locality.REMOTE
+                    )
+            except Exception as err:
+                self._log(f"sub {name}", f"Zenoh: cannot subscribe to {name}: {err}")
+                continue
+            self._subscribers[name] = sub
+
+    def _sample_handler(self, name: str) -> Callable[[Any], None]:
+        def on_sample(sample: Any) -> None:  # a Zenoh thread
+            loop = self._loop
+            if loop is not None:
+                loop.call_soon_threadsafe(self._on_sample, name, bytes(sample.payload.to_bytes()))
+
+        return on_sample
+
+    def _on_sample(self, name: str, payload: bytes) -> None:
+        topic = self.graph.topics.topics.get(name)
+        if topic is None or topic.type is None or self.session is None:
+            return
+        self.stats["received"] += 1
+        try:
+            msg = self._decode(topic.type, payload)
+        except (SimbridgeError, ValueError, KeyError, IndexError, AssertionError) as err:
+            self.stats["bad_payloads"] += 1
+            self._log(f"bad {name}", f"Zenoh: {name}: payload is not CDR of {topic.type}: {err}")
+            return
+        out = self.graph.topics.outgoing(topic, msg, self.graph.stamp())
+        out.cdr = lambda: payload
+        loop = self._loop
+        now = loop.time() if loop is not None else 0.0
+        self._forwarding = True
+        try:
+            self.graph.topics.deliver(topic, out, now, None)
+        except SimbridgeError as err:
+            self._log(f"refused {name}", f"Zenoh: {name}: refused here: {err}")
+        finally:
+            self._forwarding = False
+
+    def _decode(self, type_name: str, payload: bytes) -> Any:
+        """Return the canonical message of CDR bytes (validated like a client's payload)."""
+        spec = self.graph.registry.spec(type_name)
+        if not spec.fields and len(payload) in (4, 5):
+            # an empty message is one placeholder byte after the header in every ROS 2 RMW;
+            # some Zenoh implementations send the bare header: take both
+            return self.graph.converter.from_json(spec.name, {})
+        obj = self.graph.registry.store.deserialize_cdr(payload, spec.name)
+        return self.graph.converter.from_json(spec.name, to_dict(obj))
+
+    # -- calls to ROS 2 ---------------------------------------------------------------------
+
+    def _remote_call(self, provider: _Provider, frame: Frame) -> None:
+        """The graph forwards a call to a remote service: send it as a query."""
+        body = orjson.loads(frame.data)
+        server_id = str(body.get("id"))
+        entity = provider.entity
+        try:
+            request_type, response_type = self.graph.registry.service(entity.type)
+            msg = self.graph.converter.from_json(request_type, body.get("args") or {})
+            payload = self.cdr.serialize(request_type, msg)
+        except SimbridgeError as err:
+            self._answer_remote(provider, server_id, str(err), ok=False)
+            return
+        gid = entity_gid(f"client:{self.zid}:{entity.name}")
+        attachment = Attachment(next(self._call_ids), time.time_ns(), gid).pack()
+        self._calls[server_id] = (provider, response_type)
+        replies: list[tuple[bool, bytes]] = []
+
+        def on_reply(reply: Any) -> None:  # a Zenoh thread
+            if reply.ok is not None:
+                replies.append((True, bytes(reply.ok.payload.to_bytes())))
+            else:
+                replies.append((False, bytes(reply.err.payload.to_bytes())))
+
+        def on_done() -> None:  # a Zenoh thread
+            loop = self._loop
+            if loop is not None:
+                loop.call_soon_threadsafe(self._remote_done, server_id, replies)
+
+        self.stats["calls_out"] += 1
+        try:
+            self.session.get(
+                entity.keyexpr(),
+                self.zenoh.handlers.Callback(on_reply, on_done),
+                target=self.zenoh.QueryTarget.ALL_COMPLETE,
+                consolidation=self.zenoh.ConsolidationMode.NONE,
+                payload=payload,
+                attachment=attachment,
+                timeout=SERVICE_TIMEOUT,
+            )
+        except Exception as err:
+            self._calls.pop(server_id, None)
+            self._answer_remote(provider, server_id, f"query failed: {err}", ok=False)
+
+    def _remote_done(self, server_id: str, replies: list[tuple[bool, bytes]]) -> None:
+        pending = self._calls.pop(server_id, None)
+        if pending is None:
+            return
+        provider, response_type = pending
+        if not replies:
+            text = f"service {provider.entity.name} gave no reply (its node may have gone)"
+            self._answer_remote(provider, server_id, text, ok=False)
+            return
+        ok, payload = replies[0]
+        if not ok:
+            text = payload.decode(errors="replace") or "the service reported an error"
+            self._answer_remote(provider, server_id, text, ok=False)
+            return
+        try:
+            values = self._decode(response_type, payload)
+        except (SimbridgeError, ValueError, KeyError, IndexError, AssertionError) as err:
+            self.stats["bad_payloads"] += 1
+            text = f"reply is not CDR of {response_type}: {err}"
+            self._answer_remote(provider, server_id, text, ok=False)
+            return
+        self._answer_remote(provider, server_id, orjson.loads(_json(values)), ok=True)
+
+    def _answer_remote(self, provider: _Provider, server_id: str, values: Any, *, ok: bool) -> None:
+        op = ServiceResponse(
+            service=provider.entity.name, id=server_id, values=values, result=ok, has_values=True
+        )
+        error = self.graph.services.respond(provider, op)
+        if error is not None:
+            logger.debug("Zenoh: %s", error)
+
+    # -- logging -----------------------------------------------------------------------------
+
+    def _log(self, key: str, text: str) -> None:
+        """Log a warning at most once per :data:`LOG_EVERY` seconds per ``key``."""
+        now = time.monotonic()
+        if now - self._logged.get(key, -LOG_EVERY) >= LOG_EVERY:
+            self._logged[key] = now
+            logger.warning("%s", text)
+
+
+def _json(value: Any) -> bytes:
+    from simbridge.protocol.encoding import encode_json
+
+    return encode_json(value)
+
+
+def _quietly(action: Callable[[], Any]) -> None:
+    with contextlib.suppress(Exception):
+        action()
