@@ -1,0 +1,162 @@
+"""Fixtures of the ROS 2 over Zenoh tests.
+
+A router from ``simbridge zenohd`` on a free port of 127.0.0.1, simbridge apps joined to it,
+and zenoh-ros2-sdk (an independent rmw_zenoh implementation) as the ROS 2 side, reading message
+definitions from a local directory.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import AsyncIterator, Iterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+
+from simbridge.config import ServerSettings
+from simbridge.msgs import TypeRegistry
+from simbridge.runner import App
+from simbridge.zenoh.config import ZenohOptions
+from tests.helpers import ROOT, TIMEOUT_FACTOR
+
+
+#: Types the ROS 2 side of the tests uses (their .msg/.srv files are written for the SDK).
+MESSAGES = [
+    "nav_msgs/msg/Odometry",
+    "sensor_msgs/msg/LaserScan",
+    "tf2_msgs/msg/TFMessage",
+    "geometry_msgs/msg/Twist",
+    "std_msgs/msg/String",
+    "visualization_msgs/msg/Marker",
+]
+SERVICES = ["std_srvs/srv/Empty", "std_srvs/srv/SetBool", "std_srvs/srv/Trigger"]
+
+
+def free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def write_definitions(root: Path) -> None:
+    """Write ``<root>/<pkg>/msg/<Type>.msg`` (and ``srv``) as zenoh-ros2-sdk reads them first."""
+    registry = TypeRegistry()
+    done: set[str] = set()
+
+    def add(name: str) -> None:
+        if name in done:
+            return
+        done.add(name)
+        pkg, kind, short = name.split("/")
+        folder = root / pkg / kind
+        folder.mkdir(parents=True, exist_ok=True)
+        (folder / f"{short}.msg").write_text(registry.message_text(name))
+        for field in registry.spec(name).fields:
+            if field.nested:
+                add(field.base)
+
+    for name in MESSAGES:
+        add(name)
+    for name in SERVICES:
+        request, response = registry.service(name)
+        pkg, _, short = name.split("/")
+        folder = root / pkg / "srv"
+        folder.mkdir(parents=True, exist_ok=True)
+        text = registry.message_text(request) + "\n---\n" + registry.message_text(response)
+        (folder / f"{short}.srv").write_text(text)
+        for part in (request, response):
+            for field in registry.spec(part).fields:
+                if field.nested:
+                    add(field.base)
+
+
+class Router:
+    """A ``simbridge zenohd`` process on a free port of 127.0.0.1."""
+
+    def __init__(self) -> None:
+        self.port = free_port()
+        self.endpoint = f"tcp/127.0.0.1:{self.port}"
+        self.proc: subprocess.Popen[str] | None = None
+
+    def start(self) -> None:
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "simbridge", "zenohd", "--listen", self.endpoint],
+            cwd=ROOT,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.PIPE,
+            text=True,
+        )
+        assert self.proc.stdout is not None
+        line = self.proc.stdout.readline()  # printed once the router listens
+        assert "listening on" in line, f"zenohd did not start: {line!r} {self.proc.stderr}"
+
+    def stop(self) -> None:
+        if self.proc is not None:
+            self.proc.terminate()
+            self.proc.communicate(timeout=10)  # closes the pipes too
+            self.proc = None
+
+
+@pytest.fixture(scope="session")
+def definitions(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The SDK's message directory (it never fetches definitions from the network then)."""
+    root = tmp_path_factory.mktemp("ros2_msgs")
+    write_definitions(root)
+    from zenoh_ros2_sdk import message_registry
+
+    message_registry.get_registry(str(root))  # the SDK's registry is global: set it first
+    return root
+
+
+@pytest.fixture(scope="module")
+def router() -> Iterator[Router]:
+    """A router for the module's tests (the SDK's session is one per process)."""
+    r = Router()
+    r.start()
+    yield r
+    r.stop()
+
+
+@pytest.fixture(scope="module")
+def ros2(router: Router, definitions: Path) -> Iterator[Any]:
+    """zenoh-ros2-sdk's shared session, connected to the module's router."""
+    from zenoh_ros2_sdk import ZenohSession
+
+    if ZenohSession._instance is not None:
+        ZenohSession._instance.close()
+    session = ZenohSession.get_instance("127.0.0.1", router.port)
+    yield session
+    session.close()
+
+
+def zenoh_options(router: Router, **changes: Any) -> ZenohOptions:
+    values: dict[str, Any] = {"connect": (router.endpoint,), "listen": ("tcp/127.0.0.1:0",)}
+    values.update(changes)
+    return ZenohOptions(**values)
+
+
+@pytest.fixture
+async def zapp(router: Router, ros2: Any) -> AsyncIterator[App]:
+    """A simbridge (default world) on the router's Zenoh network."""
+    app = App(ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router))
+    await app.start()
+    yield app
+    await app.stop()
+
+
+async def eventually(check: Any, timeout: float = 8.0, step: float = 0.05) -> Any:
+    """Call ``check`` (in a thread: the SDK blocks) until it returns something true."""
+    deadline = time.monotonic() + timeout * TIMEOUT_FACTOR
+    while True:
+        value = await asyncio.to_thread(check)
+        if value:
+            return value
+        if time.monotonic() > deadline:
+            msg = f"condition not met within {timeout} s: {check}"
+            raise AssertionError(msg)
+        await asyncio.sleep(step)

@@ -1,0 +1,273 @@
+"""simbridge --zenoh against zenoh-ros2-sdk, an independent rmw_zenoh implementation.
+
+Everything goes through a router started by ``simbridge zenohd`` on 127.0.0.1.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import time
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import connect
+
+from simbridge.runner import App
+from simbridge.zenoh.names import Entity
+from simbridge.zenoh.typehash import TypeHasher
+from tests.helpers import recv_until, send_json, wait_for, ws_url
+from tests.zenoh.conftest import Router, eventually
+
+
+pytestmark = pytest.mark.e2e
+
+KW: dict[str, Any] = {"router_ip": "127.0.0.1"}
+
+
+def sdk_kw(router: Router) -> dict[str, Any]:
+    return {**KW, "router_port": router.port}
+
+
+async def test_ros2_discovers_simbridge_nodes_topics_and_services(
+    zapp: App, router: Router
+) -> None:
+    from zenoh_ros2_sdk import get_service_names_and_types, get_topic_names_and_types
+
+    def topics() -> dict[str, list[str]]:
+        return dict(get_topic_names_and_types(**sdk_kw(router)))
+
+    found = await eventually(lambda: (t := topics()) and "/odom" in t and t)
+    assert found["/odom"] == ["nav_msgs/msg/Odometry"]
+    assert found["/scan"] == ["sensor_msgs/msg/LaserScan"]
+    assert found["/tf"] == ["tf2_msgs/msg/TFMessage"]
+    assert found["/tf_static"] == ["tf2_msgs/msg/TFMessage"]
+    assert found["/cmd_vel"] == ["geometry_msgs/msg/Twist"]
+    services = dict(await asyncio.to_thread(get_service_names_and_types, **sdk_kw(router)))
+    assert services["/reset"] == ["std_srvs/srv/Empty"]
+    assert services["/virtual_robot/get_parameters"] == ["rcl_interfaces/srv/GetParameters"]
+    # the tokens are rmw_zenoh's: node tokens for each in-process node, latched /tf_static
+    tokens = [e.token() for e in (d.entity for d in zapp.zenoh._declared.values())]  # type: ignore[union-attr]
+    node = next(t for t in tokens if t.endswith("/NN/%/%/virtual_robot"))
+    assert node.startswith(f"@ros2_lv/0/{zapp.zenoh.zid}/")  # type: ignore[union-attr]
+    static = next(t for t in tokens if "/%tf_static/" in t)
+    assert static.endswith(
+        "/tf2_msgs::msg::dds_::TFMessage_/" + static.split("/")[11] + "/:1:,1:,:,:,,"
+    )
+
+
+async def test_ros2_subscribers_get_odom_scan_and_tf(zapp: App, router: Router) -> None:
+    from zenoh_ros2_sdk import ROS2Subscriber
+
+    got: dict[str, list[Any]] = {"odom": [], "scan": [], "tf": []}
+    subs = [
+        await asyncio.to_thread(
+            ROS2Subscriber, f"/{name}", type_name, callback=got[name].append, **sdk_kw(router)
+        )
+        for name, type_name in [
+            ("odom", "nav_msgs/msg/Odometry"),
+            ("scan", "sensor_msgs/msg/LaserScan"),
+            ("tf", "tf2_msgs/msg/TFMessage"),
+        ]
+    ]
+    try:
+        await wait_for(lambda: all(len(v) >= 5 for v in got.values()), timeout=10)
+    finally:
+        for sub in subs:
+            sub.close()
+    odom = got["odom"][-1]
+    assert odom.header.frame_id == "odom" and odom.child_frame_id == "base_link"
+    scan = got["scan"][-1]
+    assert len(scan.ranges) == zapp.world.params.lidar.rays
+    assert got["tf"][-1].transforms[0].child_frame_id == "base_link"
+
+
+async def test_ros2_publisher_drives_the_robot_through_cmd_vel(zapp: App, router: Router) -> None:
+    from zenoh_ros2_sdk import ROS2Publisher
+
+    robot = next(iter(zapp.world.robots.values()))
+    x0 = robot.state.x
+    pub = await asyncio.to_thread(
+        ROS2Publisher, "/cmd_vel", "geometry_msgs/msg/Twist", **sdk_kw(router)
+    )
+    from zenoh_ros2_sdk import get_message_class
+
+    twist = get_message_class("geometry_msgs/msg/Twist")
+    vector = get_message_class("geometry_msgs/msg/Vector3")
+    try:
+        deadline = time.monotonic() + 10
+        while robot.state.x < x0 + 0.1 and time.monotonic() < deadline:
+            await asyncio.to_thread(
+                pub.publish,
+                linear=vector(x=0.3, y=0.0, z=0.0),
+                angular=vector(x=0.0, y=0.0, z=0.0),
+            )
+            await asyncio.sleep(0.1)
+    finally:
+        pub.close()
+    assert robot.state.x >= x0 + 0.1
+    assert twist is not None
+
+
+async def test_ros2_calls_reset_and_a_service_with_fields(zapp: App, router: Router) -> None:
+    from zenoh_ros2_sdk import ROS2ServiceClient
+
+    # SetBool's hash is computed by the SDK from the .srv text: an independent check of ours
+    pause = await asyncio.to_thread(
+        ROS2ServiceClient, "/sim/pause", "std_srvs/srv/SetBool", **sdk_kw(router)
+    )
+    reply = await asyncio.to_thread(pause.call, data=True)
+    assert reply.success and zapp.simclock.paused
+    # the SDK cannot hash an empty request itself; it takes the hash Jazzy's rosidl gives
+    empty_hash = TypeHasher(zapp.graph.registry, "jazzy").service("std_srvs/srv/Empty")
+    reset = await asyncio.to_thread(
+        ROS2ServiceClient,
+        "/reset",
+        "std_srvs/srv/Empty",
+        request_definition="",
+        response_definition="",
+        type_hash=empty_hash,
+        **sdk_kw(router),
+    )
+    robot = next(iter(zapp.world.robots.values()))
+    start = robot.state.x
+    robot.state.x += 0.5
+    await asyncio.to_thread(reset.call)
+    assert robot.state.x == pytest.approx(start)
+    pause.close()
+    reset.close()
+
+
+async def test_ros2_topic_and_service_reach_rosbridge_clients(zapp: App, router: Router) -> None:
+    from zenoh_ros2_sdk import ROS2Publisher, ROS2ServiceServer
+
+    pub = await asyncio.to_thread(
+        ROS2Publisher, "/chatter", "std_msgs/msg/String", node_name="talker", **sdk_kw(router)
+    )
+    made: dict[str, Any] = {}
+
+    def serve(request: Any) -> Any:
+        return made["server"].response_msg_class(success=request.data, message="hello from ROS 2")
+
+    server = made["server"] = await asyncio.to_thread(
+        ROS2ServiceServer, "/ros2_hello", "std_srvs/srv/SetBool", serve, **sdk_kw(router)
+    )
+    try:
+        await wait_for(lambda: "/chatter" in zapp.graph.topics.topics, timeout=8)
+        async with connect(ws_url(zapp)) as conn:
+            await send_json(conn, {"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+            listed = await recv_until(conn, lambda m: m.get("id") == "t")
+            values = listed["values"]
+            assert values["types"][values["topics"].index("/chatter")] == "std_msgs/msg/String"
+            await send_json(conn, {"op": "subscribe", "topic": "/chatter"})
+            await asyncio.sleep(0.3)  # the link subscribes within a reconcile pass
+
+            async def talk() -> None:
+                for _ in range(40):
+                    await asyncio.to_thread(pub.publish, data="hi")
+                    await asyncio.sleep(0.05)
+
+            talking = asyncio.create_task(talk())
+            msg = await recv_until(conn, lambda m: m.get("topic") == "/chatter", timeout=5)
+            assert msg["msg"] == {"data": "hi"}
+            talking.cancel()
+            await wait_for(lambda: "/ros2_hello" in zapp.graph.services.services, timeout=8)
+            call = {"op": "call_service", "service": "/ros2_hello", "id": "c", "args": [True]}
+            await send_json(conn, call)
+            answer = await recv_until(conn, lambda m: m.get("id") == "c", timeout=8)
+            assert answer["result"] is True
+            assert answer["values"] == {"success": True, "message": "hello from ROS 2"}
+    finally:
+        pub.close()
+        server.close()
+    # gone with its tokens
+    await wait_for(lambda: "/ros2_hello" not in zapp.graph.services.services, timeout=8)
+
+
+async def test_rosbridge_topic_and_service_reach_ros2(zapp: App, router: Router) -> None:
+    from zenoh_ros2_sdk import ROS2ServiceClient, ROS2Subscriber
+
+    async with connect(ws_url(zapp)) as conn:
+        await send_json(
+            conn,
+            {"op": "advertise_service", "service": "/web_hello", "type": "std_srvs/srv/SetBool"},
+        )
+        await send_json(
+            conn, {"op": "advertise", "topic": "/web_chatter", "type": "std_msgs/msg/String"}
+        )
+        got: list[Any] = []
+        await wait_for(lambda: ("MP", "/rosbridge_websocket", "/web_chatter") in _keys(zapp), 5)
+        sub = await asyncio.to_thread(
+            ROS2Subscriber, "/web_chatter", "std_msgs/msg/String", got.append, **sdk_kw(router)
+        )
+        await wait_for(lambda: zapp.zenoh._remote_subs["/web_chatter"] > 0, 8)  # type: ignore[union-attr]
+        for _ in range(5):
+            await send_json(conn, {"op": "publish", "topic": "/web_chatter", "msg": {"data": "yo"}})
+        await wait_for(lambda: len(got) >= 5, 5)
+        assert got[0].data == "yo"
+        sub.close()
+        await wait_for(lambda: ("SS", "/rosbridge_websocket", "/web_hello") in _keys(zapp), 5)
+        client = await asyncio.to_thread(
+            ROS2ServiceClient, "/web_hello", "std_srvs/srv/SetBool", **sdk_kw(router)
+        )
+        call = asyncio.create_task(asyncio.to_thread(client.call, data=True))
+        request = await recv_until(conn, lambda m: m.get("op") == "call_service", timeout=5)
+        assert request["args"] == {"data": True}
+        await send_json(
+            conn,
+            {
+                "op": "service_response",
+                "service": "/web_hello",
+                "id": request["id"],
+                "values": {"success": True, "message": "hello from the web"},
+                "result": True,
+            },
+        )
+        reply = await asyncio.wait_for(call, 10)
+        assert reply.success and reply.message == "hello from the web"
+        client.close()
+
+
+async def test_late_ros2_subscriber_gets_the_latched_walls(zapp: App, router: Router) -> None:
+    from zenoh_ros2_sdk import ROS2Subscriber
+    from zenoh_ros2_sdk.qos import QosDurability, QosProfile
+
+    # the first walls went out before any ROS 2 subscriber existed
+    await asyncio.sleep(0.5)
+    got: list[Any] = []
+    qos = QosProfile(durability=QosDurability.TRANSIENT_LOCAL, history_depth=1)
+    sub = await asyncio.to_thread(
+        ROS2Subscriber,
+        "/walls",
+        "visualization_msgs/msg/Marker",
+        got.append,
+        qos=qos,
+        **sdk_kw(router),
+    )
+    try:
+        await wait_for(lambda: len(got) >= 1, 8)
+    finally:
+        sub.close()
+    assert len(got[0].points) == 2 * len(zapp.world.spec.segments())
+
+
+def _keys(app: App) -> set[tuple[str, str, str]]:
+    assert app.zenoh is not None
+    return set(app.zenoh._declared)
+
+
+async def test_health_reports_the_zenoh_session(zapp: App) -> None:
+    assert zapp.zenoh is not None
+    await wait_for(lambda: zapp.health()["zenoh"]["state"] == "connected", 8)
+    health = zapp.health()["zenoh"]
+    assert health["routers"] == 1 and health["domain"] == 0 and health["ros_distro"] == "jazzy"
+    assert json.dumps(health)  # JSON-able for /healthz
+
+
+def test_token_of_sdk_parses(router: Router) -> None:
+    token = (
+        "@ros2_lv/2/f9980ee0495eaafb3e38f0d19e2eae12/0/10/SS/%/%/add_two_ints_server/"
+        "%add_two_ints/example_interfaces::srv::dds_::AddTwoInts_/RIHS01_e118de6bf5eeb66a2491b5"
+        "bda11202e7b68f198d6f67922cf30364858239c81a/::,10:,:,:,,"
+    )
+    assert Entity.parse(token).token() == token

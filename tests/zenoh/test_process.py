@@ -1,0 +1,105 @@
+"""--zenoh as a user meets it: opt-in imports, a router that comes later, /healthz, Humble."""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import subprocess
+import sys
+import urllib.request
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import connect
+
+from simbridge.config import ServerSettings
+from simbridge.runner import App
+from tests.helpers import ROOT, http_url, wait_for, ws_url
+from tests.zenoh.conftest import Router, zenoh_options
+
+
+pytestmark = pytest.mark.e2e
+
+
+def _python(code: str) -> subprocess.CompletedProcess[str]:
+    return subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, timeout=60
+    )
+
+
+def test_zenoh_without_the_extra_exits_at_once_with_the_install_command() -> None:
+    done = _python(
+        "import sys; sys.modules['zenoh'] = None\n"
+        "from simbridge.cli import main\n"
+        "raise SystemExit(main(['--zenoh', '--port', '0', '--http-port', '0']))"
+    )
+    assert done.returncode == 2
+    assert 'pip install "simbridge[zenoh]"' in done.stderr
+
+
+def test_without_zenoh_nothing_of_it_is_imported() -> None:
+    done = _python(
+        "import asyncio, sys\n"
+        "from simbridge.config import ServerSettings\n"
+        "from simbridge.runner import App\n"
+        "async def main():\n"
+        "    app = App(ServerSettings(host='127.0.0.1', port=0, http_port=None))\n"
+        "    await app.start(); await app.stop()\n"
+        "asyncio.run(main())\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'zenoh'"
+        " or m.startswith('simbridge.zenoh')))"
+    )
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.strip() == "[]"
+
+
+async def test_server_runs_without_router_and_connects_when_it_appears() -> None:
+    router = Router()  # its port is chosen, nothing listens there yet
+    app = App(ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router))
+    await app.start()
+    try:
+        assert app.health()["zenoh"]["state"] == "connecting"
+        async with connect(ws_url(app)):  # the rosbridge side serves meanwhile
+            pass
+        await asyncio.to_thread(router.start)
+        await wait_for(lambda: app.health()["zenoh"]["state"] == "connected", timeout=10)
+
+        def healthz() -> Any:
+            with urllib.request.urlopen(http_url(app) + "/healthz", timeout=5) as response:
+                return json.loads(response.read())
+
+        body = await asyncio.to_thread(healthz)
+        assert body["zenoh"]["state"] == "connected" and body["zenoh"]["routers"] == 1
+    finally:
+        await app.stop()
+        router.stop()
+
+
+async def test_humble_declares_no_type_hashes_and_humble_peers_get_data(
+    router: Router, ros2: Any
+) -> None:
+    from zenoh_ros2_sdk import ROS2Subscriber
+
+    app = App(
+        ServerSettings(host="127.0.0.1", port=0, http_port=0),
+        zenoh=zenoh_options(router, distro="humble"),
+    )
+    await app.start()
+    got: list[Any] = []
+    try:
+        assert app.zenoh is not None
+        odom = app.zenoh._declared[("MP", "/virtual_robot", "/odom")].entity
+        assert odom.keyexpr() == "0/odom/nav_msgs::msg::dds_::Odometry_/TypeHashNotSupported"
+        sub = await asyncio.to_thread(
+            ROS2Subscriber,
+            "/odom",
+            "nav_msgs/msg/Odometry",
+            got.append,
+            type_hash="TypeHashNotSupported",
+            router_ip="127.0.0.1",
+            router_port=router.port,
+        )
+        await wait_for(lambda: len(got) >= 3, timeout=8)
+        sub.close()
+    finally:
+        await app.stop()
