@@ -36,7 +36,7 @@ from typing import Any
 import orjson
 
 from simbridge.bag import to_dict
-from simbridge.errors import ConfigError, SimbridgeError
+from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrWriter
@@ -66,6 +66,8 @@ INSTALL_HINT = 'pip install "simbridge[zenoh]"'
 RECONCILE_PERIOD = 0.5
 #: Seconds between two log lines about the same problem.
 LOG_EVERY = 30.0
+#: Topics that many processes publish at once (every other name has one owner).
+SHARED_TOPICS = frozenset({"/tf", "/tf_static", "/rosout", "/parameter_events"})
 #: Seconds a call from ROS 2 waits for a rosbridge client that provides the service.
 SERVICE_TIMEOUT = 10.0
 
@@ -199,6 +201,7 @@ class ZenohLink:
         self.stats: Counter[str] = Counter()
         self._liveliness_sub: Any = None
         graph.topics.taps.append(self._on_deliver)
+        self._guard_spawn()
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -278,10 +281,23 @@ class ZenohLink:
         """Bring what is declared in line with the graph (often enough, cheaply)."""
         if self.session is None:
             return
-        changed = self.graph.topics.generation != self._generation
+        changed = self._signature() != self._generation
         if now >= self._next_reconcile or ((changed or self._remote_dirty) and self._due(now)):
             self.reconcile()
             self._next_reconcile = now + RECONCILE_PERIOD
+
+    def _signature(self) -> int:
+        """A number that changes when clients subscribe or advertise (cheap to compute)."""
+        graph = self.graph
+        ads = sum(len(p.session.advertisements) + len(p.session.services) for p in graph.peers)
+        return hash(
+            (
+                graph.topics.generation,
+                len(graph.topics.topics),
+                len(graph.services.services),
+                ads,
+            )
+        )
 
     def _due(self, now: float) -> bool:
         return now >= self._next_reconcile - RECONCILE_PERIOD + 0.05
@@ -290,7 +306,7 @@ class ZenohLink:
         """Declare what the graph has and Zenoh lacks, undeclare what went, both ways."""
         if self.session is None:
             return
-        self._generation = self.graph.topics.generation
+        self._generation = self._signature()
         if self._remote_dirty or force:
             self._remote_dirty = False
             self._import_remote()
@@ -485,7 +501,7 @@ class ZenohLink:
             request_type, _ = self.graph.registry.service(type_name)
             payload = bytes(query.payload.to_bytes()) if query.payload is not None else b""
             args = self._decode(request_type, payload)
-        except (SimbridgeError, ValueError, KeyError, IndexError, AssertionError) as err:
+        except Exception as err:  # whatever the network sent: reported, never raised
             self._fail_query(query, f"service {name}: request is not CDR of {type_name}: {err}")
             return
         op_id = f"zenoh:{next(self._call_ids)}"
@@ -589,6 +605,14 @@ class ZenohLink:
                 )
                 self.stats["unknown_types"] += 1
                 continue
+            local = self._local_publisher(name)
+            if local is not None and name not in SHARED_TOPICS:
+                self._note(
+                    f"clash {name}",
+                    f"Zenoh: {name} of {node} (session {node.zid}) not bridged: {local} here "
+                    "publishes it already (robot names must be unique across the classroom)",
+                )
+                continue
             try:
                 topics.advertise(name, type_name, node, latch=latched)
             except SimbridgeError as err:
@@ -604,12 +628,11 @@ class ZenohLink:
                 continue
             existing = self.graph.services.services.get(name)
             if existing is not None:
-                self._log(
+                self._note(
                     f"clash {name}",
-                    f"Zenoh: service {name} of {entity.node_fqn} not bridged: "
-                    f"{existing.node} here already provides it",
+                    f"Zenoh: service {name} of {entity.node_fqn} (session {entity.zid}) not "
+                    f"bridged: {existing.node} here provides it already",
                 )
-                self.stats["name_clashes"] += 1
                 continue
             if entity.type not in registry.services:
                 self._log(
@@ -648,12 +671,15 @@ class ZenohLink:
     def _update_subscribers(self) -> None:
         """Subscribe to remote data exactly while something here listens to it."""
         wanted: dict[str, tuple[str, bool]] = {}
-        for name, _node in self._imported_pubs:
-            topic = self.graph.topics.topics.get(name)
-            if topic is None or topic.type is None:
+        remote = {name for name, _node in self._imported_pubs}
+        for name, topic in self.graph.topics.topics.items():
+            if topic.type is None or not topic.known:
                 continue
+            # an in-process node subscribes at once, as an rmw_zenoh subscription does (no
+            # message lost while discovery runs); a rosbridge client's subscription only
+            # while ROS 2 publishes the topic
             local = any(id(cb) not in self._marker_ids for _n, cb in topic.internal)
-            if topic.subscriptions or local:
+            if local or (topic.subscriptions and name in remote):
                 wanted[name] = (topic.type, topic.latch)
         for name in [n for n in self._subscribers if n not in wanted]:
             _quietly(self._subscribers.pop(name).undeclare)
@@ -697,7 +723,7 @@ class ZenohLink:
         self.stats["received"] += 1
         try:
             msg = self._decode(topic.type, payload)
-        except (SimbridgeError, ValueError, KeyError, IndexError, AssertionError) as err:
+        except Exception as err:  # whatever the network sent: reported, never raised
             self.stats["bad_payloads"] += 1
             self._log(f"bad {name}", f"Zenoh: {name}: payload is not CDR of {topic.type}: {err}")
             return
@@ -784,7 +810,7 @@ class ZenohLink:
             return
         try:
             values = self._decode(response_type, payload)
-        except (SimbridgeError, ValueError, KeyError, IndexError, AssertionError) as err:
+        except Exception as err:  # whatever the network sent: reported, never raised
             self.stats["bad_payloads"] += 1
             text = f"reply is not CDR of {response_type}: {err}"
             self._answer_remote(provider, server_id, text, ok=False)
@@ -799,7 +825,56 @@ class ZenohLink:
         if error is not None:
             logger.debug("Zenoh: %s", error)
 
+    def _local_publisher(self, name: str) -> str | None:
+        """Return the in-process node publishing ``name``, if any."""
+        topic = self.graph.topics.topics.get(name)
+        if topic is None:
+            return None
+        for owner in topic.publishers:
+            if isinstance(owner, str) and not isinstance(owner, RemoteNode):
+                return owner
+        return None
+
+    def _remote_robot(self, name: str) -> Entity | None:
+        """Return the remote publisher of ``/<name>/odom`` (a robot of another process)."""
+        topic = f"/{name}/odom"
+        return next((e for e in self._remote.values() if e.kind == "MP" and e.name == topic), None)
+
+    def _guard_spawn(self) -> None:
+        """Make ``/spawn`` refuse a robot name that another process of the classroom uses."""
+        service = self.graph.services.services.get("/spawn")
+        if service is None or service.handler is None:
+            return
+        spawn = service.handler
+
+        def guarded(args: Any) -> dict[str, Any]:
+            request = dict(args) if isinstance(args, dict) else {}
+            name = str(request.get("name") or "").strip("/")
+            if not name:  # pick robotN free here and elsewhere
+                n = 1
+                while f"/robot{n}/odom" in self.graph.topics.topics:
+                    n += 1
+                request["name"] = name = f"robot{n}"
+            other = self._remote_robot(name)
+            if other is not None:
+                msg = (
+                    f"/spawn: robot name '{name}' is taken by another simbridge process of "
+                    f"this classroom ({other.node_fqn}, Zenoh session {other.zid}); "
+                    "choose another name"
+                )
+                raise ServiceError(msg)
+            return spawn(request if isinstance(args, dict) else args)
+
+        service.handler = guarded
+
     # -- logging -----------------------------------------------------------------------------
+
+    def _note(self, key: str, text: str) -> None:
+        """Count a name clash; log it once (at INFO: classrooms have them by design)."""
+        self.stats["name_clashes"] += 1
+        if key not in self._logged:
+            self._logged[key] = time.monotonic()
+            logger.info("%s", text)
 
     def _log(self, key: str, text: str) -> None:
         """Log a warning at most once per :data:`LOG_EVERY` seconds per ``key``."""

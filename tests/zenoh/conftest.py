@@ -113,18 +113,18 @@ def definitions(tmp_path_factory: pytest.TempPathFactory) -> Path:
     return root
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def router() -> Iterator[Router]:
-    """A router for the module's tests (the SDK's session is one per process)."""
+    """The router of the Zenoh tests (one: the SDK keeps one session per process)."""
     r = Router()
     r.start()
     yield r
     r.stop()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope="session")
 def ros2(router: Router, definitions: Path) -> Iterator[Any]:
-    """zenoh-ros2-sdk's shared session, connected to the module's router."""
+    """zenoh-ros2-sdk's shared session, connected to the router."""
     from zenoh_ros2_sdk import ZenohSession
 
     if ZenohSession._instance is not None:

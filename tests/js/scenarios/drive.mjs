@@ -4,7 +4,8 @@
 // /odom messages carry an identical pose.
 //
 // args: v (m/s, default 0.5), w (rad/s, default 0), seconds (default 1),
-//       full_twist (send all six Twist fields instead of only x / z).
+//       full_twist (send all six Twist fields instead of only x / z),
+//       ns (a named robot: /NS/odom and /NS/cmd_vel; default: the un-namespaced robot).
 // Returns {start, final, ticks, twist_during_motion, odom_during_motion,
 //          stop_ms} where start/final are {x, y, yaw, qz, qw}.
 import { makeMessage, makeTopic, now, poseOf, samePose, waitFor } from '../lib.mjs';
@@ -22,8 +23,9 @@ export default async function drive(ROSLIB, ros, args, lib) {
   const firstTimeoutMs = args.timeout_ms ?? 5000;
   const stopTimeoutMs = args.stop_timeout_ms ?? 3000;
 
-  const odomTopic = makeTopic(ROSLIB, ros, '/odom', 'nav_msgs/msg/Odometry');
-  const cmdTopic = makeTopic(ROSLIB, ros, '/cmd_vel', 'geometry_msgs/msg/Twist');
+  const ns = args.ns ? `/${args.ns}` : '';
+  const odomTopic = makeTopic(ROSLIB, ros, `${ns}/odom`, 'nav_msgs/msg/Odometry');
+  const cmdTopic = makeTopic(ROSLIB, ros, `${ns}/cmd_vel`, 'geometry_msgs/msg/Twist');
 
   // phase: 'wait' (before first pose) -> 'moving' -> 'stopping'
   let phase = 'wait';

@@ -1,0 +1,93 @@
+"""One classroom over two simbridge processes and a router.
+
+A roslibjs client of one process drives a robot simulated by the other; robot names stay unique
+across the classroom.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import sys
+from collections.abc import AsyncIterator
+from pathlib import Path
+from typing import Any
+
+import pytest
+from websockets.asyncio.client import connect
+
+from simbridge.config import ServerSettings
+from simbridge.runner import App
+from tests.conftest import ClientRunner
+from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, wait_for, ws_url
+from tests.zenoh.conftest import Router, zenoh_options
+
+
+pytestmark = pytest.mark.e2e
+
+WORLD = """\
+name: room_a
+walls:
+  - [-3.0, -2.0, 3.0, -2.0]
+  - [-3.0, 2.0, 3.0, 2.0]
+robots:
+  - {name: a1, pose: [-1.0, 0.0, 0.0]}
+"""
+
+
+@pytest.fixture
+async def other_process(router: Router, tmp_path: Path) -> AsyncIterator[None]:
+    """A second simbridge process simulating robot a1, on the same router."""
+    world = tmp_path / "room_a.yaml"
+    world.write_text(WORLD)
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "simbridge",
+        "--zenoh",
+        "--zenoh-connect",
+        router.endpoint,
+        "--zenoh-listen",
+        "tcp/127.0.0.1:0",
+        "--world",
+        str(world),
+        "--host",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--no-http",
+        cwd=ROOT,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+    )
+    assert proc.stdout is not None
+    line = await asyncio.wait_for(proc.stdout.readline(), 20 * TIMEOUT_FACTOR)
+    assert b"rosbridge ws://" in line, line
+    yield
+    proc.terminate()
+    await proc.communicate()
+
+
+async def test_a_client_of_one_process_drives_a_robot_of_another(
+    router: Router, ros2: Any, other_process: None, run_js: ClientRunner
+) -> None:
+    app = App(ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router))
+    await app.start()
+    try:
+        await wait_for(lambda: "/a1/odom" in app.graph.topics.topics, timeout=10)
+        async with connect(ws_url(app)) as conn:
+            # the page's robot picker reads /rosapi/topics: a1 is listed with its type
+            await send_json(conn, {"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+            values = (await recv_until(conn, lambda m: m.get("id") == "t"))["values"]
+            index = values["topics"].index("/a1/odom")
+            assert values["types"][index] == "nav_msgs/msg/Odometry"
+            # a robot name of another process is refused here, with the reason
+            spawn = {"op": "call_service", "service": "/spawn", "id": "s", "args": {"name": "a1"}}
+            await send_json(conn, spawn)
+            refused = await recv_until(conn, lambda m: m.get("id") == "s")
+            assert refused["result"] is False
+            assert "taken by another simbridge process" in refused["values"]
+        result = await run_js("roslib2", ws_url(app), "drive", {"ns": "a1", "v": 0.5}, 30)
+        moved = result["final"]["x"] - result["start"]["x"]
+        assert 0.25 < moved < 0.75, result  # 0.5 m/s for 1 s, the first commands included
+    finally:
+        await app.stop()
