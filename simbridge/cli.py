@@ -310,6 +310,13 @@ def _run_parser() -> argparse.ArgumentParser:
         "(default: none, every admin change is refused) [SIMBRIDGE_ADMIN_TOKEN]",
     )
     parser.add_argument(
+        "--no-sim",
+        action="store_true",
+        default=(_env("NO_SIM", "") or "").lower() in ("1", "true", "yes"),
+        help="run the bridge alone, without the simulated world and robot (with --zenoh: a "
+        "rosbridge in front of ROS 2 nodes, or a classroom front-end) [SIMBRIDGE_NO_SIM]",
+    )
+    parser.add_argument(
         "--use-sim-time",
         action="store_true",
         default=(_env("USE_SIM_TIME", "") or "").lower() in ("1", "true", "yes"),
@@ -345,10 +352,11 @@ async def _serve(
     params: str | None,
     record: tuple[str, list[str] | None] | None = None,
     zenoh: Any = None,
+    no_sim: bool = False,
 ) -> int:
     from simbridge.runner import App  # imported late: `simbridge --help` stays fast
 
-    app = App(settings, world=world, params=params, zenoh=zenoh)
+    app = App(settings, world=world, params=params, zenoh=zenoh, no_sim=no_sim)
     try:
         await app.start()
     except OSError as err:
@@ -426,7 +434,9 @@ def _cmd_run(argv: Sequence[str]) -> int:
         load_params(args.params)
         record = (args.record, args.record_topics) if args.record else None
         zenoh = _zenoh_options(args)
-        return asyncio.run(_serve(settings, args.world, args.params, record, zenoh))
+        return asyncio.run(
+            _serve(settings, args.world, args.params, record, zenoh, no_sim=args.no_sim)
+        )
     except ConfigError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 2

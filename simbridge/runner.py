@@ -28,7 +28,10 @@ from simbridge.config import (
     resource_dir,
 )
 from simbridge.graph.assembly import build_robot_graph
+from simbridge.graph.bridge import ROBOT_NODE
+from simbridge.graph.graph import Graph
 from simbridge.graph.guard import Guard
+from simbridge.graph.simclock import SIM_NODE
 from simbridge.server import BridgeServer, tls_context
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
@@ -55,6 +58,22 @@ def _loopback(host: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
+
+
+def _strip_simulation(graph: Graph, nodes: set[str]) -> None:
+    """Remove what the simulated nodes declared from ``graph`` (``--no-sim``)."""
+    topics = graph.topics
+    for name, topic in list(topics.topics.items()):
+        for owner in [o for o in topic.publishers if isinstance(o, str) and o in nodes]:
+            topics.unadvertise(name, owner, None)
+        for callback in [c for n, c in topic.internal if n in nodes]:
+            topics.unsubscribe_internal(name, callback)
+    services = graph.services.services
+    for name in [n for n, s in services.items() if s.node in nodes]:
+        del services[name]
+    for node in nodes:
+        graph.nodes.pop(node, None)
+        graph.params.nodes.pop(node, None)
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -105,10 +124,16 @@ class App:
         static_dir: Path | None = None,
         seed: int = 0,
         zenoh: ZenohOptions | None = None,
+        no_sim: bool = False,
     ) -> None:
         #: Network settings.
         self.settings = settings or ServerSettings()
         spec = world if isinstance(world, WorldSpec) else load_world(world)
+        #: ``--no-sim``: the bridge alone (no robot, no /clock, /reset...; with ``--zenoh``, a
+        #: rosbridge in front of the ROS 2 graph).
+        self.no_sim = no_sim
+        if no_sim:
+            spec = spec.model_copy(update={"robots": []})
         prm = params if isinstance(params, Params) else load_params(params)
         #: The simulation.
         self.world = World(spec, prm, seed=seed)
@@ -166,6 +191,8 @@ class App:
                 "parameters (set --admin-token or SIMBRIDGE_ADMIN_TOKEN)",
                 self.settings.host,
             )
+        if no_sim:
+            _strip_simulation(self.graph, {ROBOT_NODE, SIM_NODE})
         #: The ROS 2 graph through Zenoh (``--zenoh``), or None.
         self.zenoh: ZenohLink | None = None
         if zenoh is not None:
@@ -212,7 +239,8 @@ class App:
             tls = tls_context(s.certfile, s.keyfile) if s.certfile else None
             self._http = await serve_http(self.web, s.host, s.http_port, ssl=tls)
         loop = asyncio.get_running_loop()
-        self.robot.publish_static(loop.time())
+        if not self.no_sim:
+            self.robot.publish_static(loop.time())
         self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
         if self.zenoh is not None:
             await self.zenoh.start()
@@ -273,7 +301,7 @@ class App:
 
     def tick(self, now: float) -> None:
         """Run one tick: step and publish (unless paused), expire timeouts, run hooks."""
-        if not self.simclock.paused:
+        if not self.simclock.paused and not self.no_sim:
             self.advance(now)
         self.robot.tick(now)
 

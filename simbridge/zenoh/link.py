@@ -35,13 +35,13 @@ from typing import Any
 
 import orjson
 
-from simbridge.bag import to_dict
 from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrWriter
 from simbridge.protocol import Frame, Outgoing, Session
 from simbridge.protocol.ops import CallService, ServiceResponse
+from simbridge.tools.bag import to_dict
 from simbridge.zenoh.attachment import Attachment
 from simbridge.zenoh.config import ZenohOptions, session_config
 from simbridge.zenoh.names import (

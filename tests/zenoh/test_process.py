@@ -103,3 +103,51 @@ async def test_humble_declares_no_type_hashes_and_humble_peers_get_data(
         sub.close()
     finally:
         await app.stop()
+
+
+async def test_no_sim_is_a_rosbridge_in_front_of_ros2_nodes(router: Router, ros2: Any) -> None:
+    from zenoh_ros2_sdk import ROS2Publisher
+
+    app = App(
+        ServerSettings(host="127.0.0.1", port=0, http_port=0),
+        zenoh=zenoh_options(router),
+        no_sim=True,
+    )
+    await app.start()
+    pub = await asyncio.to_thread(
+        ROS2Publisher,
+        "/robot_status",
+        "std_msgs/msg/String",
+        node_name="real_robot",
+        router_ip="127.0.0.1",
+        router_port=router.port,
+    )
+    try:
+        graph = app.graph
+        assert "/odom" not in graph.topics.topics and "/reset" not in graph.services.services
+        assert "/virtual_robot" not in graph.nodes
+        await wait_for(lambda: "/robot_status" in graph.topics.topics, timeout=8)
+        async with connect(ws_url(app)) as conn:
+            await conn.send(json.dumps({"op": "subscribe", "topic": "/robot_status"}))
+
+            async def talk() -> None:
+                while True:
+                    await asyncio.to_thread(pub.publish, data="battery ok")
+                    await asyncio.sleep(0.05)
+
+            talking = asyncio.create_task(talk())
+            try:
+                while True:
+                    msg = json.loads(await asyncio.wait_for(conn.recv(), 5))
+                    if msg.get("topic") == "/robot_status":
+                        break
+            finally:
+                talking.cancel()
+        assert msg["msg"] == {"data": "battery ok"}
+        # the ROS 2 side sees the bridge's nodes only, no simulated robot
+        assert app.zenoh is not None
+        nodes = {key[1] for key in app.zenoh._declared if key[0] == "NN"}
+        assert "/virtual_robot" not in nodes and "/rosapi" in nodes
+    finally:
+        pub.close()
+        await app.stop()
