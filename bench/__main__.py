@@ -46,6 +46,12 @@ RELIABILITY = {
 }
 
 
+#: ROS 2 over Zenoh (issue 15), run by name (``python -m bench.zenoh [hop|outward|classroom]``).
+ZENOH = {
+    "zenoh": "/odom latency through a Zenoh hop; server CPU to one ROS 2 vs one rosbridge client",
+}
+
+
 def main(argv: list[str]) -> int:
     names = argv or [*QUICK, *SCALE]
     if names == ["quick"]:

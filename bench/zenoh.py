@@ -1,0 +1,329 @@
+"""ROS 2 over Zenoh (issue 15): the Zenoh hop, outward publishing, and a classroom of processes.
+
+``python -m bench.zenoh [hop|outward|classroom] [SECONDS]`` (default: hop and outward, 20 s).
+Every process is separate: a router (``simbridge zenohd``) on a free port of 127.0.0.1, the
+simbridge processes, the clients. Peers find each other through the router, then exchange data
+directly (rmw_zenoh's default topology: the router is not a broker on one host).
+
+* ``hop``: one robot simulated by process A; a rosbridge client of A and a rosbridge client of a
+  ``--no-sim`` process B both subscribe to its /odom. Latency = arrival minus the message's
+  header stamp (the wall clock when A published it), p50 and p99, side by side in one run.
+  Target: p99 added by the hop <= 2 ms.
+* ``outward``: 30 robots; A's CPU (its own user + system seconds) while one rosbridge client
+  subscribes to every robot's /odom and /scan and /tf, then while one ROS 2 subscriber (another
+  process: rmw_zenoh subscription tokens, one Zenoh subscriber counting samples) does.
+  Target: ROS 2 <= 1.3x the rosbridge client.
+* ``classroom``: ``SIMS`` simulators x ``ROBOTS`` robots and ``FRONTS`` ``--no-sim`` front-ends
+  x ``CLIENTS`` clients, each client on one robot's /odom and /scan through the router
+  (environment variables; default 2 x 300 and 2 x 300). Per client: /odom rate, losses
+  (gaps in the header stamps), latency p99. Target: 20 Hz +- 10 %, 0 lost, p99 <= 50 ms.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any
+
+import psutil
+import yaml
+from websockets.asyncio.client import connect
+
+from bench.procs import ROOT, cpu_seconds, free_port, load_average, percentile, stop
+
+
+def _world(directory: Path, prefix: str, count: int, name: str) -> Path:
+    side = max(1, int(count**0.5 + 0.999))
+    robots = [
+        {"name": f"{prefix}{k + 1}", "pose": [1.0 * (k % side), 1.0 * (k // side), 0.0]}
+        for k in range(count)
+    ]
+    size = side + 2.0
+    spec = {
+        "name": name,
+        "walls": [[-2, -2, size, -2], [size, -2, size, size], [size, size, -2, size]],
+        "robots": robots,
+    }
+    path = directory / f"{name}.yaml"
+    path.write_text(yaml.safe_dump(spec))
+    return path
+
+
+@contextmanager
+def _router() -> Iterator[str]:
+    endpoint = f"tcp/127.0.0.1:{free_port()}"
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "simbridge", "zenohd", "--listen", endpoint],
+        cwd=ROOT,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+    assert proc.stdout is not None
+    proc.stdout.readline()
+    try:
+        yield endpoint
+    finally:
+        stop(proc)
+
+
+@contextmanager
+def _simbridge(
+    router: str, *options: str, zenoh: bool = True
+) -> Iterator[tuple[psutil.Process, int]]:
+    cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0", "--no-http"]
+    cmd += ["--log-level", "warning", "--max-clients", "2000"]
+    if zenoh:
+        cmd += ["--zenoh", "--zenoh-connect", router, "--zenoh-listen", "tcp/127.0.0.1:0"]
+    proc = subprocess.Popen([*cmd, *options], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    try:
+        assert proc.stdout is not None
+        line = proc.stdout.readline()
+        match = re.search(r"ws://[^:]+:(\d+)/", line)
+        if match is None:
+            msg = f"simbridge did not start: {line!r}"
+            raise RuntimeError(msg)
+        yield psutil.Process(proc.pid), int(match.group(1))
+    finally:
+        stop(proc)
+
+
+async def _latencies(port: int, topic: str, seconds: float, out: list[float]) -> None:
+    async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
+        await ws.send(json.dumps({"op": "subscribe", "topic": topic}))
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            try:
+                raw = await asyncio.wait_for(ws.recv(), 2)
+            except TimeoutError:
+                continue
+            msg = json.loads(raw)
+            if msg.get("topic") != topic:
+                continue
+            stamp = msg["msg"]["header"]["stamp"]
+            out.append(time.time() - (stamp["sec"] + stamp["nanosec"] * 1e-9))
+
+
+def _wait_topic(port: int, topic: str, timeout: float = 30.0) -> None:
+    async def probe() -> None:
+        deadline = time.monotonic() + timeout
+        async with connect(f"ws://127.0.0.1:{port}") as ws:
+            while time.monotonic() < deadline:
+                await ws.send(
+                    json.dumps({"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+                )
+                reply = json.loads(await ws.recv())
+                if topic in reply.get("values", {}).get("topics", []):
+                    return
+                await asyncio.sleep(0.5)
+        msg = f"{topic} did not reach the front-end within {timeout} s"
+        raise RuntimeError(msg)
+
+    asyncio.run(probe())
+
+
+def hop(seconds: float) -> bool:
+    with tempfile.TemporaryDirectory() as tmp, _router() as router:
+        world = _world(Path(tmp), "hop", 1, "hop")
+        with (
+            _simbridge(router, "--world", str(world)) as (_a, port_a),
+            _simbridge(router, "--no-sim") as (_b, port_b),
+        ):
+            _wait_topic(port_b, "/hop1/odom")
+            same: list[float] = []
+            via: list[float] = []
+
+            async def both() -> None:
+                await asyncio.gather(
+                    _latencies(port_a, "/hop1/odom", seconds, same),
+                    _latencies(port_b, "/hop1/odom", seconds, via),
+                )
+
+            asyncio.run(both())
+    rows = [("same process (A)", same), ("via B through the router", via)]
+    print(f"zenoh hop: /odom latency of a rosbridge client, {seconds:g} s, {load_average()}")
+    print(f"{'':28}{'messages':>10}{'p50 ms':>10}{'p99 ms':>10}")
+    for label, values in rows:
+        p50, p99 = percentile(values, 0.5) * 1e3, percentile(values, 0.99) * 1e3
+        print(f"{label:28}{len(values):>10}{p50:>10.2f}{p99:>10.2f}")
+    added = (percentile(via, 0.99) - percentile(same, 0.99)) * 1e3
+    ratio = percentile(via, 0.99) / max(percentile(same, 0.99), 1e-9)
+    ok = added <= 2.0
+    print(
+        f"p99 added by the hop: {added:.2f} ms (ratio {ratio:.2f}x); target <= 2 ms: "
+        f"{'met' if ok else 'NOT met'}"
+    )
+    return ok
+
+
+def _ros2_subscriber(router: str, names: list[tuple[str, str]], seconds: float) -> Any:
+    """A ROS 2 subscriber process: rmw_zenoh subscription tokens and one Zenoh subscriber that
+    counts the samples (no decoding: the figure is the server's CPU, not the subscriber's).
+    """
+    code = f"""
+import json, time, zenoh
+from simbridge.zenoh.names import Entity
+conf = zenoh.Config()
+conf.insert_json5("mode", '"peer"')
+conf.insert_json5("connect/endpoints", '["{router}"]')
+conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+conf.insert_json5("scouting/multicast/enabled", "false")
+s = zenoh.open(conf)
+zid = str(s.info.zid())
+tokens = [s.liveliness().declare_token(Entity(0, zid, "0", "0", "NN", "/", "bench_sub").token())]
+for i, (name, type_name) in enumerate({names!r}):
+    e = Entity(0, zid, "0", str(i + 1), "MS", "/", "bench_sub", name=name, type=type_name,
+               type_hash="RIHS01_0")
+    tokens.append(s.liveliness().declare_token(e.token()))
+count = [0]
+sub = s.declare_subscriber("0/**", lambda sample: count.__setitem__(0, count[0] + 1))
+time.sleep(3)
+start = count[0]
+time.sleep({seconds})
+print(json.dumps({{"messages": count[0] - start}}), flush=True)
+"""
+    return subprocess.Popen(
+        [sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.PIPE, text=True
+    )
+
+
+def outward(seconds: float) -> bool:
+    n = 30
+    with tempfile.TemporaryDirectory() as tmp, _router() as router:
+        world = _world(Path(tmp), "r", n, "outward")
+        topics = [(f"/r{k + 1}/odom", "nav_msgs/msg/Odometry") for k in range(n)]
+        topics += [(f"/r{k + 1}/scan", "sensor_msgs/msg/LaserScan") for k in range(n)]
+        topics += [("/tf", "tf2_msgs/msg/TFMessage")]
+        with _simbridge(router, "--world", str(world)) as (proc, port):
+            time.sleep(3)
+            idle0 = cpu_seconds(proc)
+            time.sleep(seconds)
+            idle = cpu_seconds(proc) - idle0
+
+            async def rosbridge() -> int:
+                count = 0
+                async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
+                    for name, _ in topics:
+                        await ws.send(json.dumps({"op": "subscribe", "topic": name}))
+                    await asyncio.sleep(2)
+                    c0 = cpu_seconds(proc)
+                    end = time.monotonic() + seconds
+                    while time.monotonic() < end:
+                        await ws.recv()
+                        count += 1
+                    rows.append(("one rosbridge client", cpu_seconds(proc) - c0, count))
+                return count
+
+            rows: list[tuple[str, float, int]] = []
+            asyncio.run(rosbridge())
+            time.sleep(2)
+            sub = _ros2_subscriber(router, topics, seconds)
+            time.sleep(3 + 0.5)  # its subscribers declared, simbridge publishing to them
+            c0 = cpu_seconds(proc)
+            out, _ = sub.communicate(timeout=seconds + 60)
+            used = cpu_seconds(proc) - c0
+            got = json.loads(out.strip().splitlines()[-1])["messages"]
+            rows.append(("one ROS 2 subscriber (Zenoh)", used, got))
+    print(f"zenoh outward: {n} robots' /odom, /scan and /tf, {seconds:g} s, {load_average()}")
+    print(f"{'':32}{'server CPU %':>14}{'messages':>10}")
+    print(f"{'nobody subscribed':32}{100 * idle / seconds:>14.1f}{0:>10}")
+    for label, cpu, count in rows:
+        print(f"{label:32}{100 * cpu / seconds:>14.1f}{count:>10}")
+    ratio = rows[1][1] / max(rows[0][1], 1e-9)
+    ok = ratio <= 1.3
+    print(
+        f"ROS 2 / rosbridge server CPU: {ratio:.2f}x; target <= 1.3x: {'met' if ok else 'NOT met'}"
+    )
+    return ok
+
+
+def classroom(seconds: float) -> bool:
+    sims = int(os.environ.get("SIMS", "2"))
+    robots = int(os.environ.get("ROBOTS", "300"))
+    fronts = int(os.environ.get("FRONTS", "2"))
+    clients = int(os.environ.get("CLIENTS", "300"))
+    names = [f"s{s}r{k + 1}" for s in range(sims) for k in range(robots)]
+    with tempfile.TemporaryDirectory() as tmp, _router() as router:
+        worlds = [_world(Path(tmp), f"s{s}r", robots, f"sim{s}") for s in range(sims)]
+        with contextlib_exit() as stack:
+            for w in worlds:
+                stack.enter_context(_simbridge(router, "--world", str(w)))
+            ports = [stack.enter_context(_simbridge(router, "--no-sim"))[1] for _ in range(fronts)]
+            for port in ports:
+                _wait_topic(port, f"/{names[-1]}/odom", timeout=120)
+            specs = []
+            for f, port in enumerate(ports):
+                for c in range(clients):
+                    robot = names[(f * clients + c) % len(names)]
+                    specs.append((port, robot))
+            results = asyncio.run(_classroom_clients(specs, seconds))
+    rates = [r["odom"] / seconds for r in results]
+    lost = sum(r["lost"] for r in results)
+    lat = [x for r in results for x in r["lat"]]
+    low, high = percentile(rates, 0.01), percentile(rates, 0.99)
+    p99 = percentile(lat, 0.99) * 1e3
+    print(
+        f"zenoh classroom: {sims} simulators x {robots} robots, {fronts} front-ends x "
+        f"{clients} clients (/odom + /scan each), {seconds:g} s, {load_average()}"
+    )
+    print(f"/odom rate per client: p1 {low:.1f} Hz, p99 {high:.1f} Hz (target 18-22 Hz)")
+    print(f"/odom lost (stamp gaps): {lost} (target 0); latency p99 {p99:.1f} ms (target <= 50)")
+    return low >= 18.0 and high <= 22.0 and lost == 0 and p99 <= 50.0
+
+
+def contextlib_exit() -> Any:
+    import contextlib
+
+    return contextlib.ExitStack()
+
+
+async def _classroom_clients(specs: list[tuple[int, str]], seconds: float) -> list[Any]:
+    async def one(port: int, robot: str) -> dict[str, Any]:
+        result: dict[str, Any] = {"odom": 0, "lost": 0, "lat": []}
+        last: float | None = None
+        async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
+            for topic in (f"/{robot}/odom", f"/{robot}/scan"):
+                await ws.send(json.dumps({"op": "subscribe", "topic": topic}))
+            await asyncio.sleep(3)
+            end = time.monotonic() + seconds
+            while time.monotonic() < end:
+                try:
+                    msg = json.loads(await asyncio.wait_for(ws.recv(), 2))
+                except TimeoutError:
+                    continue
+                if not msg.get("topic", "").endswith("/odom"):
+                    continue
+                s = msg["msg"]["header"]["stamp"]
+                t = s["sec"] + s["nanosec"] * 1e-9
+                result["odom"] += 1
+                result["lat"].append(time.time() - t)
+                if last is not None and t - last > 0.075:
+                    result["lost"] += round((t - last) / 0.05) - 1
+                last = t
+        return result
+
+    return list(await asyncio.gather(*(one(p, r) for p, r in specs)))
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = list(argv or [])
+    parts = [a for a in args if a in ("hop", "outward", "classroom")] or ["hop", "outward"]
+    numbers = [float(a) for a in args if a.replace(".", "", 1).isdigit()]
+    seconds = numbers[0] if numbers else 20.0
+    ok = True
+    for part in parts:
+        ok = {"hop": hop, "outward": outward, "classroom": classroom}[part](seconds) and ok
+        print()
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main(sys.argv[1:]))
