@@ -165,8 +165,9 @@ def hop(seconds: float) -> bool:
 
 
 def _ros2_subscriber(router: str, names: list[tuple[str, str]], seconds: float) -> Any:
-    """A ROS 2 subscriber process: rmw_zenoh subscription tokens and one Zenoh subscriber that
-    counts the samples (no decoding: the figure is the server's CPU, not the subscriber's).
+    """Start a ROS 2 subscriber process: rmw_zenoh subscription tokens, one counting subscriber.
+
+    It does not decode: the figure is the server's CPU, not the subscriber's.
     """
     code = f"""
 import json, time, zenoh
