@@ -28,9 +28,13 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
 # managed", PEP 668) and works the same on python:*-slim.
 RUN python3 -m venv /opt/simbridge
 
+# Optional extras, comma-separated: SIMBRIDGE_EXTRAS=zenoh adds ROS 2 over Zenoh (--zenoh, zenohd;
+# docker-compose.classroom.yml builds it so).
+ARG SIMBRIDGE_EXTRAS=""
+
 # Dependencies first, from pyproject.toml alone: this layer stays cached while the code changes.
 COPY pyproject.toml /tmp/simbridge/
-RUN python3 -c "import tomllib; print('\n'.join(tomllib.load(open('/tmp/simbridge/pyproject.toml', 'rb'))['project']['dependencies']))" \
+RUN python3 -c "import os, tomllib; p = tomllib.load(open('/tmp/simbridge/pyproject.toml', 'rb'))['project']; extras = [e for e in os.environ.get('SIMBRIDGE_EXTRAS', '').split(',') if e]; print('\n'.join(p['dependencies'] + [d for e in extras for d in p['optional-dependencies'][e]]))" \
         > /tmp/requirements.txt \
     && pip install --no-cache-dir --only-binary=:all: -r /tmp/requirements.txt \
     && rm -f /tmp/requirements.txt

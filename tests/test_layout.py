@@ -147,5 +147,5 @@ def test_top_level_holds_the_parts_and_the_entry_points() -> None:
     """The top level of the package: the parts, and a handful of modules that join them."""
     top = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem not in ("__init__", "__main__"))
     packages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
-    assert packages == ["graph", "msgs", "protocol", "sim", "tools", "web"]
+    assert packages == ["graph", "msgs", "protocol", "sim", "tools", "web", "zenoh"]
     assert top == ["cli", "config", "errors", "headless", "runner", "server"]

@@ -17,7 +17,7 @@ from simbridge.msgs.convert import NUMPY_DTYPES
 from simbridge.msgs.registry import TypeRegistry, normalize_type
 
 
-__all__ = ["CdrWriter"]
+__all__ = ["CdrWriter", "to_dict"]
 
 Builder = Callable[[Any], Any]
 _PLACEHOLDER = "structure_needs_at_least_one_member"
@@ -111,3 +111,17 @@ def _uint8s(value: Any) -> Any:
     if isinstance(value, bytes | bytearray | memoryview):
         return np.frombuffer(bytes(value), dtype=np.uint8)
     return np.asarray(value, dtype=np.uint8)
+
+
+def to_dict(obj: Any) -> Any:
+    """Return a rosbags message object (deserialized CDR) as a plain dict (arrays as lists)."""
+    fields = getattr(obj, "__dataclass_fields__", None)
+    if fields is not None:
+        return {name: to_dict(getattr(obj, name)) for name in fields if name != "__msgtype__"}
+    if isinstance(obj, np.ndarray):
+        return obj.tolist()
+    if isinstance(obj, list | tuple):
+        return [to_dict(v) for v in obj]
+    if isinstance(obj, np.generic):
+        return obj.item()
+    return obj

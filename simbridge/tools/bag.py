@@ -33,6 +33,7 @@ from rosbags.typesys import Stores, get_typestore
 
 from simbridge.errors import SimbridgeError
 from simbridge.msgs import TypeRegistry
+from simbridge.msgs.cdr import to_dict
 from simbridge.msgs.convert import NUMPY_DTYPES
 
 
@@ -67,20 +68,6 @@ def to_ros(registry: TypeRegistry, type_name: str, msg: dict[str, Any]) -> Any:
             dtype = NUMPY_DTYPES.get(field.base, np.bool_)
             values[field.name] = np.asarray(value, dtype=dtype)
     return cls(**values)
-
-
-def to_dict(obj: Any) -> Any:
-    """Return a rosbags message object as a plain dict (arrays as lists)."""
-    fields = getattr(obj, "__dataclass_fields__", None)
-    if fields is not None:
-        return {name: to_dict(getattr(obj, name)) for name in fields if name != "__msgtype__"}
-    if isinstance(obj, np.ndarray):
-        return obj.tolist()
-    if isinstance(obj, list | tuple):
-        return [to_dict(v) for v in obj]
-    if isinstance(obj, np.generic):
-        return obj.item()
-    return obj
 
 
 class BagWriter:

@@ -38,10 +38,9 @@ import orjson
 from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.topics import Peer
-from simbridge.msgs.cdr import CdrWriter
+from simbridge.msgs.cdr import CdrWriter, to_dict
 from simbridge.protocol import Frame, Outgoing, Session
 from simbridge.protocol.ops import CallService, ServiceResponse
-from simbridge.tools.bag import to_dict
 from simbridge.zenoh.attachment import Attachment
 from simbridge.zenoh.config import ZenohOptions, session_config
 from simbridge.zenoh.names import (
@@ -599,12 +598,13 @@ class ZenohLink:
             if (name, node) in self._imported_pubs:
                 continue
             if not registry.known(type_name):
+                # listed (rosapi shows it with its type, without a definition), not bridged
                 self._log(
                     f"type {type_name}",
-                    f"Zenoh: {name} from {node} has type {type_name}, unknown here: not bridged",
+                    f"Zenoh: {name} from {node} has type {type_name}, unknown here: listed, "
+                    "its messages are not bridged",
                 )
                 self.stats["unknown_types"] += 1
-                continue
             local = self._local_publisher(name)
             if local is not None and name not in SHARED_TOPICS:
                 self._note(

@@ -70,7 +70,10 @@ async def test_unknown_type_and_type_clash_are_not_bridged_and_counted(
     try:
         await wait_for(lambda: zapp.zenoh.stats["unknown_types"] >= 1, timeout=8)  # type: ignore[union-attr]
         await wait_for(lambda: zapp.zenoh.stats["name_clashes"] >= 1, timeout=8)  # type: ignore[union-attr]
-        assert "/weird_topic" not in zapp.graph.topics.topics
+        # listed with its type (rosapi shows it, without a definition), never subscribed
+        weird_topic = zapp.graph.topics.topics["/weird_topic"]
+        assert weird_topic.type == "nobody_msgs/msg/Thing" and not weird_topic.known
+        assert "/weird_topic" not in zapp.zenoh._subscribers
         assert zapp.graph.topics.topics["/odom"].type == "nav_msgs/msg/Odometry"
     finally:
         for token in tokens:
