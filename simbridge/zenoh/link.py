@@ -180,6 +180,8 @@ class ZenohLink:
         #: Inward: topic owners and services simbridge added to the graph for remote entities.
         self._imported_pubs: dict[tuple[str, RemoteNode], str] = {}  # (topic, owner) -> type
         self._providers: dict[str, _Provider] = {}
+        #: Nodes of other processes listed in the graph (rosapi's nodes), by name.
+        self._remote_nodes: set[str] = set()
         #: Remote subscriptions stand in the graph as in-process subscribers that do nothing
         #: (so that the simulation publishes what only ROS 2 listens to, and rosapi lists them).
         self._markers: dict[tuple[str, RemoteNode], Callable[[Any, Any], None]] = {}
@@ -329,7 +331,8 @@ class ZenohLink:
         """Return the local entities: (kind, node, name) -> (kind, type, QoS)."""
         want: dict[tuple[str, str, str], tuple[str, str, Qos]] = {}
         for node in self.graph.nodes:
-            want[("NN", node, "")] = ("NN", "", DEFAULT_QOS)
+            if node not in self._remote_nodes:
+                want[("NN", node, "")] = ("NN", "", DEFAULT_QOS)
         for topic in self.graph.topics.topics.values():
             if topic.type is None or not topic.known:
                 continue
@@ -590,6 +593,7 @@ class ZenohLink:
             elif entity.kind == "SS":
                 services.setdefault(entity.name, entity)
         self._import_subscriptions(subs)
+        self._import_nodes({e.node_fqn for e in self._remote.values() if e.kind == "NN"})
         for name, owner in list(self._imported_pubs):
             if (name, owner) not in pubs:
                 del self._imported_pubs[(name, owner)]
@@ -645,6 +649,17 @@ class ZenohLink:
             service = self.graph.services.advertise(provider, name, entity.type)
             service.node = entity.node_fqn
             self._providers[name] = provider
+
+    def _import_nodes(self, names: set[str]) -> None:
+        """List the nodes of other processes in the graph (rosapi), unless one is local."""
+        nodes = self.graph.nodes
+        for name in self._remote_nodes - names:
+            self._remote_nodes.discard(name)
+            nodes.pop(name, None)
+        for name in names - self._remote_nodes:
+            if name not in nodes:
+                nodes[name] = "a ROS 2 node (Zenoh)"
+                self._remote_nodes.add(name)
 
     def _import_subscriptions(self, subs: dict[tuple[str, RemoteNode], str]) -> None:
         topics = self.graph.topics

@@ -8,6 +8,7 @@ definitions from a local directory.
 from __future__ import annotations
 
 import asyncio
+import re
 import socket
 import subprocess
 import sys
@@ -34,7 +35,12 @@ MESSAGES = [
     "std_msgs/msg/String",
     "visualization_msgs/msg/Marker",
 ]
-SERVICES = ["std_srvs/srv/Empty", "std_srvs/srv/SetBool", "std_srvs/srv/Trigger"]
+SERVICES = [
+    "std_srvs/srv/Empty",
+    "std_srvs/srv/SetBool",
+    "std_srvs/srv/Trigger",
+    "rcl_interfaces/srv/GetParameters",
+]
 
 
 def free_port() -> int:
@@ -67,12 +73,25 @@ def write_definitions(root: Path) -> None:
         pkg, _, short = name.split("/")
         folder = root / pkg / "srv"
         folder.mkdir(parents=True, exist_ok=True)
-        text = registry.message_text(request) + "\n---\n" + registry.message_text(response)
+        text = _qualified(registry, request) + "\n---\n" + _qualified(registry, response)
         (folder / f"{short}.srv").write_text(text)
         for part in (request, response):
             for field in registry.spec(part).fields:
                 if field.nested:
                     add(field.base)
+
+
+def _qualified(registry: TypeRegistry, name: str) -> str:
+    """Return the .msg text of a service part with nested types spelled ``pkg/Type``.
+
+    The SDK would look a bare ``Type`` up in the service's own package.
+    """
+    text = registry.message_text(name)
+    for field in registry.spec(name).fields:
+        if field.nested:
+            pkg, _, short = field.base.split("/")
+            text = re.sub(rf"(?m)^{short}\b", f"{pkg}/{short}", text)
+    return text
 
 
 class Router:

@@ -37,15 +37,22 @@ async def test_ros2_discovers_simbridge_nodes_topics_and_services(
     def topics() -> dict[str, list[str]]:
         return dict(get_topic_names_and_types(**sdk_kw(router)))
 
-    found = await eventually(lambda: (t := topics()) and "/odom" in t and t)
+    expected = {"/odom", "/scan", "/tf", "/tf_static", "/cmd_vel"}
+    found = await eventually(lambda: (t := topics()) and expected <= t.keys() and t)
     assert found["/odom"] == ["nav_msgs/msg/Odometry"]
     assert found["/scan"] == ["sensor_msgs/msg/LaserScan"]
     assert found["/tf"] == ["tf2_msgs/msg/TFMessage"]
     assert found["/tf_static"] == ["tf2_msgs/msg/TFMessage"]
     assert found["/cmd_vel"] == ["geometry_msgs/msg/Twist"]
-    services = dict(await asyncio.to_thread(get_service_names_and_types, **sdk_kw(router)))
-    assert services["/reset"] == ["std_srvs/srv/Empty"]
-    assert services["/virtual_robot/get_parameters"] == ["rcl_interfaces/srv/GetParameters"]
+
+    def services() -> dict[str, list[str]]:
+        return dict(get_service_names_and_types(**sdk_kw(router)))
+
+    found = await eventually(
+        lambda: (s := services()) and "/reset" in s and "/virtual_robot/get_parameters" in s and s
+    )
+    assert found["/reset"] == ["std_srvs/srv/Empty"]
+    assert found["/virtual_robot/get_parameters"] == ["rcl_interfaces/srv/GetParameters"]
     # the tokens are rmw_zenoh's: node tokens for each in-process node, latched /tf_static
     tokens = [e.token() for e in (d.entity for d in zapp.zenoh._declared.values())]  # type: ignore[union-attr]
     node = next(t for t in tokens if t.endswith("/NN/%/%/virtual_robot"))
@@ -138,6 +145,25 @@ async def test_ros2_calls_reset_and_a_service_with_fields(zapp: App, router: Rou
     reset.close()
 
 
+async def test_ros2_reads_a_parameter_of_the_virtual_robot(zapp: App, router: Router) -> None:
+    from zenoh_ros2_sdk import ROS2ServiceClient
+
+    # what `ros2 param get /virtual_robot robot.max_linear_velocity` calls
+    client = await asyncio.to_thread(
+        ROS2ServiceClient,
+        "/virtual_robot/get_parameters",
+        "rcl_interfaces/srv/GetParameters",
+        **sdk_kw(router),
+    )
+    try:
+        reply = await asyncio.to_thread(client.call, names=["robot.max_linear_velocity"])
+    finally:
+        client.close()
+    value = reply.values[0]
+    assert value.type == 3  # PARAMETER_DOUBLE
+    assert value.double_value == zapp.world.params.robot.max_linear_velocity
+
+
 async def test_ros2_topic_and_service_reach_rosbridge_clients(zapp: App, router: Router) -> None:
     from zenoh_ros2_sdk import ROS2Publisher, ROS2ServiceServer
 
@@ -159,6 +185,9 @@ async def test_ros2_topic_and_service_reach_rosbridge_clients(zapp: App, router:
             listed = await recv_until(conn, lambda m: m.get("id") == "t")
             values = listed["values"]
             assert values["types"][values["topics"].index("/chatter")] == "std_msgs/msg/String"
+            await send_json(conn, {"op": "call_service", "service": "/rosapi/nodes", "id": "n"})
+            nodes = (await recv_until(conn, lambda m: m.get("id") == "n"))["values"]["nodes"]
+            assert "/talker" in nodes and "/virtual_robot" in nodes
             await send_json(conn, {"op": "subscribe", "topic": "/chatter"})
             await asyncio.sleep(0.3)  # the link subscribes within a reconcile pass
 
