@@ -91,3 +91,32 @@ async def test_a_client_of_one_process_drives_a_robot_of_another(
         assert 0.25 < moved < 0.75, result  # 0.5 m/s for 1 s, the first commands included
     finally:
         await app.stop()
+
+
+async def test_a_latched_topic_reaches_a_late_subscriber_of_another_process(
+    router: Router, ros2: Any
+) -> None:
+    apps = []
+    for _ in range(2):
+        app = App(
+            ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router)
+        )
+        await app.start()
+        apps.append(app)
+    first, second = apps
+    try:
+        async with connect(ws_url(first)) as conn:
+            advertise = {"op": "advertise", "topic": "/lesson", "type": "std_msgs/msg/String"}
+            await send_json(conn, {**advertise, "latch": True})
+            await wait_for(lambda: "/lesson" in second.graph.topics.topics, timeout=10)
+            msg = {"data": "lesson 3: PID"}
+            await send_json(conn, {"op": "publish", "topic": "/lesson", "msg": msg, "latch": True})
+            await asyncio.sleep(0.5)  # published long before the other process's client asks
+            async with connect(ws_url(second)) as late:
+                await send_json(late, {"op": "subscribe", "topic": "/lesson"})
+                got = await recv_until(late, lambda m: m.get("topic") == "/lesson", timeout=8)
+        assert got["msg"] == {"data": "lesson 3: PID"}
+        assert second.graph.topics.topics["/lesson"].latch
+    finally:
+        for app in apps:
+            await app.stop()
