@@ -45,3 +45,12 @@ def test_cdr_of_bytes_bools_strings_and_empty_messages() -> None:
     assert list(back.byte_array_value) == [1, 2] and list(back.bool_array_value) == [True]
     assert back.string_array_value == ["a"]
     assert len(writer.serialize("std_srvs/srv/Empty_Request", {})) == 5
+
+
+def test_a_message_is_serialized_once_whoever_asks_for_its_cdr() -> None:
+    """cbor-raw subscribers and ROS 2 over Zenoh share one serialization per message."""
+    writer = CdrWriter(TypeRegistry())
+    cdr = writer.factory("std_msgs/msg/String", {"data": "hi"})
+    first = cdr()
+    assert cdr() is first  # the same bytes object: computed once, then kept
+    assert first[4:] == b"\x03\x00\x00\x00hi\x00"
