@@ -55,7 +55,11 @@ def test_without_zenoh_nothing_of_it_is_imported() -> None:
 
 async def test_server_runs_without_router_and_connects_when_it_appears() -> None:
     router = Router()  # its port is chosen, nothing listens there yet
-    app = App(ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router))
+    retry = "connect/retry={period_init_ms: 200, period_max_ms: 500, period_increase_factor: 2}"
+    app = App(
+        ServerSettings(host="127.0.0.1", port=0, http_port=0),
+        zenoh=zenoh_options(router, override=retry),
+    )
     await app.start()
     try:
         assert app.health()["zenoh"]["state"] == "connecting"
