@@ -14,10 +14,10 @@ from typing import Any
 import numpy as np
 
 from simbridge.msgs.convert import NUMPY_DTYPES
-from simbridge.msgs.registry import TypeRegistry, normalize_type
+from simbridge.msgs.registry import FieldSpec, TypeRegistry, normalize_type
 
 
-__all__ = ["CdrWriter", "to_dict"]
+__all__ = ["CdrReader", "CdrWriter", "to_dict"]
 
 Builder = Callable[[Any], Any]
 _PLACEHOLDER = "structure_needs_at_least_one_member"
@@ -125,3 +125,82 @@ def to_dict(obj: Any) -> Any:
     if isinstance(obj, np.generic):
         return obj.item()
     return obj
+
+
+class CdrReader:
+    """Turns CDR bytes (with encapsulation header) into canonical messages.
+
+    The result is what :class:`~simbridge.msgs.Converter` makes of the same message sent as
+    JSON (bulk numbers as numpy arrays, ``uint8[]`` as bytes, nested messages as dicts), built
+    straight from rosbags' objects by a reader compiled once per type: several times faster
+    than a detour through plain lists (ROS 2 over Zenoh decodes every sample it bridges).
+    """
+
+    def __init__(self, registry: TypeRegistry) -> None:
+        #: Where the definitions and rosbags classes come from.
+        self.registry = registry
+        self._readers: dict[str, Builder] = {}
+
+    def read(self, typename: str, data: bytes) -> dict[str, Any]:
+        """Return the canonical message of CDR bytes.
+
+        Raises:
+            TypeNotFoundError: the type is unknown.
+            Exception: the bytes are not CDR of that type (rosbags' error, as raised).
+        """
+        spec = self.registry.spec(typename)
+        if not spec.fields and len(data) in (4, 5):
+            # an empty message is one placeholder byte after the header in every ROS 2 RMW;
+            # a bare header is taken too
+            return {}
+        obj = self.registry.store.deserialize_cdr(data, spec.name)
+        result: dict[str, Any] = self._reader(spec.name)(obj)
+        return result
+
+    def _reader(self, typename: str) -> Builder:
+        reader = self._readers.get(typename)
+        if reader is None:
+            reader = self._readers[typename] = self._compile(typename)
+        return reader
+
+    def _compile(self, typename: str) -> Builder:
+        if typename in _TIME_TYPES:
+            return lambda v: {"sec": int(v.sec), "nanosec": int(v.nanosec)}
+        parts = [(f.name, self._field(f)) for f in self.registry.spec(typename).fields]
+
+        def read(value: Any) -> dict[str, Any]:
+            return {name: convert(getattr(value, name)) for name, convert in parts}
+
+        return read
+
+    def _field(self, field: FieldSpec) -> Callable[[Any], Any]:
+        if field.arraylen == -1:
+            return self._element(field)
+        if field.base in _BYTES:
+            return _to_bytes
+        dtype = NUMPY_DTYPES.get(field.base)
+        if dtype is not None and not field.nested:
+            return lambda v: np.asarray(v, dtype=dtype)
+        element = self._element(field)
+        return lambda v: [element(x) for x in v]
+
+    def _element(self, field: FieldSpec) -> Callable[[Any], Any]:
+        base = field.base
+        if field.nested:
+            return lambda v: self._reader(base)(v)
+        if base in ("float32", "float64"):
+            return float
+        if base == "bool":
+            return bool
+        if base in ("string", "wstring"):
+            return str
+        return int
+
+
+_TIME_TYPES = frozenset({"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"})
+
+
+def _to_bytes(value: Any) -> bytes:
+    if isinstance(value, bytes | bytearray | memoryview):
+        return bytes(value)
+    return np.asarray(value, dtype=np.uint8).tobytes()

@@ -1,9 +1,11 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 
 from simbridge.msgs import Converter, TypeRegistry
-from simbridge.msgs.cdr import CdrWriter
+from simbridge.msgs.cdr import CdrReader, CdrWriter
+from simbridge.protocol.encoding import encode_json
 
 
 def test_cdr_round_trips_through_rosbags_with_the_encapsulation_header() -> None:
@@ -54,3 +56,40 @@ def test_a_message_is_serialized_once_whoever_asks_for_its_cdr() -> None:
     first = cdr()
     assert cdr() is first  # the same bytes object: computed once, then kept
     assert first[4:] == b"\x03\x00\x00\x00hi\x00"
+
+
+@pytest.mark.parametrize(
+    ("typename", "payload"),
+    [
+        (
+            "nav_msgs/msg/Odometry",
+            {"child_frame_id": "base_link", "pose": {"covariance": [0.5] * 36}},
+        ),
+        ("sensor_msgs/msg/LaserScan", {"ranges": [1.0, float("inf"), 2.5], "intensities": [3.0]}),
+        (
+            "tf2_msgs/msg/TFMessage",
+            {"transforms": [{"child_frame_id": "a"}, {"child_frame_id": "b"}]},
+        ),
+        ("sensor_msgs/msg/Image", {"encoding": "mono8", "data": [0, 7, 255], "is_bigendian": 1}),
+        (
+            "diagnostic_msgs/msg/DiagnosticStatus",
+            {"name": "x", "values": [{"key": "k", "value": "v"}]},
+        ),
+        ("std_msgs/msg/Empty", {}),
+        ("sensor_msgs/msg/JointState", {"name": ["j1", "j2"], "position": [0.1, 0.2]}),
+    ],
+)
+def test_reading_cdr_gives_what_the_json_converter_gives(typename: str, payload: dict) -> None:
+    registry = TypeRegistry()
+    convert = Converter(registry, lambda: (7, 8))
+    msg = convert.from_json(typename, payload)
+    data = CdrWriter(registry).serialize(typename, msg)
+    read = CdrReader(registry).read(typename, data)
+    assert encode_json(read) == encode_json(msg)
+
+
+def test_reading_bytes_that_are_not_cdr_of_the_type_raises() -> None:
+    reader = CdrReader(TypeRegistry())
+    with pytest.raises(Exception, match="Twist"):
+        reader.read("geometry_msgs/msg/Twist", b"\x00\x01\x00\x00\x01")
+    assert reader.read("std_srvs/srv/Empty_Request", b"\x00\x01\x00\x00") == {}
