@@ -503,7 +503,8 @@ class ZenohLink:
         try:
             request_type, _ = self.graph.registry.service(type_name)
             payload = bytes(query.payload.to_bytes()) if query.payload is not None else b""
-            args = self._decode(request_type, payload)
+            # as a rosbridge client's call_service args: plain JSON values
+            args = orjson.loads(_json(self._decode(request_type, payload)))
         except Exception as err:  # whatever the network sent: reported, never raised
             self._fail_query(query, f"service {name}: request is not CDR of {type_name}: {err}")
             return

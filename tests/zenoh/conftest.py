@@ -40,6 +40,7 @@ SERVICES = [
     "std_srvs/srv/SetBool",
     "std_srvs/srv/Trigger",
     "rcl_interfaces/srv/GetParameters",
+    "rcl_interfaces/srv/SetParameters",
 ]
 
 

@@ -164,6 +164,44 @@ async def test_ros2_reads_a_parameter_of_the_virtual_robot(zapp: App, router: Ro
     assert value.double_value == zapp.world.params.robot.max_linear_velocity
 
 
+async def test_ros2_sets_a_parameter_with_array_fields_in_the_request(
+    zapp: App, router: Router
+) -> None:
+    import numpy as np
+    from zenoh_ros2_sdk import ROS2ServiceClient, get_message_class
+
+    client = await asyncio.to_thread(
+        ROS2ServiceClient,
+        "/virtual_robot/set_parameters",
+        "rcl_interfaces/srv/SetParameters",
+        **sdk_kw(router),
+    )
+    value_class = get_message_class("rcl_interfaces/msg/ParameterValue")
+    parameter_class = get_message_class("rcl_interfaces/msg/Parameter")
+    assert value_class is not None and parameter_class is not None
+    value = value_class(
+        type=3,
+        bool_value=False,
+        integer_value=0,
+        double_value=0.3,
+        string_value="",
+        byte_array_value=np.zeros(0, dtype=np.uint8),
+        bool_array_value=np.zeros(0, dtype=np.bool_),
+        integer_array_value=np.zeros(0, dtype=np.int64),
+        double_array_value=np.zeros(0, dtype=np.float64),
+        string_array_value=[],
+    )
+    try:
+        reply = await asyncio.to_thread(
+            client.call,
+            parameters=[parameter_class(name="robot.max_linear_velocity", value=value)],
+        )
+    finally:
+        client.close()
+    assert reply.results[0].successful, reply
+    assert zapp.world.params.robot.max_linear_velocity == 0.3
+
+
 async def test_ros2_topic_and_service_reach_rosbridge_clients(zapp: App, router: Router) -> None:
     from zenoh_ros2_sdk import ROS2Publisher, ROS2ServiceServer
 
