@@ -237,6 +237,7 @@ class ZenohLink:
         if session is None:
             return
         self.state = "closed"
+        self._loop = None  # Zenoh's threads hand nothing more to the event loop
         for entry in list(self._declared.values()):
             self._undeclare(entry)
         self._declared.clear()
