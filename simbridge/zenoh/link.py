@@ -893,7 +893,8 @@ class ZenohLink:
         now = time.monotonic()
         if now - self._logged.get(key, -LOG_EVERY) >= LOG_EVERY:
             self._logged[key] = now
-            logger.warning("%s", text)
+            # the log and /rosout: a rosbridge client sees why a topic stays silent
+            self.graph.log("warn", text, name="simbridge.zenoh")
 
 
 def _json(value: Any) -> bytes:

@@ -34,8 +34,16 @@ async def test_payload_that_is_not_cdr_is_dropped_and_good_ones_still_drive(
     try:
         await wait_for(lambda: "/cmd_vel" in zapp.zenoh._subscribers, timeout=8)  # type: ignore[union-attr]
         ticks = zapp.stats.ticks
-        for garbage in (b"", b"\x00\x01\x00\x00\x01", b"\xff" * 7):
-            await asyncio.to_thread(ros2.session.put, pub.keyexpr, garbage)
+        async with connect(ws_url(zapp)) as conn:
+            await send_json(conn, {"op": "subscribe", "topic": "/rosout"})
+            await asyncio.sleep(0.2)
+            for garbage in (b"", b"\x00\x01\x00\x00\x01", b"\xff" * 7):
+                await asyncio.to_thread(ros2.session.put, pub.keyexpr, garbage)
+            # one line (rate-limited) in the log and on /rosout says which topic and why
+            said = await recv_until(
+                conn, lambda m: "not CDR" in str(m.get("msg", {}).get("msg")), timeout=5
+            )
+        assert "/cmd_vel" in said["msg"]["msg"] and said["msg"]["level"] == 30
         await wait_for(lambda: zapp.zenoh.stats["bad_payloads"] >= 3, timeout=5)  # type: ignore[union-attr]
         await wait_for(lambda: zapp.stats.ticks > ticks + 5, timeout=5)  # the loop runs on
         vector = get_message_class("geometry_msgs/msg/Vector3")
