@@ -225,7 +225,7 @@ class App:
             "sim_time_s": round(self.world.time, 3),
             "loop_rate_hz": self.world.params.sim.rate,
             **self.server.stats(),
-            "loop": self.stats.summary(),
+            "loop": {**self.stats.summary(), "failures": self.robot.failures},
             **({"zenoh": self.zenoh.health()} if self.zenoh is not None else {}),
         }
 
@@ -300,9 +300,13 @@ class App:
                 await asyncio.sleep(0)  # let clients run even when the loop is behind
 
     def tick(self, now: float) -> None:
-        """Run one tick: step and publish (unless paused), expire timeouts, run hooks."""
+        """Run one tick: step and publish (unless paused), expire timeouts, run hooks.
+
+        Each part runs whatever failed before it (see :meth:`RobotGraph.tick
+        <simbridge.graph.assembly.RobotGraph.tick>`): a failing step never skips the watchdog.
+        """
         if not self.simclock.paused and not self.no_sim:
-            self.advance(now)
+            self.robot.isolated("simulation step", self.advance, now)
         self.robot.tick(now)
 
     def advance(self, now: float) -> None:

@@ -12,6 +12,8 @@ the sockets and the graph, and the headless API has no clients.
 
 from __future__ import annotations
 
+import logging
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 
@@ -29,6 +31,11 @@ from simbridge.sim import World
 
 
 __all__ = ["RobotGraph", "build_robot_graph"]
+
+logger = logging.getLogger(__name__)
+
+#: Distinct failure causes logged with a traceback; later new causes are only counted.
+MAX_LOGGED_CAUSES = 100
 
 
 @dataclass(eq=False)
@@ -56,6 +63,9 @@ class RobotGraph:
     safety: Safety
     #: Run after each tick's publishing, with ``now``; extensions may add theirs.
     tick_hooks: list[Callable[[float], None]] = field(default_factory=list)
+    #: Parts of ticks that raised (each part is isolated: the others still ran).
+    failures: int = 0
+    _failed: set[tuple[str, str, str, int | None]] = field(default_factory=set)
 
     def publish_static(self, now: float) -> None:
         """Publish what is latched once at start: ``/tf_static`` and ``/walls``."""
@@ -73,10 +83,29 @@ class RobotGraph:
         self.simclock.publish(now)
 
     def tick(self, now: float) -> None:
-        """Expire what timed out (service calls...), then run the tick hooks (watchdog, TF)."""
-        self.graph.tick(now)
+        """Expire what timed out (service calls...), then run the tick hooks (watchdog, TF).
+
+        Each part runs whatever failed before it: a hook that raises (a TF request with a bad
+        frame, a recorder's full disk) never skips the safety watchdog or another hook. A
+        failure is logged once per cause (the part, the exception type and where it was
+        raised), not once per tick, and counted in :attr:`failures` (``/healthz``).
+        """
+        self.isolated("graph timeouts", self.graph.tick, now)
         for hook in self.tick_hooks:
-            hook(now)
+            self.isolated(getattr(hook, "__qualname__", repr(hook)), hook, now)
+
+    def isolated(self, part: str, run: Callable[[float], None], now: float) -> None:
+        """Run one part of a tick; a failure is counted and logged once per cause."""
+        try:
+            run(now)
+        except Exception as err:
+            self.failures += 1
+            where = traceback.extract_tb(err.__traceback__)[-1]
+            cause = (part, type(err).__name__, where.filename, where.lineno)
+            if cause in self._failed or len(self._failed) >= MAX_LOGGED_CAUSES:
+                return
+            self._failed.add(cause)
+            logger.exception("tick: %s failed (logged once per cause; the other parts ran)", part)
 
 
 def build_robot_graph(
@@ -104,7 +133,7 @@ def build_robot_graph(
     bridge.on_robot_removed.append(estop.remove_robot)
     roles = Roles(graph, world, estop)
     walls = WallsPublisher(graph, world)
-    tf_republisher = install_tf_republisher(graph)
+    tf_republisher = install_tf_republisher(graph, lambda: world.params.sim.rate)
     safety = Safety(graph, world)
     bridge.on_robot_removed.append(safety.forget)
     return RobotGraph(

@@ -116,10 +116,12 @@ class Graph:
     def remove_peer(self, peer: Peer) -> None:
         """Forget a client and everything it owned (subscriptions, publishers, services)."""
         self.peers.discard(peer)
-        self.topics.drop_peer(peer)
-        self.services.drop_peer(peer)
-        for callback in self.on_disconnect:
-            callback(peer)
+        # each part runs whatever failed before it: stop-on-disconnect must never be skipped
+        for callback in (self.topics.drop_peer, self.services.drop_peer, *self.on_disconnect):
+            try:
+                callback(peer)
+            except Exception:
+                logger.exception("%s: cleanup after disconnect failed in %r", peer.label, callback)
 
     def receive(self, peer: Peer, data: str | bytes, now: float) -> None:
         """Handle one frame from ``peer``: every op in it, in order."""

@@ -16,9 +16,11 @@ world are followed at the next tick.
 
 from __future__ import annotations
 
+import logging
 import math
 from typing import Any
 
+from simbridge.errors import ProtocolError
 from simbridge.graph.bridge import ROBOT_NODE
 from simbridge.graph.cmdvel import cmd_vel_type, twist_of
 from simbridge.graph.graph import Graph
@@ -27,6 +29,8 @@ from simbridge.sim import World
 
 
 __all__ = ["Safety"]
+
+logger = logging.getLogger(__name__)
 
 
 def _finite_command(msg: Any) -> bool:
@@ -53,6 +57,7 @@ class Safety:
         self.stops = 0
         self._fresh: set[str] = set()
         self._callbacks: dict[str, tuple[str, InternalCallback]] = {}
+        self._unwatched: set[str] = set()
         self._follow_robots()
         graph.on_disconnect.append(self.disconnected)
 
@@ -82,7 +87,15 @@ class Safety:
             topic = robot.topic("cmd_vel")
             # the robot's own node: the watchdog is part of its driver, as in turtlesim
             kind = cmd_vel_type(self.world.params)
-            self.graph.subscribe(topic, kind, ROBOT_NODE, on_cmd_vel)
+            try:
+                self.graph.subscribe(topic, kind, ROBOT_NODE, on_cmd_vel)
+            except ProtocolError:
+                # never let one robot's topic stop the watchdog of the others; the robot
+                # itself could not subscribe either (its bridge refused it)
+                if name not in self._unwatched:
+                    self._unwatched.add(name)
+                    logger.exception("safety: cannot watch %s", topic)
+                continue
             self._callbacks[name] = (topic, on_cmd_vel)
 
     def tick(self, now: float) -> None:
