@@ -414,6 +414,19 @@ class ServerSettings:
     #: Seconds a client may go without reading while messages wait for it; then it is
     #: disconnected (None: never).
     stall_timeout: float | None = 30.0
+    #: Seconds a connection that owes a token (no ``?token=`` on a server that requires one)
+    #: has to authenticate with the ``auth`` op; then it is closed.
+    auth_timeout: float = 5.0
+    #: Connections that owe a token, at most at once (their own pool: they never take the
+    #: slots of ``max_clients`` that authenticated students need).
+    max_unauthenticated: int = 20
+    #: TF requests (``/republish_tfs`` topics and ``/tf2_web_republisher`` goals) per client.
+    tf_requests_per_client: int = 10
+    #: Transforms a second (frames x rate) one client's TF requests may send, and all clients'.
+    tf_transforms_per_client: float = 1000.0
+    tf_transforms_total: float = 10000.0
+    #: Longest ``timeout`` of a ``/republish_tfs`` topic without subscribers, seconds.
+    tf_max_timeout: float = 60.0
     #: Client tokens (query parameter ``?token=``): token -> scope. A scope is ``"*"`` (any
     #: topic) or a robot name (publish only under ``/<name>/``). Empty: no client tokens.
     client_tokens: dict[str, str] = field(default_factory=dict)

@@ -11,19 +11,36 @@ the target, child the source) whenever it moved by more than ``trans_thres`` met
 
 Frame names are compared without a leading ``/`` (REP-105 names as roslibjs strips them). The
 transform tree is the latest transform of each child frame on /tf and /tf_static; a transform
-between frames is composed through their common ancestor. A republished topic with no
-subscriber for ``timeout`` is removed, as the real node does.
+between frames is composed through their common ancestor (once per tick for every request that
+asks for the same pair). A republished topic with no subscriber for ``timeout`` is removed, as
+the real node does.
+
+What a client can make it do is bounded (``docs/security.md``); a request over a bound is
+refused with the reason (a failed ``service_response``, or an ``action_result`` with
+``result: false``):
+
+* frame names must be valid strings (no lone UTF-16 surrogates, no NUL); thresholds finite and
+  not negative; ``rate`` finite and positive, capped at the simulation rate (TF changes no
+  faster); a ``timeout`` over ``tf_max_timeout`` is capped to it (``0`` means the default 10 s);
+* a client holds at most ``tf_requests_per_client`` requests (goals and republished topics
+  together) and at most ``tf_transforms_per_client`` transforms a second (frames times rate);
+  the whole class at most ``tf_transforms_total``;
+* a client's requests go when it leaves: its goals are cancelled and its republished topics
+  removed at once, whatever their ``timeout``.
 """
 
 from __future__ import annotations
 
 import itertools
+import logging
 import math
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from simbridge.errors import ServiceError
-from simbridge.graph.actions import CANCELED, Goal
+from simbridge.graph.actions import ABORTED, CANCELED, Goal
+from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer, Topic
 
 
@@ -36,6 +53,13 @@ REPUBLISHER_NODE = "/tf2_web_republisher"
 _ACTION_TYPE = "tf2_web_republisher_interfaces/action/TFSubscription"
 _SERVICE_TYPE = "tf2_web_republisher_interfaces/srv/RepublishTFs"
 _TOPIC_TYPE = "tf2_web_republisher/msg/TFArray"
+
+logger = logging.getLogger(__name__)
+
+#: Frames in one request at most (a page asks for a handful).
+MAX_FRAMES = 100
+#: Length of a frame name at most (characters).
+MAX_FRAME_NAME = 256
 
 Vec = tuple[float, float, float]
 Quat = tuple[float, float, float, float]
@@ -129,6 +153,13 @@ class _Request:
     timeout: float = 10.0
     last_subscribed: float = -math.inf
     listened: bool = False
+    #: The client that asked (None: in process); its requests go with it.
+    owner: Peer | None = None
+
+    @property
+    def cost(self) -> float:
+        """Transforms a second it may send at most (what the budgets count)."""
+        return len(self.source_frames) / self.period
 
 
 def _moved(old: Pose, new: Pose, trans: float, angle: float) -> bool:
@@ -141,7 +172,7 @@ def _moved(old: Pose, new: Pose, trans: float, angle: float) -> bool:
 class TfRepublisher:
     """Serves the tf2_web_republisher action and service from the graph's /tf and /tf_static."""
 
-    def __init__(self, graph: Graph) -> None:
+    def __init__(self, graph: Graph, max_rate: Callable[[], float] | None = None) -> None:
         #: The graph it reads TF from and sends on.
         self.graph = graph
         #: The transform tree.
@@ -150,6 +181,12 @@ class TfRepublisher:
         self.requests: list[_Request] = []
         self._topics = itertools.count(1)
         self._listening = False
+        #: This tick's lookups, shared by every request that asks for the same pair.
+        self._poses: dict[tuple[str, str], Pose | None] = {}
+        #: Failures already logged (once per cause).
+        self._failed: set[str] = set()
+        self._max_rate = max_rate or (lambda: 20.0)
+        graph.on_disconnect.append(self.drop_peer)
         graph.actions.add_server(REPUBLISHER_NODE, _ACTION_TYPE, REPUBLISHER_NODE, self)
         graph.add_service("/republish_tfs", _SERVICE_TYPE, REPUBLISHER_NODE, self._republish)
 
@@ -184,22 +221,97 @@ class TfRepublisher:
         if not self.requests:
             self._listen(False)
 
-    @staticmethod
-    def _request(values: Any) -> _Request:
-        rate = float(values.get("rate") or 10.0)
-        return _Request(
-            [str(f) for f in values.get("source_frames", [])],
-            str(values.get("target_frame", "")),
-            float(values.get("angular_thres", 0.0)),
-            float(values.get("trans_thres", 0.0)),
-            1.0 / max(min(rate, 100.0), 0.1),
+    def _request(self, values: Any, owner: Peer | None, what: str) -> _Request:
+        """Check a request (goal or service) against the rules and budgets; build it.
+
+        Raises:
+            ServiceError: the request is refused; the text says why.
+        """
+        if not isinstance(values, dict):
+            msg = f"{what}: expected a request object"
+            raise ServiceError(msg)
+        frames = values.get("source_frames", [])
+        target = values.get("target_frame", "")
+        if not isinstance(frames, list):
+            msg = f"{what}: source_frames must be a list of frame names"
+            raise ServiceError(msg)
+        if len(frames) > MAX_FRAMES:
+            msg = f"{what}: {len(frames)} source_frames; at most {MAX_FRAMES} in one request"
+            raise ServiceError(msg)
+        for frame in [*frames, target]:
+            _check_frame(frame, what)
+        numbers = {}
+        for key, default in (("angular_thres", 0.0), ("trans_thres", 0.0), ("rate", 10.0)):
+            value = values.get(key, default)
+            if isinstance(value, bool) or not isinstance(value, int | float):
+                msg = f"{what}: {key} must be a number, got {value!r}"
+                raise ServiceError(msg)
+            if not math.isfinite(value) or value < 0:
+                msg = f"{what}: {key} must be a finite number >= 0, got {value!r}"
+                raise ServiceError(msg)
+            numbers[key] = float(value)
+        # as many sends a second as TF changes at most; 0 means the node's default, 10 Hz
+        rate = min(numbers["rate"] or 10.0, self.max_rate())
+        request = _Request(
+            list(frames),
+            target,
+            numbers["angular_thres"],
+            numbers["trans_thres"],
+            1.0 / max(rate, 0.1),
+            owner=owner,
         )
+        self._admit(request, what)
+        return request
+
+    def max_rate(self) -> float:
+        """The fastest a request is served: the simulation rate (TF changes no faster)."""
+        return self._max_rate()
+
+    def _admit(self, request: _Request, what: str) -> None:
+        """Refuse a request over the owner's or the class's budget (``docs/security.md``)."""
+        s = self.graph.settings
+        if request.owner is None:
+            return
+        mine = [r for r in self.requests if r.owner is request.owner]
+        if len(mine) >= s.tf_requests_per_client:
+            msg = (
+                f"{what}: refused, this client already has {len(mine)} TF requests (the "
+                f"server's tf_requests_per_client, {s.tf_requests_per_client}); cancel one first"
+            )
+            raise ServiceError(msg)
+        cost = request.cost
+        if sum(r.cost for r in mine) + cost > s.tf_transforms_per_client:
+            msg = (
+                f"{what}: refused, this client's TF requests would send up to "
+                f"{sum(r.cost for r in mine) + cost:.0f} transforms a second (the server's "
+                f"tf_transforms_per_client, {s.tf_transforms_per_client:g}); ask for fewer "
+                "frames or a lower rate"
+            )
+            raise ServiceError(msg)
+        if sum(r.cost for r in self.requests) + cost > s.tf_transforms_total:
+            msg = (
+                f"{what}: refused, the server is sending as many transforms as it allows for "
+                f"everyone (tf_transforms_total, {s.tf_transforms_total:g} a second); try "
+                "again later or ask for fewer frames"
+            )
+            raise ServiceError(msg)
+
+    def drop_peer(self, peer: Peer) -> None:
+        """Remove the republished topics of a client that left (its goals are cancelled)."""
+        for request in [r for r in self.requests if r.owner is peer]:
+            if request.topic is not None:
+                self.graph.topics.unadvertise(request.topic.name, REPUBLISHER_NODE)
+            self._remove(request)
 
     # -- action (ROS2TFClient) -------------------------------------------------------------
 
     def goal(self, goal: Goal) -> None:
-        """Start sending feedback for a TFSubscription goal."""
-        request = self._request(goal.args)
+        """Start sending feedback for a TFSubscription goal (or refuse it with the reason)."""
+        try:
+            request = self._request(goal.args, goal.caller, f"goal of {REPUBLISHER_NODE}")
+        except ServiceError as err:
+            goal.finish(ABORTED, str(err), result=False)
+            return
         request.goal = goal
         self._add(request)
 
@@ -212,13 +324,16 @@ class TfRepublisher:
     # -- service (TFClient, roslibpy) ------------------------------------------------------
 
     def _republish(self, values: Any) -> dict[str, Any]:
-        if not isinstance(values, dict):
-            msg = "republish_tfs: expected a RepublishTFs request object"
-            raise ServiceError(msg)
-        request = self._request(values)
+        request = self._request(values, caller.get(), "republish_tfs")
         timeout = values.get("timeout") or {}
-        seconds = float(timeout.get("sec", 0)) + float(timeout.get("nanosec", 0)) / 1e9
-        request.timeout = seconds if seconds > 0 else 10.0
+        try:
+            seconds = float(timeout.get("sec", 0)) + float(timeout.get("nanosec", 0)) / 1e9
+        except (AttributeError, TypeError, ValueError):
+            msg = "republish_tfs: timeout must be a builtin_interfaces/Duration {sec, nanosec}"
+            raise ServiceError(msg) from None
+        # a lifetime without subscribers: never longer than tf_max_timeout (not 63 years)
+        limit = self.graph.settings.tf_max_timeout
+        request.timeout = min(seconds, limit) if seconds > 0 else min(10.0, limit)
         name = f"/tf_repub_{next(self._topics)}"
         request.topic = self.graph.advertise(name, _TOPIC_TYPE, REPUBLISHER_NODE)
         self._add(request)
@@ -227,30 +342,52 @@ class TfRepublisher:
     # -- sending ------------------------------------------------------------------------------
 
     def tick(self, now: float) -> None:
-        """Send what is due (call once per simulation step)."""
+        """Send what is due (call once per simulation step).
+
+        A request whose sending fails is dropped (its goal aborted), logged once per cause;
+        the other requests are served.
+        """
+        self._poses.clear()
         for request in list(self.requests):
-            if request.goal is not None and request.goal.done:
-                self._remove(request)
-                continue
-            if request.topic is not None and self._expired(request, now):
-                continue
-            if now < request.next_due:
-                continue
-            request.next_due = max(request.next_due + request.period, now)
-            if request.topic is not None:
-                listening = bool(request.topic.subscriptions)
-                if listening and not request.listened:
-                    request.sent.clear()  # a (new) subscriber gets every transform once
-                request.listened = listening
-                if not listening:
-                    continue
-            transforms = self._changed(request)
-            if not transforms:
-                continue
-            if request.goal is not None:
-                request.goal.feedback({"transforms": transforms})
-            elif request.topic is not None:
-                self.graph.publish(request.topic, {"transforms": transforms}, now)
+            try:
+                self._serve(request, now)
+            except Exception as err:
+                self._drop_failed(request, err)
+
+    def _drop_failed(self, request: _Request, err: Exception) -> None:
+        cause = f"{type(err).__name__}: {err}"[:200]
+        if cause not in self._failed and len(self._failed) < 100:
+            self._failed.add(cause)
+            logger.exception("a TF request failed and was dropped (logged once per cause)")
+        if request.topic is not None:
+            self.graph.topics.unadvertise(request.topic.name, REPUBLISHER_NODE)
+        self._remove(request)
+        if request.goal is not None:
+            request.goal.finish(ABORTED, f"TF request failed: {cause}", result=False)
+
+    def _serve(self, request: _Request, now: float) -> None:
+        if request.goal is not None and request.goal.done:
+            self._remove(request)
+            return
+        if request.topic is not None and self._expired(request, now):
+            return
+        if now < request.next_due:
+            return
+        request.next_due = max(request.next_due + request.period, now)
+        if request.topic is not None:
+            listening = bool(request.topic.subscriptions)
+            if listening and not request.listened:
+                request.sent.clear()  # a (new) subscriber gets every transform once
+            request.listened = listening
+            if not listening:
+                return
+        transforms = self._changed(request)
+        if not transforms:
+            return
+        if request.goal is not None:
+            request.goal.feedback({"transforms": transforms})
+        elif request.topic is not None:
+            self.graph.publish(request.topic, {"transforms": transforms}, now)
 
     def _expired(self, request: _Request, now: float) -> bool:
         topic = request.topic
@@ -268,7 +405,11 @@ class TfRepublisher:
         sec, nanosec = self.graph.stamp()
         out = []
         for frame in request.source_frames:
-            pose = self.buffer.lookup(request.target_frame, frame)
+            key = (request.target_frame, frame)
+            if key in self._poses:
+                pose = self._poses[key]
+            else:
+                pose = self._poses[key] = self.buffer.lookup(*key)
             if pose is None:
                 continue
             child = _strip(frame)
@@ -295,6 +436,24 @@ class TfRepublisher:
         return out
 
 
-def install_tf_republisher(graph: Graph) -> TfRepublisher:
-    """Serve tf2_web_republisher on ``graph``; call the result's ``tick(now)`` every step."""
-    return TfRepublisher(graph)
+def _check_frame(frame: object, what: str) -> None:
+    """Refuse a frame name that is not a sane string (it would fail every later send)."""
+    if not isinstance(frame, str):
+        msg = f"{what}: frame names must be strings, got {frame!r}"
+        raise ServiceError(msg)
+    if len(frame) > MAX_FRAME_NAME:
+        msg = f"{what}: frame name of {len(frame)} characters; at most {MAX_FRAME_NAME}"
+        raise ServiceError(msg)
+    if "\x00" in frame or any("\ud800" <= c <= "\udfff" for c in frame):
+        msg = f"{what}: frame name {frame!r} holds a NUL or a lone UTF-16 surrogate"
+        raise ServiceError(msg)
+
+
+def install_tf_republisher(
+    graph: Graph, max_rate: Callable[[], float] | None = None
+) -> TfRepublisher:
+    """Serve tf2_web_republisher on ``graph``; call the result's ``tick(now)`` every step.
+
+    ``max_rate`` gives the fastest rate a request is served at (the simulation rate).
+    """
+    return TfRepublisher(graph, max_rate)

@@ -122,3 +122,58 @@ def test_a_late_subscriber_of_a_republished_topic_gets_static_transforms() -> No
     repub.tick(0.1)
     (msg,) = client.take()
     assert msg["msg"]["transforms"][0]["child_frame_id"] == "laser"
+
+
+def goal_op(goal_id: str, **args: Any) -> dict[str, Any]:
+    request = {"source_frames": ["base_link"], "target_frame": "odom", "rate": 10.0}
+    return {
+        "op": "send_action_goal",
+        "action": "/tf2_web_republisher",
+        "action_type": "tf2_web_republisher_interfaces/TFSubscription",
+        "args": {**request, **args},
+        "id": goal_id,
+        "feedback": True,
+    }
+
+
+@pytest.mark.parametrize(
+    ("args", "error"),
+    [
+        ({"source_frames": ["\ud800"]}, "lone UTF-16 surrogate"),
+        ({"target_frame": "od\x00om"}, "NUL"),
+        ({"trans_thres": -1.0}, "trans_thres must be a finite number >= 0"),
+        ({"angular_thres": math.nan}, "angular_thres must be a finite number >= 0"),
+        ({"source_frames": ["f"] * 101}, "at most 100"),
+        ({"source_frames": ["f"] * 100, "rate": 20.0}, "tf_transforms_per_client"),
+    ],
+)
+def test_a_goal_that_would_fail_or_cost_too_much_is_refused(args: Any, error: str) -> None:
+    graph = Graph()
+    repub = TfRepublisher(graph)
+    client = RecordingPeer(graph)
+    graph.dispatch(client, _goal(graph, client, goal_op("g", **args)), 0.0)
+    (result,) = client.take()
+    assert (result["op"], result["result"]) == ("action_result", False)
+    assert error in result["values"]
+    assert repub.requests == []
+
+
+def _goal(graph: Graph, client: RecordingPeer, body: dict[str, Any]) -> Any:
+    """The op as parsed (a frame with a lone surrogate cannot be encoded to send)."""
+    (op,) = client.session.parse(json.dumps(body, ensure_ascii=True), 0.0)
+    return op
+
+
+def test_requests_are_counted_per_client_and_go_with_it() -> None:
+    """The 11th request of a client is refused; the others' are not; a leaving client's go."""
+    graph = Graph()
+    repub = TfRepublisher(graph)
+    one, two = RecordingPeer(graph), RecordingPeer(graph)
+    for n in range(11):
+        call(graph, one, **goal_op(f"g{n}"))
+    refused = [m for m in one.take() if m["op"] == "action_result"]
+    assert len(refused) == 1 and "tf_requests_per_client" in refused[0]["values"]
+    call(graph, two, **goal_op("mine"))
+    assert two.take() == [] and len(repub.requests) == 11
+    graph.remove_peer(one)
+    assert [r.owner for r in repub.requests] == [two]
