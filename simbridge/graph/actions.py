@@ -21,7 +21,11 @@ Status codes are ``action_msgs/msg/GoalStatus``: 0 unknown, 1 accepted, 2 execut
 Each action also gets the hidden service ``<action>/_action/cancel_goal``
 (``action_msgs/srv/CancelGoal``): an all-zero ``goal_info`` cancels every goal of the action
 (roslibjs 2.1 ``Action.cancelAllGoals``), a zero id with a stamp cancels the goals accepted up to
-that time, else the goal with that UUID.
+that time, else the goal with that UUID. A client reaches only the goals it sent: "every goal"
+means every goal of its own, and another client's goal UUID is refused with the reason.
+
+A client may not advertise an action the server provides itself (``/tf2_web_republisher``):
+that would take it over for everyone, and it would be gone when that client left.
 """
 
 from __future__ import annotations
@@ -34,7 +38,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
-from simbridge.graph.services import ServiceTable
+from simbridge.graph.services import ServiceTable, caller
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
 from simbridge.protocol import OpId, json_frame, ops as o, resolve_name
@@ -201,6 +205,15 @@ class ActionTable:
 
     def _advertise(self, peer: Peer, op: o.AdvertiseAction, now: float) -> None:
         name = resolve_name(op.action, "action")
+        existing = self.actions.get(name)
+        if existing is not None and existing.server is not None:
+            # what the server provides stays the server's: taking it over would break it for
+            # every client, and it would be gone for everyone when this client left
+            msg = (
+                f"advertise_action {name}: refused, the server provides this action itself; "
+                "choose another name"
+            )
+            raise ProtocolError(msg)
         try:
             canonical = normalize_type(op.type, "action")
         except TypeNotFoundError as err:
@@ -394,6 +407,17 @@ class ActionTable:
             raise ServiceError(msg)
         limit = (stamp.get("sec", 0), stamp.get("nanosec", 0))
         goals = [g for g in self.goals.values() if g.action is action]
+        calling = caller.get()
+        if calling is not None:  # a client cancels its own goals only, never another's
+            if any(goal_id) and any(
+                g.uuid == bytes(goal_id) and g.caller is not calling for g in goals
+            ):
+                msg = (
+                    f"cancel_goal: goal {bytes(goal_id).hex()} of {action.name} was sent by "
+                    "another client; a client may cancel only its own goals"
+                )
+                raise ServiceError(msg)
+            goals = [g for g in goals if g.caller is calling]
         if any(goal_id):
             chosen = [g for g in goals if g.uuid == bytes(goal_id)]
         elif limit != (0, 0):
