@@ -124,16 +124,25 @@ class RobotBridge:
         def on_cmd_vel(msg: Any, source: Peer | None, name: str = robot.name) -> None:
             self._on_cmd_vel(name, msg)
 
-        self.robots[robot.name] = _RobotTopics(
-            robot,
-            g.advertise(robot.topic("odom"), "nav_msgs/msg/Odometry", ROBOT_NODE),
-            g.advertise(robot.topic("scan"), "sensor_msgs/msg/LaserScan", ROBOT_NODE),
-            g.subscribe(
-                robot.topic("cmd_vel"), cmd_vel_type(self.world.params), ROBOT_NODE, on_cmd_vel
-            ),
-            g.advertise(robot.topic("contact"), CONTACT_TYPE, ROBOT_NODE),
-            on_cmd_vel,
-        )
+        # all or nothing: a name a client holds with another type leaves no half-made robot
+        made: list[str] = []
+
+        def advertise(topic: str, type_name: str) -> Topic:
+            made.append(robot.topic(topic))
+            return g.advertise(robot.topic(topic), type_name, ROBOT_NODE)
+
+        try:
+            odom = advertise("odom", "nav_msgs/msg/Odometry")
+            scan = advertise("scan", "sensor_msgs/msg/LaserScan")
+            contact = advertise("contact", CONTACT_TYPE)
+            kind = cmd_vel_type(self.world.params)
+            cmd_vel = g.subscribe(robot.topic("cmd_vel"), kind, ROBOT_NODE, on_cmd_vel)
+        except ProtocolError as err:
+            for name in made:
+                g.topics.unadvertise(name, ROBOT_NODE)
+            msg = f"{err} (a client holds that name; it must unadvertise it or disconnect)"
+            raise ProtocolError(msg) from None
+        self.robots[robot.name] = _RobotTopics(robot, odom, scan, cmd_vel, contact, on_cmd_vel)
         add_robot_services(self, robot)
         for callback in self.on_robot_added:
             callback(robot.name)

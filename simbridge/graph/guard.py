@@ -276,6 +276,18 @@ class Guard:
         return True
 
     def _subscribe(self, peer: Peer, access: Access, op: o.Subscribe, now: float) -> bool:
+        if op.type and access.scope != ANY_SCOPE:
+            # a typed subscription fixes the type of a topic nobody publishes yet: outside its
+            # own namespace that would squat a name (a robot spawned later could not take it)
+            name = resolve_name(op.topic)
+            topic = self.graph.topics.topics.get(name)
+            if not in_namespace(access.scope, name) and (topic is None or topic.type is None):
+                msg = (
+                    f"subscribe {name}: refused with a type, the topic is outside /{access.scope}/ "
+                    "and nothing publishes it yet (the type would claim the name); subscribe "
+                    "without a type and it waits for the topic"
+                )
+                raise ProtocolError(msg)
         limit = self.settings.max_subscriptions
         subs = peer.session.subscriptions
         if op.topic not in subs and len(subs) >= limit:
