@@ -107,6 +107,12 @@ class Robot:
         self.cmd_omega = 0.0
 
 
+#: Metres around the walls' bounding box where robots may still be placed (open layouts).
+WORLD_MARGIN = 1.0
+#: Metres around the start poses of a world without walls where robots may be placed.
+OPEN_WORLD = 50.0
+
+
 class World:
     """Walls and robots, stepped at a fixed ``dt``."""
 
@@ -359,8 +365,24 @@ class World:
 
     # -- robots at run time ----------------------------------------------------------------
 
+    def bounds(self) -> tuple[float, float, float, float]:
+        """The world's extent ``(x_min, y_min, x_max, y_max)``: where a robot may be placed.
+
+        The box around every wall, obstacle and start pose, plus :data:`WORLD_MARGIN` (open
+        layouts); a world without walls extends :data:`OPEN_WORLD` metres around its starts.
+        """
+        starts = np.array([p[:2] for p in self.spec.start_poses().values()], dtype=np.float64)
+        if len(self.segments):
+            points = np.vstack([self.segments[:, :2], self.segments[:, 2:4], starts])
+            margin = WORLD_MARGIN
+        else:
+            points, margin = starts, OPEN_WORLD
+        low = points.min(axis=0) - margin
+        high = points.max(axis=0) + margin
+        return float(low[0]), float(low[1]), float(high[0]), float(high[1])
+
     def check_pose(self, pose: tuple[float, float, float], *, ignore: str | None = None) -> None:
-        """Refuse a pose whose footprint would overlap a wall or another robot.
+        """Refuse a pose outside the world or whose footprint would overlap a wall or robot.
 
         ``ignore`` is the robot being moved (its own footprint does not count). Other robots
         count at their current position and at their start pose (so /reset stays clear).
@@ -370,6 +392,13 @@ class World:
         """
         if not all(math.isfinite(v) for v in pose):
             msg = f"pose must be three finite numbers [x, y, theta], got {list(pose)}"
+            raise ValueError(msg)
+        x0, y0, x1, y1 = self.bounds()
+        if not (x0 <= pose[0] <= x1 and y0 <= pose[1] <= y1):
+            msg = (
+                f"cannot place a robot at ({pose[0]:g}, {pose[1]:g}): outside the world "
+                f"(x from {x0:g} to {x1:g}, y from {y0:g} to {y1:g})"
+            )
             raise ValueError(msg)
         others = [
             p

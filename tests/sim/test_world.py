@@ -243,3 +243,14 @@ def test_teleport_refuses_a_pose_inside_another_robots_start_pose() -> None:
     world.teleport("r1", (0.0, 2.0, 0.0))
     with pytest.raises(ValueError, match="overlaps another robot"):
         world.teleport("r2", (-1.0, 0.05, 0.0))
+
+
+def test_a_robot_is_never_placed_outside_the_world() -> None:
+    """Teleport and spawn far outside the walls' box (plus its margin) are refused."""
+    world = fleet(("r1", -1.0, 0.0, 0.0))
+    assert world.bounds() == (-6.0, -6.0, 6.0, 6.0)  # BOX's walls at +-5, margin 1 m
+    with pytest.raises(ValueError, match="outside the world"):
+        world.teleport("r1", (1000.0, -1000.0, 0.0))
+    with pytest.raises(ValueError, match="outside the world"):
+        world.spawn("r2", (0.0, 6.5, 0.0))
+    world.teleport("r1", (5.5, 0.0, 0.0))  # in the margin: open layouts have no walls there
