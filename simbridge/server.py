@@ -9,9 +9,12 @@ stalled client therefore never delays the simulation loop or any other client.
 
 Hostile or broken clients are bounded here (``docs/security.md``): upgrades from a foreign
 ``Origin``, over ``max_clients`` or with a wrong ``?token=`` are refused with an HTTP status
-before the handshake; incoming messages are rate limited per client (excess ones are dropped
-with one ``status`` a second); a client that reads nothing for ``stall_timeout`` seconds while
-messages wait for it is disconnected; keepalive pings evict dead peers.
+before the handshake; where a token is required, connections without one wait in a small pool
+of their own (``max_unauthenticated``), have ``auth_timeout`` seconds to authenticate and may
+send only small frames until they do; incoming messages are rate limited per client (excess
+ones are dropped with one ``status`` a second); a client that reads nothing for
+``stall_timeout`` seconds while messages wait for it (timed from when they began to wait) is
+disconnected; keepalive pings evict dead peers.
 """
 
 from __future__ import annotations
@@ -21,6 +24,7 @@ import contextlib
 import http
 import logging
 import ssl
+import weakref
 from collections.abc import Hashable
 from typing import Any
 
@@ -28,11 +32,12 @@ from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.http11 import Request, Response
+from websockets.protocol import State
 from websockets.typing import Origin
 
 from simbridge.config import ServerSettings
 from simbridge.graph import Graph
-from simbridge.graph.guard import TokenBucket, token_access
+from simbridge.graph.guard import Access, TokenBucket, token_access
 from simbridge.graph.topics import SendEntries
 from simbridge.protocol import Frame, SendQueue, Session, status_frame
 from simbridge.web import HttpRequest, WebApp, parse_target
@@ -48,6 +53,8 @@ logger = logging.getLogger(__name__)
 WRITE_HIGH_WATER = 64 * 1024
 #: Incoming messages handled back to back before the handler lets other tasks run.
 BATCH = 16
+#: Largest frame read from a connection that still owes a token (an ``auth`` op is small).
+UNAUTHENTICATED_MAX_SIZE = 16 * 1024
 
 
 def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
@@ -79,8 +86,13 @@ class Client:
         self.frames_sent = 0
         #: The client was told that frames were dropped for it.
         self.told_dropped = False
-        #: When the writer last completed a write (monotonic seconds): stall detection.
+        #: When the client last made progress (monotonic seconds): the writer completed a
+        #: write, or frames started to wait for it. Stall detection times from here.
         self.last_progress = asyncio.get_running_loop().time()
+        #: The connection still owes a token (its own slot pool, a deadline, small frames).
+        self.unauthenticated = False
+        #: Closes the connection if it has not authenticated in time.
+        self.auth_timer: asyncio.TimerHandle | None = None
         #: Incoming-message rate limit.
         self.messages = TokenBucket(settings.message_rate, settings.message_burst)
         #: When the client was last told its messages are dropped for the rate (seconds).
@@ -107,6 +119,11 @@ class Client:
             broadcast((self.ws,), frame.data, text=frame.text)
             self.frames_sent += 1
             return
+        if not self.queue.pending:
+            # the client stopped keeping up just now: a stall is timed from here, not from
+            # the last write of the queue (a client that read everything for 40 s and
+            # pauses now has paused for 0 s)
+            self.last_progress = asyncio.get_running_loop().time()
         if self.queue.push(frame, key, limit) and not self.told_dropped:
             self.told_dropped = True
             logger.info("%s is not keeping up: dropping its oldest queued messages", self.label)
@@ -156,6 +173,8 @@ class BridgeServer:
         self.refused_total = 0
         self.stalled_total = 0
         self._watcher: asyncio.Task[None] | None = None
+        #: Connections admitted without a token that have not authenticated yet.
+        self._unauthenticated: weakref.WeakSet[ServerConnection] = weakref.WeakSet()
         graph.topics.send_many = self._send_many
 
     def _send_many(self, frame: Frame, entries: SendEntries) -> None:
@@ -230,20 +249,76 @@ class BridgeServer:
         return Response(answer.status, reason, out, answer.body)
 
     def _admit(self, connection: ServerConnection, request: Request) -> Response | None:
-        """Refuse an upgrade over ``max_clients`` or with a token that grants nothing."""
+        """Refuse an upgrade with a token that grants nothing, or over its pool's slots.
+
+        Where clients must authenticate, a connection without a token (it may still send an
+        ``auth`` op) takes a slot of its own small pool, ``max_unauthenticated``, never one of
+        the ``max_clients`` that authenticated students need.
+        """
         s = self.settings
-        if len(self.clients) >= s.max_clients:
-            self.refused_total += 1
-            logger.warning("refused a client: %d clients connected (max_clients)", s.max_clients)
-            return connection.respond(
-                503, f"simbridge is full: {s.max_clients} clients connected; try again later\n"
-            )
         token = _query_token(request.path)
         if token is not None and token_access(s, token) is None:
             self.refused_total += 1
             logger.warning("refused a client: invalid token")
             return connection.respond(401, "invalid token\n")
+        if token is None and s.auth_required:
+            waiting = [c for c in self._unauthenticated if c.state is not State.CLOSED]
+            if len(waiting) >= s.max_unauthenticated:
+                self.refused_total += 1
+                logger.warning(
+                    "refused a client: %d connections without a token wait to authenticate "
+                    "(max_unauthenticated)",
+                    len(waiting),
+                )
+                return connection.respond(
+                    503,
+                    f"simbridge is full: {len(waiting)} connections without a token are "
+                    f"waiting to authenticate (max_unauthenticated); connect with "
+                    "?token=YOUR_TOKEN\n",
+                )
+            self._unauthenticated.add(connection)
+            return None
+        admitted = sum(1 for c in self.clients if not c.unauthenticated)
+        if admitted >= s.max_clients:
+            self.refused_total += 1
+            logger.warning("refused a client: %d clients connected (max_clients)", s.max_clients)
+            return connection.respond(
+                503, f"simbridge is full: {s.max_clients} clients connected; try again later\n"
+            )
         return None
+
+    def _owes_token(self, client: Client) -> None:
+        """Give a connection that owes a token its deadline and small frames."""
+        s = self.settings
+        client.unauthenticated = True
+        # the auth op is a few hundred bytes: nothing bigger is read before admission
+        client.ws.protocol.max_message_size = min(UNAUTHENTICATED_MAX_SIZE, s.max_message_size)
+
+        def deadline() -> None:
+            if client.unauthenticated and not client.closed:
+                logger.info(
+                    "%s did not authenticate within %g s: closing", client.label, s.auth_timeout
+                )
+                if client.session.wants_status("error"):
+                    client.send(
+                        status_frame(
+                            "error",
+                            f"not authenticated within {s.auth_timeout:g} s (the server's "
+                            "auth_timeout): connect with ?token=YOUR_TOKEN or send an auth op "
+                            "first",
+                        )
+                    )
+                client.close_soon(1008, "authentication timeout")
+
+        client.auth_timer = asyncio.get_running_loop().call_later(s.auth_timeout, deadline)
+
+    def _admitted(self, client: Client) -> None:
+        """The connection authenticated: it leaves the pool of those that owe a token."""
+        client.unauthenticated = False
+        client.ws.protocol.max_message_size = self.settings.max_message_size
+        self._unauthenticated.discard(client.ws)
+        if client.auth_timer is not None:
+            client.auth_timer.cancel()
 
     async def _watch_stalls(self, timeout: float) -> None:
         """Disconnect clients that have read nothing for ``timeout`` s while frames wait."""
@@ -289,6 +364,11 @@ class BridgeServer:
         self.clients.add(client)
         self.connections_total += 1
         graph.add_peer(client)
+        access = session.extra.get("access")
+        if not isinstance(access, Access):  # no guard installed: everyone is admitted
+            access = Access(True, "*", False, TokenBucket(0.0, 0.0))
+        if not access.authenticated:
+            self._owes_token(client)
         writer = asyncio.create_task(client.write_loop(), name=f"writer-{session.client_id}")
         logger.info("%s connected", client.label)
         loop = asyncio.get_running_loop()
@@ -303,6 +383,8 @@ class BridgeServer:
                 except Exception as err:  # a bug must not cost the client its connection
                     logger.exception("%s: internal error", client.label)
                     client.send(status_frame("error", f"internal error: {err}"))
+                if client.unauthenticated and access.authenticated:
+                    self._admitted(client)
                 handled += 1
                 if handled % BATCH == 0:
                     await asyncio.sleep(0)  # a flood must not hold the loop: let ticks run
@@ -311,6 +393,9 @@ class BridgeServer:
         finally:
             client.closed = True
             client.queue.clear()
+            self._unauthenticated.discard(ws)
+            if client.auth_timer is not None:
+                client.auth_timer.cancel()
             writer.cancel()
             with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
                 await writer
@@ -326,6 +411,7 @@ class BridgeServer:
             "queued_frames": sum(len(c.queue) for c in self.clients),
             "dropped_frames": sum(c.queue.dropped for c in self.clients),
             "refused_total": self.refused_total,
+            "unauthenticated": sum(1 for c in self.clients if c.unauthenticated),
             "stalled_total": self.stalled_total,
         }
 
