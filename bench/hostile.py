@@ -13,14 +13,16 @@ observer with no attack.
 Targets (issue 17): RSS <= 200 MB for any one-client attack; /odom >= 19 Hz; worst gap
 <= 150 ms; the watchdog within its timeout (0.5 s) plus one tick (50 ms).
 
-An attack is a function ``(Target) -> str`` registered with :func:`attack`: it attacks until
-``target.until`` (or finishes earlier) and returns what the server answered, in a few words.
+An attack is a function ``(Target) -> str`` registered with :func:`attack` (or an asyncio one
+registered with :func:`attack_async`): it attacks until ``target.until`` (or finishes earlier)
+and returns what the server answered, in a few words.
 ``python -m bench hostile [NAME ...]`` runs the named attacks only (``fuzz`` is the 20,000
 hypothesis frames of issue 7; ``HOSTILE_FRAMES`` changes the count).
 """
 
 from __future__ import annotations
 
+import asyncio
 import itertools
 import json
 import os
@@ -29,7 +31,7 @@ import sys
 import tempfile
 import threading
 import time
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Coroutine, Iterator
 from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -56,6 +58,8 @@ WORK = 0.01
 WATCHDOG = 0.5
 ADMIN = "bench-admin"
 OBSERVER = "bench-observer"
+#: A teaching assistant's token: every topic, not an administrator.
+TA = "bench-ta"
 #: Student tokens: ``student-rN`` may command robot rN only.
 STUDENTS = {f"student-r{n}": f"r{n}" for n in range(1, 9)}
 TWIST = {"linear": {"x": 0.2, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.0}}
@@ -113,6 +117,30 @@ def attack(
         return run
 
     return register
+
+
+#: An attack written with asyncio: ``(url, stop) -> str``, where ``url(who)`` is the URL for
+#: ``"student"`` (robot r1's student), ``"admin"`` or ``None`` (no token) and ``stop`` is set
+#: when its time is up.
+AsyncAttack = Callable[[Callable[[str | None], str], asyncio.Event], Coroutine[Any, Any, str]]
+
+
+def attack_async(name: str, row: str, run: AsyncAttack, *options: str) -> None:
+    """Register an asyncio attack (e.g. those of ``bench/stateattacks.py``) under ``name``."""
+
+    def who(target: Target) -> Callable[[str | None], str]:
+        tokens = {"student": "student-r1", "admin": ADMIN}
+        return lambda kind: target.url(tokens[kind] if kind is not None else None)
+
+    def sync(target: Target) -> str:
+        async def go() -> str:
+            stop = asyncio.Event()
+            asyncio.get_running_loop().call_later(max(0.0, target.left()), stop.set)
+            return await run(who(target), stop)
+
+        return asyncio.run(go())
+
+    ATTACKS[name] = Attack(name, row, sync, options)
 
 
 # -- helpers for attacks --------------------------------------------------------------------
@@ -238,8 +266,8 @@ def tf_goal_bad_frame(target: Target) -> str:
 
 @attack("advertise_action", "10")
 def takeover(target: Target) -> str:
-    """``advertise_action /tf2_web_republisher``, then leave: does TF still work for others?"""
-    with target.student() as ws:
+    """``advertise_action /tf2_web_republisher`` (every-topic token), then leave: TF for others?"""
+    with connect(target.url(TA), max_size=None, open_timeout=20) as ws:
         send(
             ws,
             {
@@ -263,7 +291,7 @@ def unauthenticated(target: Target) -> str:
     refused = 0
     for _ in range(200):
         try:
-            held.append(connect(target.url(), open_timeout=5))
+            held.append(connect(target.url(), open_timeout=5, legacy=True))
         except (InvalidStatus, OSError, TimeoutError):
             refused += 1
     try:
@@ -305,16 +333,15 @@ def cancel_others(target: Target) -> str:
 
 @attack("squat", "15")
 def squat(target: Target) -> str:
-    """r3's student advertises /r5/cmd_vel and /r5/odom; then the instructor spawns r5."""
+    """r3's student claims /r5/cmd_vel by a typed subscribe; then the instructor spawns r5."""
     with target.student("r3") as ws, target.admin() as admin:
-        for topic, kind in (("/r5/cmd_vel", "std_msgs/String"), ("/r5/odom", "std_msgs/String")):
-            send(ws, {"op": "advertise", "topic": topic, "type": kind})
+        send(ws, {"op": "subscribe", "topic": "/r5/cmd_vel", "type": "std_msgs/String"})
         squatting = statuses([answer(ws, lambda m: m.get("op") == "status", 1) or {}])
         spawn = {"x": 0.0, "y": 1.5, "theta": 0.0, "name": "r5"}
         send(admin, {"op": "call_service", "service": "/spawn", "args": spawn, "id": "s"})
         reply = answer(admin, lambda m: m.get("op") == "service_response", 5)
     result = "spawned" if reply is not None and reply["result"] else f"spawn FAILED {said(reply)}"
-    return f"{squatting[0][:60] if squatting else 'advertise accepted'}; {result}"
+    return f"{squatting[0][:60] if squatting else 'typed subscribe accepted'}; {result}"
 
 
 @attack("teleport_out", "19")
@@ -476,7 +503,7 @@ def run_one(name: str, run: Callable[[Target], str] | None, options: tuple[str, 
     row = Row(name, ATTACKS[name].row if name in ATTACKS else "-")
     files = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
     tokens = files / "tokens.yaml"
-    tokens.write_text(json.dumps({"tokens": {**STUDENTS, OBSERVER: "*"}}))
+    tokens.write_text(json.dumps({"tokens": {**STUDENTS, OBSERVER: "*", TA: "*"}}))
     config = ROOT / "config"
     args = (
         *("--world", str(config / "worlds/classroom.yaml")),
