@@ -292,7 +292,7 @@ class BridgeServer:
         s = self.settings
         client.unauthenticated = True
         # the auth op is a few hundred bytes: nothing bigger is read before admission
-        client.ws.protocol.max_message_size = min(UNAUTHENTICATED_MAX_SIZE, s.max_message_size)
+        _frame_limit(client.ws, min(UNAUTHENTICATED_MAX_SIZE, s.max_message_size))
 
         def deadline() -> None:
             if client.unauthenticated and not client.closed:
@@ -315,7 +315,7 @@ class BridgeServer:
     def _admitted(self, client: Client) -> None:
         """The connection authenticated: it leaves the pool of those that owe a token."""
         client.unauthenticated = False
-        client.ws.protocol.max_message_size = self.settings.max_message_size
+        _frame_limit(client.ws, self.settings.max_message_size)
         self._unauthenticated.discard(client.ws)
         if client.auth_timer is not None:
             client.auth_timer.cancel()
@@ -414,6 +414,13 @@ class BridgeServer:
             "unauthenticated": sum(1 for c in self.clients if c.unauthenticated),
             "stalled_total": self.stalled_total,
         }
+
+
+def _frame_limit(ws: ServerConnection, size: int) -> None:
+    """Set the largest message ``ws`` reads from now on (websockets 14-15 and 16+ spellings)."""
+    protocol = ws.protocol
+    name = "max_message_size" if hasattr(protocol, "max_message_size") else "max_size"
+    setattr(protocol, name, size)
 
 
 def _query_token(target: str) -> str | None:
