@@ -58,6 +58,8 @@ WORK = 0.01
 WATCHDOG = 0.5
 ADMIN = "bench-admin"
 OBSERVER = "bench-observer"
+#: Marks an attack's note when the attack got through (the row is then not 'ok').
+BREACH = "BREACH:"
 #: A teaching assistant's token: every topic, not an administrator.
 TA = "bench-ta"
 #: Student tokens: ``student-rN`` may command robot rN only.
@@ -182,6 +184,11 @@ def drain(ws: ClientConnection) -> list[Any]:
     return out
 
 
+def verdict(held: bool, text: str) -> str:
+    """``text``, marked as a breach when the server did not hold (the attack got through)."""
+    return text if held else f"{BREACH} {text}"
+
+
 def statuses(messages: list[Any]) -> list[str]:
     return [m["msg"] for m in messages if m.get("op") == "status"]
 
@@ -247,7 +254,8 @@ def tf_goals(target: Target) -> str:
             send(ws, tf_goal(f"g{n}", FRAMES))
         done = answer(ws, lambda m: m.get("op") in ("action_result", "status"), WINDOW / 2)
         refused = done
-    return f"2000 goals sent; first refusal: {said(refused)}; caller left"
+    text = f"2000 goals sent; first refusal: {said(refused)}; caller left"
+    return verdict(refused is not None, text)
 
 
 @attack("tf_goal_bad_frame", "9")
@@ -261,7 +269,7 @@ def tf_goal_bad_frame(target: Target) -> str:
         while target.left() > 0:
             drain(ws)
             time.sleep(0.1)
-    return said(reply)
+    return verdict(reply is not None, said(reply))
 
 
 @attack("advertise_action", "10")
@@ -281,7 +289,9 @@ def takeover(target: Target) -> str:
         send(other, tf_goal("after", ["r1/base_link"]))
         got = answer(other, lambda m: m.get("op") in ("action_feedback", "action_result"), 3)
     works = got is not None and got["op"] == "action_feedback"
-    return f"{said(reply)}; TF for others afterwards: {'works' if works else 'BROKEN'}"
+    return verdict(
+        works, f"{said(reply)}; TF for others afterwards: {'works' if works else 'BROKEN'}"
+    )
 
 
 @attack("unauthenticated", "13")
@@ -298,9 +308,9 @@ def unauthenticated(target: Target) -> str:
         with target.student("r1") as ws:
             send(ws, {"op": "call_service", "service": "/rosapi/topics", "id": "s"})
             ok = answer(ws, lambda m: m.get("op") == "service_response", 5) is not None
-            student = "student served" if ok else "student NOT served"
+            student = verdict(ok, "student served" if ok else "student NOT served")
     except InvalidStatus as err:
-        student = f"student refused: HTTP {err.response.status_code}"
+        student = verdict(False, f"student refused: HTTP {err.response.status_code}")
     while target.left() > 0 and held:
         time.sleep(0.1)
     for ws in held:
@@ -328,7 +338,7 @@ def cancel_others(target: Target) -> str:
         reply = answer(ws, lambda m: m.get("op") == "service_response", 3)
         ended = answer(victim, lambda m: m.get("op") == "action_result", 1)
     fate = "victim's goal CANCELED" if ended is not None else "victim's goal kept"
-    return f"{said(reply)}; {fate}"
+    return verdict(ended is None, f"{said(reply)}; {fate}")
 
 
 @attack("squat", "15")
@@ -340,8 +350,11 @@ def squat(target: Target) -> str:
         spawn = {"x": 0.0, "y": 1.5, "theta": 0.0, "name": "r5"}
         send(admin, {"op": "call_service", "service": "/spawn", "args": spawn, "id": "s"})
         reply = answer(admin, lambda m: m.get("op") == "service_response", 5)
-    result = "spawned" if reply is not None and reply["result"] else f"spawn FAILED {said(reply)}"
-    return f"{squatting[0][:60] if squatting else 'typed subscribe accepted'}; {result}"
+    spawned = reply is not None and reply["result"]
+    result = "spawned" if spawned else f"spawn FAILED {said(reply)}"
+    return verdict(
+        spawned, f"{squatting[0][:60] if squatting else 'typed subscribe accepted'}; {result}"
+    )
 
 
 @attack("teleport_out", "19")
@@ -353,7 +366,7 @@ def teleport_out(target: Target) -> str:
         send(ws, call)
         reply = answer(ws, lambda m: m.get("op") == "service_response", 3)
     if reply is not None and reply["result"]:
-        return "teleported to (1000, -1000)"
+        return verdict(False, "teleported to (1000, -1000)")
     return said(reply)
 
 
@@ -401,7 +414,8 @@ def fuzz(target: Target) -> str:
     given(frames)(limits(one))()
     for text in crashes[:3]:
         print(f"    fuzz crash: {text}")
-    return f"{sent} frames, {len(crashes)} crashes, {closed} closed for size (1009)"
+    text = f"{sent} frames, {len(crashes)} crashes, {closed} closed for size (1009)"
+    return verdict(not crashes, text)
 
 
 # -- the run --------------------------------------------------------------------------------
@@ -557,6 +571,7 @@ def report(rows: list[Row]) -> bool:
             and not r.missed_stops
             and worst <= (WATCHDOG + TICK + WORK) * 1e3
             and r.healthy
+            and BREACH not in r.note
         )
         ok = ok and good
         print(
@@ -575,7 +590,8 @@ def report(rows: list[Row]) -> bool:
         "  targets: RSS <= 200 MB, /odom >= 19 Hz, gap <= 150 ms, watchdog <= "
         f"{(WATCHDOG + TICK) * 1e3:.0f} ms (timeout + one tick, + {WORK * 1e3:.0f} ms of the "
         "tick's own work) and never missed ('Nx'), server "
-        "serves a new student afterwards; 'ok' says all held"
+        f"serves a new student afterwards, and the attack did not get through ({BREACH}); 'ok' "
+        "says all held"
     )
     return ok
 
