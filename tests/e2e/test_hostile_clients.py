@@ -35,9 +35,9 @@ from tests.helpers import (
 
 ADMIN = "admin-token-for-tests"
 TOKENS = {f"student-r{n}": f"r{n}" for n in range(1, 6)} | {"ta-token": "*"}
-#: A student's page asks for TF at 10 Hz; the observer's margin below the loop's 20 Hz.
-MIN_RATE = 19.0
-#: The bench holds the 150 ms target on a quiet machine; a test on a shared one allows more.
+#: The bench holds 19 Hz and 150 ms on a process of its own; the suite runs on a shared,
+#: loaded machine in the same process as its clients, so it allows a little more.
+MIN_RATE = 18.0
 MAX_GAP = 0.25 * TIMEOUT_FACTOR
 
 
