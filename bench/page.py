@@ -8,7 +8,8 @@ own. For each page and world (default, classroom):
 * page weight: bytes transferred to load the page (CDP ``Network.loadingFinished``
   ``encodedDataLength``: headers and bodies of every HTTP response);
 * bytes per second the page receives over its WebSocket (CDP ``webSocketFrameReceived``
-  payload sizes) over :data:`WINDOW_S` seconds parked, then driving (W and A held: a circle);
+  payload sizes; binary frames, which CDP gives in base64, counted decoded) over
+  :data:`WINDOW_S` seconds parked, then driving (W and A held: a circle);
 * the renderer's CPU over the same windows: user + system seconds of the browser's renderer
   processes (``psutil``) per wall second, and the main thread's busy time (CDP
   ``Performance.getMetrics`` ``TaskDuration``).
@@ -21,6 +22,7 @@ counters, but a busy machine still delays its work.
 from __future__ import annotations
 
 import asyncio
+import base64
 import re
 import subprocess
 import sys
@@ -158,7 +160,11 @@ async def _measure(static: Path, world: str) -> Figures:
             weight = [0]
 
             def on_frame(ev: dict[str, Any]) -> None:
-                received[0] += len(ev["response"]["payloadData"])
+                frame = ev["response"]
+                data = frame["payloadData"]
+                # CDP gives binary frames (CBOR) in base64: count the bytes that travelled
+                binary = frame.get("opcode") == 2
+                received[0] += len(base64.b64decode(data)) if binary else len(data.encode())
 
             def on_loaded(ev: dict[str, Any]) -> None:
                 weight[0] += int(ev["encodedDataLength"])
