@@ -53,7 +53,7 @@ function showState(detail = { state: conn.state, url: conn.url, reason: conn.rea
   let kind = detail.state;
   let text = STATE_WORDS[kind] || kind;
   let reason = detail.reason || '';
-  if (kind === 'connected' && state.needsToken) {
+  if (state.needsToken && (kind === 'connected' || kind === 'disconnected')) {
     kind = 'refused';
     text = 'token needed';
     reason = 'this server needs a token: enter the one your instructor gave you under Server';
@@ -237,6 +237,9 @@ async function loadAccess() {
     // a server that wants a token refuses every call; a real robot's rosbridge has no such
     // service (then the page shows everything, as it cannot know)
     state.needsToken = /not authenticated/.test(err.message);
+    // the server closes a connection that owes a token after a while: stay closed and say
+    // why until the student enters one (no reconnect loop)
+    if (state.needsToken) conn.disconnect();
   }
   state.access = access;
   showRole();

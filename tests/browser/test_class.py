@@ -294,6 +294,7 @@ async def test_a_refused_token_and_a_dead_server_each_say_so(
     # no token where one is needed: connected, but told to enter one
     none, _ = await open_page(browser, contexts, f"{http_url(app)}/?url={ws_url(app)}")
     await none.wait_for_function("window.simbridge && window.simbridge.state.needsToken")
+    await none.wait_for_function("window.simbridge.conn.state === 'disconnected'")  # no retry loop
     assert await none.text_content("#statusText") == "token needed"
     # a full server
     full = App(ServerSettings(host="127.0.0.1", port=0, http_port=0, max_clients=1))
