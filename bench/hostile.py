@@ -434,6 +434,10 @@ class Row:
     missed_stops: int = 0
     healthy: bool = False
     note: str = ""
+    #: The server's CPU over the window (% of one core) and the machine's load average: a gap
+    #: while the server was idle and the load high is the machine's, not the attack's.
+    cpu: float = 0.0
+    load: float = 0.0
 
 
 class RssSampler(threading.Thread):
@@ -512,6 +516,11 @@ def measure(row: Row, records: dict[str, Any], start: float, end: float) -> None
             row.missed_stops += 1
 
 
+def _cpu(proc: psutil.Process) -> float:
+    times = proc.cpu_times()
+    return float(times.user + times.system)
+
+
 def run_one(name: str, run: Callable[[Target], str] | None, options: tuple[str, ...]) -> Row:
     """Run one attack (``run`` None: the quiet baseline) on a fresh server."""
     row = Row(name, ATTACKS[name].row if name in ATTACKS else "-")
@@ -531,15 +540,17 @@ def run_one(name: str, run: Callable[[Target], str] | None, options: tuple[str, 
         time.sleep(2.0)  # the observer settles; r2's first probe
         row.rss_start = proc.memory_info().rss / 2**20
         start = time.time()
+        cpu = _cpu(proc)
         target = Target(port, proc, time.monotonic() + WINDOW)
         try:
             row.note = run(target) if run is not None else "no attack"
         except Exception as err:  # an attack that breaks is a figure too
             row.note = f"attack raised {type(err).__name__}: {err}"[:120]
-        if run is None:
-            time.sleep(max(0.0, target.left()))
-        time.sleep(AFTER)
+        # every row is watched as long (quick attacks too): the same number of watchdog probes
+        time.sleep(max(0.0, target.left()) + AFTER)
         end = time.time()
+        row.cpu = (_cpu(proc) - cpu) / (end - start) * 100
+        row.load = os.getloadavg()[0]
         row.healthy = proc.is_running() and proc.status() != "zombie" and healthy(port)
         sampler.stop.set()
         sampler.join()
@@ -552,11 +563,12 @@ def report(rows: list[Row]) -> bool:
     base = rows[0]
     print(
         f"hostile: one attack per fresh server (classroom world, tokens, watchdog {WATCHDOG} s); "
-        f"attacks run {WINDOW:g} s (or less) + {AFTER:g} s after"
+        f"each row watched {WINDOW:g} s (the attack runs in it, or less) + {AFTER:g} s after; "
+        f"{os.cpu_count()} cores"
     )
     head = (
         f"  {'attack':<18}{'row':>6}{'RSS MB':>14}{'/odom Hz':>10}{'gap ms':>8}{'p99 ms':>8}"
-        f"{'watchdog ms':>13}{'ok':>4}"
+        f"{'watchdog ms':>13}{'CPU %':>7}{'load':>6}{'ok':>4}"
     )
     print(head)
     ok = True
@@ -576,7 +588,7 @@ def report(rows: list[Row]) -> bool:
         ok = ok and good
         print(
             f"  {r.name:<18}{r.row:>6}{rss:>14}{r.rate:>10.2f}{r.gap * 1e3:>8.0f}"
-            f"{r.p99 * 1e3:>8.1f}{dog:>13}{'yes' if good else 'NO':>4}"
+            f"{r.p99 * 1e3:>8.1f}{dog:>13}{r.cpu:>7.0f}{r.load:>6.1f}{'yes' if good else 'NO':>4}"
         )
         print(f"  {'':<18}  server said: {r.note}")
     print(
