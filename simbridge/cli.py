@@ -324,6 +324,14 @@ def _run_parser() -> argparse.ArgumentParser:
         "clock (as ROS nodes with use_sim_time:=true expect) [SIMBRIDGE_USE_SIM_TIME]",
     )
     parser.add_argument(
+        "--demo-nodes",
+        action="store_true",
+        default=(_env("DEMO_NODES", "") or "").lower() in ("1", "true", "yes"),
+        help="also run the ROS tutorial nodes: talker/listener on /chatter, /add_two_ints, "
+        "the /fibonacci action (ROS 2 and ROS 1 actionlib); or demo_nodes: true in the world "
+        "file [SIMBRIDGE_DEMO_NODES]",
+    )
+    parser.add_argument(
         "--record",
         metavar="DIR",
         default=_env("RECORD", None),
@@ -427,6 +435,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
             port=args.port,
             http_port=None if args.no_http else args.http_port,
             use_sim_time=args.use_sim_time,
+            demo_nodes=args.demo_nodes,
             **_security_settings(args),
         )
         # validate before binding anything, so a bad file fails fast and clearly

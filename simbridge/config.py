@@ -272,6 +272,33 @@ class Circle(_Strict):
     segments: int = Field(24, ge=6, le=256)
 
 
+class StaticFrame(_Strict):
+    """A fixed transform ``parent -> child`` published on ``/tf_static`` (REP-105 frame names).
+
+    ``pose`` is ``[x, y, yaw]`` (metres, radians: the 2D case) or ``[x, y, z, roll, pitch,
+    yaw]`` as ``static_transform_publisher`` takes them.
+    """
+
+    parent: str = Field(min_length=1, max_length=200)
+    child: str = Field(min_length=1, max_length=200)
+    pose: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
+
+    @field_validator("pose", mode="before")
+    @classmethod
+    def _pose(cls, v: Any) -> Any:
+        count = len(v) if isinstance(v, list) else 0
+        return _check_numbers(
+            v, 6 if count == 6 else 3, "[x, y, yaw] or [x, y, z, roll, pitch, yaw]"
+        )
+
+    def xyz_rpy(self) -> tuple[float, float, float, float, float, float]:
+        """Return the pose as (x, y, z, roll, pitch, yaw)."""
+        p = self.pose
+        if len(p) == 3:
+            return (p[0], p[1], 0.0, 0.0, 0.0, p[2])
+        return (p[0], p[1], p[2], p[3], p[4], p[5])
+
+
 class WorldSpec(_Strict):
     """A world file: walls and obstacles as line segments, and the robot's start pose.
 
@@ -287,9 +314,24 @@ class WorldSpec(_Strict):
     robot: RobotSpec = Field(default_factory=RobotSpec)
     #: Named robots (``/r1/odom``...); ``None`` means the single un-namespaced ``robot``.
     robots: list[NamedRobotSpec] | None = None
+    #: Fixed frames published on /tf_static (``{parent: world, child: turtle1, pose: [...]}``).
+    frames: list[StaticFrame] = Field(default_factory=list, max_length=1000)
+    #: Start the ROS tutorial nodes (talker, listener, add_two_ints, fibonacci), as
+    #: ``--demo-nodes`` does.
+    demo_nodes: bool = False
 
     def model_post_init(self, context: Any, /) -> None:
         """Check that ``robot`` and ``robots`` are not both given and names are unique."""
+        children: set[str] = set()
+        for i, f in enumerate(self.frames):
+            child = f.child.lstrip("/")
+            if child == f.parent.lstrip("/"):
+                msg = f"frames[{i}]: parent and child are both '{child}'"
+                raise ValueError(msg)
+            if child in children:
+                msg = f"frames[{i}]: frame '{child}' has two parents; each child frame once"
+                raise ValueError(msg)
+            children.add(child)
         if self.robots is None:
             return
         if "robot" in self.model_fields_set:
@@ -396,6 +438,8 @@ class ServerSettings:
     admin_token: str | None = None
     #: Stamp headers with simulated time (``/clock``) instead of the wall clock.
     use_sim_time: bool = False
+    #: Start the ROS tutorial nodes (also ``demo_nodes: true`` in the world file).
+    demo_nodes: bool = False
     extra: dict[str, Any] = field(default_factory=dict)
     # -- reliability and security (docs/security.md); admin_token above also guards the
     # administrative ROS services (when it is None they are open: a laptop on its own) --

@@ -158,6 +158,8 @@ class App:
         self.tf_republisher = self.robot.tf_republisher
         #: The robots' safety watchdog (docs/security.md).
         self.safety = self.robot.safety
+        #: The ROS tutorial nodes (``--demo-nodes`` or ``demo_nodes: true``), else None.
+        self.tutorials = self.robot.tutorials
         #: Hooks run after each tick's publishing, with ``now`` (extensions).
         self.tick_hooks = self.robot.tick_hooks
         #: HTTP answers (page, /healthz).

@@ -3,8 +3,10 @@
 :func:`build_robot_graph` is the only code that decides what a simbridge world offers: rosapi and
 the parameter services, the robots' topics and services (``/cmd_vel``, ``/odom``, ``/scan``,
 ``/tf``, ``/spawn``...), the safety watchdog, the e-stop, ``/walls``, ``/clock`` and the sim-time
-services, and tf2_web_republisher. :class:`~simbridge.runner.App` drives it in real time and
-:class:`~simbridge.headless.Simulation` step by step, so the two cannot offer different graphs.
+services, tf2_web_republisher, and the ROS tutorial nodes when the settings (``--demo-nodes``)
+or the world file (``demo_nodes: true``) ask for them. :class:`~simbridge.runner.App` drives it
+in real time and :class:`~simbridge.headless.Simulation` step by step, so the two cannot offer
+different graphs.
 
 Client access control (:class:`~simbridge.graph.guard.Guard`) is not part of it: it sits between
 the sockets and the graph, and the headless API has no clients.
@@ -26,6 +28,7 @@ from simbridge.graph.rosapi import install_rosapi
 from simbridge.graph.safety import Safety
 from simbridge.graph.simclock import SimClock
 from simbridge.graph.tfrepublisher import TfRepublisher, install_tf_republisher
+from simbridge.graph.tutorials import TutorialNodes, install_tutorials
 from simbridge.graph.walls import WallsPublisher
 from simbridge.sim import World
 
@@ -66,6 +69,8 @@ class RobotGraph:
     #: Parts of ticks that raised (each part is isolated: the others still ran).
     failures: int = 0
     _failed: set[tuple[str, str, str, int | None]] = field(default_factory=set)
+    #: The tutorial nodes (talker, listener, /add_two_ints, /fibonacci), when asked for.
+    tutorials: TutorialNodes | None = None
 
     def publish_static(self, now: float) -> None:
         """Publish what is latched once at start: ``/tf_static`` and ``/walls``."""
@@ -136,6 +141,11 @@ def build_robot_graph(
     tf_republisher = install_tf_republisher(graph, lambda: world.params.sim.rate)
     safety = Safety(graph, world)
     bridge.on_robot_removed.append(safety.forget)
+    hooks: list[Callable[[float], None]] = [tf_republisher.tick, safety.tick]
+    tutorials = None
+    if world.spec.demo_nodes or (settings is not None and settings.demo_nodes):
+        tutorials = install_tutorials(graph)
+        hooks.append(tutorials.tick)
     return RobotGraph(
         world=world,
         graph=graph,
@@ -146,5 +156,6 @@ def build_robot_graph(
         walls=walls,
         tf_republisher=tf_republisher,
         safety=safety,
-        tick_hooks=[tf_republisher.tick, safety.tick],
+        tick_hooks=hooks,
+        tutorials=tutorials,
     )

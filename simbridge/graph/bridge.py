@@ -59,6 +59,19 @@ def _quaternion(yaw: float) -> dict[str, float]:
     return {"x": 0.0, "y": 0.0, "z": math.sin(yaw / 2.0), "w": math.cos(yaw / 2.0)}
 
 
+def _rpy_quaternion(roll: float, pitch: float, yaw: float) -> dict[str, float]:
+    """Fixed-axis roll, pitch, yaw (as tf2's ``setRPY``) as a quaternion."""
+    cr, sr = math.cos(roll / 2.0), math.sin(roll / 2.0)
+    cp, sp = math.cos(pitch / 2.0), math.sin(pitch / 2.0)
+    cy, sy = math.cos(yaw / 2.0), math.sin(yaw / 2.0)
+    return {
+        "x": sr * cp * cy - cr * sp * sy,
+        "y": cr * sp * cy + sr * cp * sy,
+        "z": cr * cp * sy - sr * sp * cy,
+        "w": cr * cp * cy + sr * sp * sy,
+    }
+
+
 @dataclass(eq=False, slots=True)
 class _RobotTopics:
     robot: Robot
@@ -180,7 +193,7 @@ class RobotBridge:
     # -- publishing ------------------------------------------------------------------------
 
     def publish_static(self, now: float) -> None:
-        """Publish (latch) ``/tf_static``: each robot's ``base_link -> laser``."""
+        """Publish (latch) ``/tf_static``: robots' ``base_link -> laser``, the world's frames."""
         sec, nanosec = self.graph.stamp()
         mx, my, myaw = self.world.params.lidar.mount
         transforms = [
@@ -194,6 +207,18 @@ class RobotBridge:
             }
             for rt in self.robots.values()
         ]
+        for frame in self.world.spec.frames:
+            x, y, z, roll, pitch, yaw = frame.xyz_rpy()
+            transforms.append(
+                {
+                    "header": {"stamp": _stamp(sec, nanosec), "frame_id": frame.parent},
+                    "child_frame_id": frame.child,
+                    "transform": {
+                        "translation": {"x": x, "y": y, "z": z},
+                        "rotation": _rpy_quaternion(roll, pitch, yaw),
+                    },
+                }
+            )
         self.graph.publish(self.tf_static, {"transforms": transforms}, now)
 
     def publish(self, now: float) -> None:

@@ -182,10 +182,14 @@ class Graph:
         """Publish a canonical message from in process (no validation: the caller is trusted)."""
         self.topics.deliver(topic, self.topics.outgoing(topic, msg, self.stamp()), now, None)
 
-    def log(self, level: str, text: str, *, name: str = "simbridge") -> None:
-        """Log a notable event to the Python log and to ``/rosout`` (rcl_interfaces/Log)."""
+    def log(self, level: str, text: str, *, name: str = "simbridge", echo: bool = True) -> None:
+        """Log a notable event to ``/rosout`` (rcl_interfaces/Log) and to the Python log.
+
+        ``echo=False`` logs it at debug level in Python (a per-message log such as the tutorial
+        listener's must not flood the server log).
+        """
         number = _LOG_LEVELS.get(level, 20)
-        logger.log(number, "%s", text)
+        logger.log(number if echo else logging.DEBUG, "%s", text)
         topic = self.topics.topics.get(ROSOUT)
         if topic is None or not topic.subscriptions:
             return

@@ -9,15 +9,20 @@ Replies from client providers (``service_response``) are routed back by the serv
 ``service_request:<service>:<n>``. Clients disagree on the reply shape (protocol reference
 section 8, item 14), so simbridge reads it as follows:
 
-* ``result: false``: failure; ``values`` (a string, or anything else shown as JSON) is the reason;
-* ``result: true``: success; ``values`` must be an object (missing or null means ``{}``);
-* ``result`` missing or ``null`` (roslibjs when the callback returns nothing, roslibpy when it
-  returns ``None``): success when ``values`` is an object, else failure.
+* ``values`` an object: success, whatever ``result`` says. This is rosbridge's behaviour (its
+  ``service_response`` capability builds the ROS response from ``values`` and never reads
+  ``result``), and what roslibpy's own test expects of a callback that fills the response and
+  returns ``False``; the caller gets ``result: true`` and the values as JSON;
+* ``result: true`` without ``values`` (or ``null``): success with ``{}``;
+* otherwise failure: ``values`` as the reason when it is a string (roslibjs 2.1
+  ``advertiseAsync`` sends the error text), else a sentence saying what came, with the values as
+  JSON. rosbridge leaves the caller waiting in these cases.
 """
 
 from __future__ import annotations
 
 import itertools
+import json
 import logging
 import math
 from collections.abc import Callable
@@ -256,15 +261,16 @@ class ServiceTable:
             return f"service_response for {op.id!r} from a client that does not provide it"
         del self.pending[op.id]
         values = op.values
-        if op.result is False:
-            ok = False
-            if not isinstance(values, str):
-                values = "service provider reported failure" if values is None else str(values)
-        elif isinstance(values, dict) or (op.result is True and values is None):
+        if isinstance(values, dict) or (op.result is True and values is None):
             ok, values = True, values if isinstance(values, dict) else {}
+        elif isinstance(values, str) and op.result is False:
+            ok = False
+        elif op.result is False and values is None:
+            ok, values = False, "service provider reported failure"
         else:
             ok = False
-            values = f"service provider sent no result object (values: {values!r})"
+            shown = json.dumps(values, default=repr)
+            values = f"service provider sent no result object (values: {shown})"
         if ok and self.finish is not None:
             try:
                 values = self.finish(call.service.type, values)

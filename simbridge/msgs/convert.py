@@ -15,6 +15,11 @@ accepted for an integer field; ``uint8[]`` accepts a base64 string or a list of 
 Time accepts ``sec``/``secs`` and ``nanosec``/``nsecs`` and the string ``"now"``; a ``header``
 object present without a stamp gets the current time.
 
+ROS 1-era payloads are read where they are unambiguous (docs/compatibility.md): ``secs``/``nsecs``
+in any Time or Duration field (giving both ``sec`` and ``secs`` is refused), and a
+``std_msgs/Header`` ``seq`` (an unsigned integer, dropped: ROS 2 headers have none). What goes
+out is always ROS 2 (``sec``/``nanosec``, no ``seq``).
+
 Deliberate difference from rosbridge: ``null`` is accepted in float fields and read as NaN,
 because JSON cannot carry NaN and ``JSON.stringify`` turns it into ``null`` (simbridge sends NaN
 out as ``null`` too, so a message round-trips). Consumers that need finite values check them.
@@ -127,6 +132,10 @@ class Converter:
             return self._time(typename, obj, root, path)
         spec = self.registry.spec(typename)
         names = {f.name for f in spec.fields}
+        if typename == _HEADER and "seq" in obj:
+            # ROS 1's header.seq (roslibpy's Header, ROS 1-era pages): checked, then dropped
+            self._int(obj["seq"], "uint32", root, f"{path}.seq" if path else "seq")
+            obj = {k: v for k, v in obj.items() if k != "seq"}
         for key in obj:
             if key not in names:
                 where = f"{path}.{key}" if path else key
@@ -155,6 +164,13 @@ class Converter:
         if extra:
             msg = f"Message type {root} does not have a field {path}.{sorted(extra)[0]}"
             raise ConversionError(msg)
+        for ros2, ros1 in (("sec", "secs"), ("nanosec", "nsecs")):
+            if ros2 in obj and ros1 in obj:
+                msg = (
+                    f"{root} message: {path} has both '{ros2}' (ROS 2) and '{ros1}' (ROS 1); "
+                    "give one of them"
+                )
+                raise ConversionError(msg)
         sec = self._int(obj.get("sec", obj.get("secs", 0)), "int32", root, f"{path}.sec")
         nanosec = self._int(
             obj.get("nanosec", obj.get("nsecs", 0)), "uint32", root, f"{path}.nanosec"

@@ -104,6 +104,27 @@ def test_time_accepts_both_spellings_and_now(conv: Converter) -> None:
         conv.from_json("std_msgs/msg/Header", {"stamp": {"nanosec": -1}})
 
 
+def test_ros1_header_seq_is_checked_then_dropped(conv: Converter) -> None:
+    """ROS 1's header.seq (roslibpy's Header) is accepted and left out; a bad one is refused."""
+    msg = conv.from_json(
+        "geometry_msgs/msg/PointStamped",
+        {"header": {"seq": 3, "stamp": {"secs": 1, "nsecs": 2}, "frame_id": "base"}},
+    )
+    assert msg["header"] == {"stamp": {"sec": 1, "nanosec": 2}, "frame_id": "base"}
+    with pytest.raises(ConversionError, match=r"header\.seq"):
+        conv.from_json("geometry_msgs/msg/PointStamped", {"header": {"seq": -1}})
+    with pytest.raises(ConversionError, match="does not have a field seq"):
+        conv.from_json("std_msgs/msg/String", {"seq": 1})
+
+
+def test_time_with_both_ros1_and_ros2_names_is_refused(conv: Converter) -> None:
+    """{sec, secs} is ambiguous: refused naming both; actionlib GoalID stamps take secs/nsecs."""
+    with pytest.raises(ConversionError, match=r"both 'sec' .* and 'secs'"):
+        conv.from_json("std_msgs/msg/Header", {"stamp": {"sec": 1, "secs": 1}})
+    goal_id = conv.from_json("actionlib_msgs/msg/GoalID", {"stamp": {"secs": 0, "nsecs": 5}})
+    assert goal_id == {"stamp": {"sec": 0, "nanosec": 5}, "id": ""}
+
+
 def test_header_object_without_stamp_is_stamped_now(conv: Converter) -> None:
     """A header object given without stamp gets the current time; an absent header stays 0."""
     stamped = conv.from_json("geometry_msgs/msg/PoseStamped", {"header": {"frame_id": "map"}})
