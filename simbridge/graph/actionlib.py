@@ -147,6 +147,11 @@ class ActionlibServer:
         graph.subscribe(f"{name}/cancel", "actionlib_msgs/msg/GoalID", node, self._on_cancel)
         graph.on_disconnect.append(self.drop_peer)
 
+    @property
+    def now(self) -> float:
+        """The ``now`` of the last :meth:`tick`."""
+        return self._now
+
     # -- incoming ---------------------------------------------------------------------------
 
     def _on_goal(self, msg: Any, peer: Peer | None) -> None:

@@ -4,7 +4,11 @@ roslibjs' ``TFClient`` (1.x, ``groovyCompatibility: false``) and roslibpy's ``TF
 service ``/republish_tfs`` (``tf2_web_republisher_interfaces/srv/RepublishTFs``) and subscribe to
 the topic it names (``tf2_web_republisher/TFArray``); roslibjs 2.x ``ROS2TFClient`` sends goals to
 the action ``/tf2_web_republisher`` (``tf2_web_republisher_interfaces/action/TFSubscription``)
-and reads the feedback. Either way simbridge sends, at ``rate`` Hz, each requested
+and reads the feedback; the default ``TFClient`` of roslibjs 1.x (``groovyCompatibility: true``)
+and 2.x speaks the node's ROS 1 actionlib interface (``/tf2_web_republisher/goal``,
+``/cancel``, ``/status``, ``/feedback``, ``/result``; type ``tf2_web_republisher/
+TFSubscriptionAction``), served here too (feedback only to the goal's sender). Either way
+simbridge sends, at ``rate`` Hz, each requested
 ``target_frame <- source_frame`` transform (a ``geometry_msgs/TransformStamped``: header frame
 the target, child the source) whenever it moved by more than ``trans_thres`` metres or
 ``angular_thres`` radians since it was last sent (always the first time).
@@ -39,6 +43,13 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from simbridge.errors import ServiceError
+from simbridge.graph.actionlib import (
+    ABORTED as AL_ABORTED,
+    PREEMPTED,
+    REJECTED,
+    ActionlibGoal,
+    ActionlibServer,
+)
 from simbridge.graph.actions import ABORTED, CANCELED, Goal
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer, Topic
@@ -53,6 +64,7 @@ REPUBLISHER_NODE = "/tf2_web_republisher"
 _ACTION_TYPE = "tf2_web_republisher_interfaces/action/TFSubscription"
 _SERVICE_TYPE = "tf2_web_republisher_interfaces/srv/RepublishTFs"
 _TOPIC_TYPE = "tf2_web_republisher/msg/TFArray"
+_ACTIONLIB_ACTION = "tf2_web_republisher/TFSubscription"
 
 logger = logging.getLogger(__name__)
 
@@ -149,6 +161,8 @@ class _Request:
     next_due: float = -math.inf
     sent: dict[str, Pose] = field(default_factory=dict)
     goal: Goal | None = None
+    #: A ROS 1 actionlib goal (roslibjs' default TFClient).
+    al_goal: ActionlibGoal | None = None
     topic: Topic | None = None
     timeout: float = 10.0
     last_subscribed: float = -math.inf
@@ -189,6 +203,16 @@ class TfRepublisher:
         graph.on_disconnect.append(self.drop_peer)
         graph.actions.add_server(REPUBLISHER_NODE, _ACTION_TYPE, REPUBLISHER_NODE, self)
         graph.add_service("/republish_tfs", _SERVICE_TYPE, REPUBLISHER_NODE, self._republish)
+        #: The ROS 1 actionlib interface of the same node.
+        self.actionlib = ActionlibServer(
+            graph,
+            REPUBLISHER_NODE,
+            _ACTIONLIB_ACTION,
+            REPUBLISHER_NODE,
+            self._actionlib_goal,
+            self._actionlib_cancel,
+            private=True,
+        )
 
     # -- feeding --------------------------------------------------------------------------
 
@@ -321,6 +345,24 @@ class TfRepublisher:
             self._remove(request)
         goal.finish(CANCELED, {})
 
+    # -- ROS 1 actionlib (the default TFClient of roslibjs) ------------------------------------
+
+    def _actionlib_goal(self, goal: ActionlibGoal, now: float) -> None:
+        """Start a goal of the default TFClient (or reject it, status 5, with the reason)."""
+        try:
+            request = self._request(goal.goal, goal.peer, f"goal of {REPUBLISHER_NODE}/goal")
+        except ServiceError as err:
+            goal.finish(REJECTED, {}, now, str(err))
+            return
+        request.al_goal = goal
+        self._add(request)
+
+    def _actionlib_cancel(self, goal: ActionlibGoal, now: float) -> None:
+        """Roslibjs cancels its goal each time its frame list changes: it ends preempted."""
+        for request in [r for r in self.requests if r.al_goal is goal]:
+            self._remove(request)
+        goal.finish(PREEMPTED, {}, now)
+
     # -- service (TFClient, roslibpy) ------------------------------------------------------
 
     def _republish(self, values: Any) -> dict[str, Any]:
@@ -347,6 +389,7 @@ class TfRepublisher:
         A request whose sending fails is dropped (its goal aborted), logged once per cause;
         the other requests are served.
         """
+        self.actionlib.tick(now)
         self._poses.clear()
         for request in list(self.requests):
             try:
@@ -364,9 +407,14 @@ class TfRepublisher:
         self._remove(request)
         if request.goal is not None:
             request.goal.finish(ABORTED, f"TF request failed: {cause}", result=False)
+        if request.al_goal is not None:
+            text = f"TF request failed: {cause}"
+            request.al_goal.finish(AL_ABORTED, {}, self.actionlib.now, text)
 
     def _serve(self, request: _Request, now: float) -> None:
-        if request.goal is not None and request.goal.done:
+        if (request.goal is not None and request.goal.done) or (
+            request.al_goal is not None and request.al_goal.done
+        ):
             self._remove(request)
             return
         if request.topic is not None and self._expired(request, now):
@@ -386,6 +434,8 @@ class TfRepublisher:
             return
         if request.goal is not None:
             request.goal.feedback({"transforms": transforms})
+        elif request.al_goal is not None:
+            request.al_goal.feedback({"transforms": transforms}, now)
         elif request.topic is not None:
             self.graph.publish(request.topic, {"transforms": transforms}, now)
 

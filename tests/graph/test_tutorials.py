@@ -33,7 +33,7 @@ def run(nodes: TutorialNodes, start: float, end: float, dt: float = 0.05) -> Non
 def test_talker_says_hello_world_n_once_a_second_and_the_listener_logs_it(
     graph: Graph, nodes: TutorialNodes
 ) -> None:
-    """demo_nodes_cpp: "Hello World: 1", "Hello World: 2"... at 1 Hz; "I heard: [...]" on /rosout."""
+    """demo_nodes_cpp: "Hello World: N" at 1 Hz; the listener logs "I heard: [...]" on /rosout."""
     c = RecordingPeer(graph)
     op(c, graph, op="subscribe", topic="/chatter")
     op(c, graph, op="subscribe", topic="/rosout")
