@@ -1,4 +1,4 @@
-"""End to end: the tutorial nodes and ROS 1-era clients, with unmodified roslibjs 1.4.1 and 2.1.0."""
+"""End to end: the tutorial nodes and ROS 1-era clients, with unmodified roslibjs 1.4.1 and 2.1."""
 
 from __future__ import annotations
 
