@@ -28,6 +28,23 @@ node_packages() {
 need_node
 node_packages
 
+# roslibpy 2.1.0's own test suite (tests/e2e/test_roslibpy_suite.py runs it against simbridge):
+# the tests/ of its PyPI sdist (hash-pinned), unpacked into .cache/ (git-ignored).
+ROSLIBPY_SDIST_SHA256=05d2ec196dd2ff89c864418f7afeac4b01bff5679034c997a6b4d0c54775f352
+roslibpy_suite() {
+  local dest=.cache/roslibpy-2.1.0 tmp python=python3
+  [ -f "$dest/tests/conftest.py" ] && return
+  [ -x .venv/bin/python ] && python=.venv/bin/python
+  tmp=$(mktemp -d)
+  echo "roslibpy==2.1.0 --hash=sha256:$ROSLIBPY_SDIST_SHA256" >"$tmp/req.txt"
+  "$python" -m pip download -qq --no-binary :all: --no-deps --require-hashes -r "$tmp/req.txt" -d "$tmp"
+  mkdir -p .cache
+  tar -xzf "$tmp/roslibpy-2.1.0.tar.gz" -C .cache \
+    roslibpy-2.1.0/tests roslibpy-2.1.0/pyproject.toml roslibpy-2.1.0/LICENSE
+  rm -rf "$tmp"
+}
+roslibpy_suite
+
 # Debian's chromium for the browser tests (Playwright drives it via executable_path).
 need_chromium() {
   if command -v chromium >/dev/null 2>&1; then

@@ -4,7 +4,9 @@ Started by ``simbridge --demo-nodes`` or ``demo_nodes: true`` in the world file,
 ROS 2's ``demo_nodes_cpp``, ``action_tutorials_cpp`` and ROS 1's ``actionlib_tutorials``:
 
 * ``/talker`` publishes ``std_msgs/msg/String`` ``"Hello World: N"`` (N = 1, 2, ...) on
-  ``/chatter`` once a second;
+  ``/chatter`` once a second. It is a stand-in: while a client advertises ``/chatter`` (a
+  student's own talker, roslibpy's hello-world example) it stays quiet, so that the client's
+  listeners hear that talker alone; it resumes when no client publishes there any more;
 * ``/listener`` subscribes to ``/chatter`` and logs ``I heard: [text]`` (info, on ``/rosout``);
 * ``/add_two_ints_server`` serves ``/add_two_ints`` (``example_interfaces/srv/AddTwoInts``);
 * ``/fibonacci_action_server`` serves the ROS 2 action ``/fibonacci``
@@ -113,6 +115,8 @@ class TutorialNodes:
         self.graph.log("info", f"I heard: [{text}]", name="listener", echo=False)
 
     def _talk(self, now: float) -> None:
+        if any(owner != TALKER for owner in self.chatter.publishers):
+            return  # a client talks on /chatter: let it be heard alone
         self.count += 1
         self.graph.publish(self.chatter, {"data": f"Hello World: {self.count}"}, now)
 

@@ -54,6 +54,20 @@ def test_listener_hears_clients_too(graph: Graph, nodes: TutorialNodes) -> None:
     assert [m["msg"]["msg"] for m in c.take()] == ["I heard: [hi from a page]"]
 
 
+def test_talker_is_quiet_while_a_client_advertises_chatter(
+    graph: Graph, nodes: TutorialNodes
+) -> None:
+    """A student's own talker is heard alone; the built-in one resumes after it unadvertises."""
+    c = RecordingPeer(graph)
+    op(c, graph, op="subscribe", topic="/chatter")
+    op(c, graph, op="advertise", topic="/chatter", type="std_msgs/String")
+    run(nodes, 0.0, 2.0)
+    assert c.take() == []
+    op(c, graph, op="unadvertise", topic="/chatter")
+    run(nodes, 2.05, 3.0)
+    assert [m["msg"]["data"] for m in c.take()] == ["Hello World: 1"]
+
+
 def test_add_two_ints_sums_and_refuses_an_int64_overflow(
     graph: Graph, nodes: TutorialNodes
 ) -> None:
