@@ -7,6 +7,7 @@ import pytest
 
 from simbridge.config import Params, load_world
 from simbridge.graph import Graph, RobotBridge, install_rosapi
+from simbridge.graph.tutorials import install_tutorials
 from simbridge.sim import World
 from tests.helpers import RecordingPeer
 
@@ -104,6 +105,29 @@ def test_topics_and_raw_types_give_full_text_with_msg_sections(graph: Graph) -> 
     )
     assert "=" * 80 + "\nMSG: geometry_msgs/Vector3\nfloat64 x" in text["/cmd_vel"]
     assert "MSG: builtin_interfaces/Time" in text["/rosout"]
+
+
+def test_every_known_topic_type_has_its_text_and_an_unknown_one_an_empty_definition(
+    graph: Graph,
+) -> None:
+    """Lichtblick needs a definition text per listed topic.
+
+    Known types (the tutorial and actionlib ones included) get the full definition; a client's
+    unknown type is listed with rosapi's comment-only text, which parses to an empty definition.
+    """
+    install_tutorials(graph)
+    client = RecordingPeer(graph)
+    graph.receive(client, json.dumps({"op": "advertise", "topic": "/x", "type": "my_pkg/X"}), 0.0)
+    values = call(graph, "/rosapi/topics_and_raw_types", {})["values"]
+    rows = list(zip(values["topics"], values["types"], values["typedefs_full_text"], strict=True))
+    assert {"/chatter", "/fibonacci/goal", "/x"} <= {name for name, _t, _x in rows}
+    for name, type_name, text in rows:
+        body = [ln for ln in text.split("\n") if ln.strip() and not ln.startswith("#")]
+        if name == "/x":
+            assert type_name == "my_pkg/msg/X"
+            assert body == [] and text.startswith("# failed to get full definition text")
+        else:
+            assert graph.registry.known(type_name) and body, name
 
 
 def test_graph_introspection_services(graph: Graph) -> None:
