@@ -161,3 +161,38 @@ def test_a_world_may_list_named_robots(tmp_path: Path) -> None:
 def test_bad_robot_lists_fail_naming_the_key(tmp_path: Path, text: str, error: str) -> None:
     with pytest.raises(ConfigError, match=error.replace("[", r"\[")):
         load_world(write(tmp_path, "bad.yaml", text))
+
+
+def test_a_world_lists_static_frames_and_turns_on_the_tutorial_nodes(tmp_path: Path) -> None:
+    """frames: [x, y, yaw] or [x, y, z, roll, pitch, yaw]; demo_nodes a boolean."""
+    text = (
+        "demo_nodes: true\nframes:\n"
+        "  - {parent: world, child: turtle1, pose: [1, 2, 0.5]}\n"
+        "  - {parent: world, child: cam, pose: [1, 2, 3, 0.1, 0.2, 0.3]}\n"
+    )
+    world = load_world(write(tmp_path, "w.yaml", text))
+    assert world.demo_nodes is True
+    assert [f.xyz_rpy() for f in world.frames] == [
+        (1.0, 2.0, 0.0, 0.0, 0.0, 0.5),
+        (1.0, 2.0, 3.0, 0.1, 0.2, 0.3),
+    ]
+
+
+@pytest.mark.parametrize(
+    ("text", "error"),
+    [
+        (
+            "frames: [{parent: world, child: a, pose: [1, 2]}]\n",
+            "frames.0.pose: has 2 numbers, expected [x, y, yaw] or",
+        ),
+        ("frames: [{parent: a, child: /a}]\n", "frames[0]: parent and child are both 'a'"),
+        (
+            "frames: [{parent: w, child: a}, {parent: v, child: a}]\n",
+            "frames[1]: frame 'a' has two parents",
+        ),
+        ("frames: [{parent: w, child: a, pose: [0, 0, .nan]}]\n", "not a finite number"),
+    ],
+)
+def test_bad_frames_fail_naming_the_entry(tmp_path: Path, text: str, error: str) -> None:
+    with pytest.raises(ConfigError, match=error.replace("[", r"\[")):
+        load_world(write(tmp_path, "bad.yaml", text))
