@@ -650,7 +650,59 @@ def tf_clients(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return {"first": first, "turned": turned, "counts": counts}
 
 
+def tutorials(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """The tutorial nodes as roslibpy's docs use them (same keys as scenarios/tutorials.mjs).
+
+    The talker on /chatter, /add_two_ints, and /fibonacci through the ROS 1 actionlib client of
+    roslibpy's docs (ros-action-client.py: actionlib_tutorials/FibonacciAction) and the ROS 2
+    ActionClient; TF of the world file's turtle1 frame via roslibpy's TFClient.
+    """
+    from roslibpy.ros1 import actionlib
+    from roslibpy.tf import TFClient
+
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    order = int(args.get("order", 3))
+    talker, _times = collect(roslibpy, ros, "/chatter", "std_msgs/String", 1, timeout_s + 1.5)
+    add = roslibpy.Service(ros, "/add_two_ints", "example_interfaces/srv/AddTwoInts")
+    total = add.call(roslibpy.ServiceRequest({"a": 1, "b": 2}), timeout=timeout_s)
+
+    client = actionlib.ActionClient(ros, "/fibonacci", "actionlib_tutorials/FibonacciAction")
+    goal = actionlib.Goal(client, roslibpy.Message({"order": order}))
+    feedback: list[Any] = []
+    goal.on("feedback", lambda f: feedback.append(f["sequence"]))
+    goal.send()
+    result = goal.wait(timeout_s + order)
+    status = goal.status["status"]
+    client.dispose()
+
+    ros2: dict[str, Any] = {}
+    done = threading.Event()
+    action = roslibpy.ActionClient(ros, "/fibonacci", "example_interfaces/action/Fibonacci")
+
+    def on_result(r: Any) -> None:
+        ros2.update(status=int(r["status"].value), values=r["values"])
+        done.set()
+
+    action.send_goal(roslibpy.Goal({"order": order}), on_result, lambda f: None, on_result)
+    if not done.wait(timeout_s + order):
+        raise TimeoutError("ROS 2 fibonacci result")
+
+    tf = TFClient(ros, fixed_frame="world")
+    turtle: list[Any] = []
+    tf.subscribe("turtle1", lambda t: turtle.append(dict(t["translation"])))
+    wait_for(lambda: turtle, timeout_s, "turtle1 from roslibpy's TFClient")
+    tf.dispose()
+    return {
+        "chatter": {"talker": [m["data"] for m in talker]},
+        "sum": dict(total),
+        "actionlib": {"result": result["sequence"], "feedback": feedback, "status": status},
+        "ros2": ros2,
+        "tf": turtle[0],
+    }
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
+    "tutorials": tutorials,
     "tf_clients": tf_clients,
     "services_actions": services_actions,
     "rosapi_all": rosapi_all,

@@ -47,3 +47,20 @@ async def test_roslibjs_examples_work_against_the_tutorial_nodes(
     ros2 = r["ros2"]
     assert ros2["ok"] == {"result": [0, 1, 1, 2], "feedback": [[0, 1, 1], [0, 1, 1, 2]]}
     assert "Action was canceled" in ros2["canceled"]["error"]
+
+
+async def test_roslibpy_examples_work_against_the_tutorial_nodes(
+    make_app: Any, run_roslibpy: ClientRunner
+) -> None:
+    """roslibpy: talker, add_two_ints, ROS 1 actionlib and ROS 2 fibonacci, TFClient (service)."""
+    app = await make_app(world=WORLD)
+    r = await run_roslibpy(ws_url(app), "tutorials", {"order": 3}, timeout=30)
+    assert r["chatter"]["talker"][0].startswith("Hello World: ")
+    assert r["sum"] == {"sum": 3}
+    assert r["actionlib"] == {
+        "result": [0, 1, 1, 2],
+        "feedback": [[0, 1, 1], [0, 1, 1, 2]],
+        "status": 3,
+    }
+    assert r["ros2"] == {"status": 4, "values": {"sequence": [0, 1, 1, 2]}}
+    assert r["tf"] == pytest.approx({"x": 1.0, "y": 2.0, "z": 0.0})
