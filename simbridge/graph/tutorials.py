@@ -68,13 +68,10 @@ class _Run:
 
     @property
     def peer(self) -> Peer | None:
-        return (
-            self.goal.caller
-            if self.goal is not None
-            else self.al_goal.peer
-            if self.al_goal
-            else None
-        )
+        """The client that sent the goal."""
+        if self.goal is not None:
+            return self.goal.caller
+        return self.al_goal.peer if self.al_goal is not None else None
 
 
 class TutorialNodes:
