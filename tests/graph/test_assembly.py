@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from websockets.asyncio.client import ClientConnection
 
+from simbridge.config import WorldSpec
 from simbridge.headless import Simulation
 from tests.helpers import recv_until, send_json
 
@@ -37,3 +38,13 @@ async def test_lists_the_same_topics_services_and_actions_as_the_server(
     for name in ("/estop/state", "/walls", "/clock", "/cmd_vel", "/odom", "/scan"):
         assert name in headless["topics"]
     assert "/tf2_web_republisher" in headless["action_servers"]
+
+
+def test_the_world_file_turns_on_the_tutorial_nodes_in_the_headless_api_too() -> None:
+    """demo_nodes: true adds /add_two_ints, /fibonacci and /chatter; the default world has none."""
+    plain = Simulation()
+    assert "/add_two_ints" not in plain.call_service("/rosapi/services")["services"]
+    sim = Simulation(WorldSpec(demo_nodes=True))
+    assert sim.call_service("/add_two_ints", {"a": 2, "b": 40}) == {"sum": 42}
+    assert "/fibonacci" in sim.call_service("/rosapi/action_servers")["action_servers"]
+    assert "/chatter" in sim.call_service("/rosapi/topics")["topics"]
