@@ -139,6 +139,10 @@ class TypeRegistry:
         # lookup that needs one of them or a full listing: an idle server never does, and their
         # generated classes are 2.9 MB of its resident memory.
         self._interfaces_pending = interfaces
+        if interfaces:
+            # the few ROS 1 actionlib messages are needed at start-up (the in-process actionlib
+            # servers declare their topics), so they come at once, without the rest
+            self._add_generated(_actionlib())
 
     @property
     def store(self) -> Typestore:
@@ -185,7 +189,11 @@ class TypeRegistry:
                 fresh._actions,
                 fresh.texts,
             )
-        fielddefs, types, services, actions, texts = _INTERFACES
+        self._add_generated(_INTERFACES)
+
+    def _add_generated(self, generated: Any) -> None:
+        """Copy definitions generated once per process into this registry's store."""
+        fielddefs, types, services, actions, texts = generated
         for name in fielddefs.keys() - self._store.fielddefs.keys():
             self._store.fielddefs[name] = fielddefs[name]
             self._store.types[name] = types[name]
@@ -357,6 +365,27 @@ class TypeRegistry:
 
 
 _INTERFACES: Any = None
+_ACTIONLIB: Any = None
+
+
+def _actionlib() -> Any:
+    """Return the ROS 1 actionlib messages, generated once per process (as ``_INTERFACES``)."""
+    global _ACTIONLIB
+    if _ACTIONLIB is None:
+        from simbridge.msgs.interfaces import ACTIONLIB_MESSAGES
+
+        fresh = TypeRegistry(interfaces=False)
+        before = set(fresh._store.fielddefs)
+        fresh.register_many([("msg", n, t) for n, t in ACTIONLIB_MESSAGES.items()])
+        added = set(fresh._store.fielddefs) - before
+        _ACTIONLIB = (
+            {k: fresh._store.fielddefs[k] for k in added},
+            {k: fresh._store.types[k] for k in added},
+            {},
+            {},
+            fresh.texts,
+        )
+    return _ACTIONLIB
 
 
 @functools.cache
