@@ -182,3 +182,25 @@ def test_tf_republisher_actionlib_goal_gets_transforms_and_a_cancel_preempts() -
     )
     (result,) = on(c, "/tf2_web_republisher/result")
     assert result["status"]["status"] == PREEMPTED and tf.requests == []
+
+
+def test_tf_republisher_actionlib_goal_over_a_bound_is_rejected_with_the_reason() -> None:
+    """The TF budgets apply to the default TFClient's goals too: status 5 and why."""
+    graph = Graph()
+    install_tf_republisher(graph)
+    c = RecordingPeer(graph)
+    op(c, graph, op="subscribe", topic="/tf2_web_republisher/result")
+    goal = {
+        "goal_id": {"id": "goal_1"},
+        "goal": {"source_frames": [f"f{i}" for i in range(101)], "target_frame": "world"},
+    }
+    op(
+        c,
+        graph,
+        op="publish",
+        topic="/tf2_web_republisher/goal",
+        msg=goal,
+        type="tf2_web_republisher/TFSubscriptionActionGoal",
+    )
+    (result,) = on(c, "/tf2_web_republisher/result")
+    assert result["status"]["status"] == REJECTED and "at most 100" in result["status"]["text"]
