@@ -449,6 +449,29 @@ class ServerSettings:
     max_subscriptions: int = 200
     #: Advertised topics, services and actions per client at most.
     max_advertisements: int = 100
+    #: Budgets of what one client may make the server hold (docs/security.md), and what all
+    #: clients together may (``global_*``). Subscribe ids over every topic, and on one topic:
+    max_subscribe_ids: int = 1_000
+    max_ids_per_subscription: int = 100
+    global_subscribe_ids: int = 20_000
+    #: Advertise ids over every topic.
+    max_advertise_ids: int = 1_000
+    global_advertise_ids: int = 20_000
+    #: Calls waiting for a client provider, and the longest wait (seconds; ``timeout: 0`` too).
+    max_pending_calls: int = 100
+    global_pending_calls: int = 2_000
+    max_call_timeout: float = 60.0
+    #: Incomplete fragmented messages per client; their bytes (UTF-8) are bounded per client
+    #: by max_message_size and for all clients by global_fragment_bytes.
+    max_fragment_sets: int = 16
+    global_fragment_bytes: int = 40_000_000
+    #: Bytes of latched messages (JSON) a client's publishes leave on the server.
+    max_latched_bytes: int = 16_000_000
+    global_latched_bytes: int = 64_000_000
+    #: ``status`` refusals per client per second (one per cause per second); the rest counted.
+    statuses_per_second: int = 10
+    #: Share of the loop's time one client's incoming frames may take (0.25: a quarter).
+    client_work_share: float = 0.25
     #: Sustained ``publish`` ops per second per client, and the burst allowed above it.
     publish_rate: float = 200.0
     publish_burst: int = 400

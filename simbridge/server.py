@@ -37,9 +37,9 @@ from websockets.typing import Origin
 
 from simbridge.config import ServerSettings
 from simbridge.graph import Graph
-from simbridge.graph.guard import Access, TokenBucket, token_access
+from simbridge.graph.guard import token_access
 from simbridge.graph.topics import SendEntries
-from simbridge.protocol import Frame, SendQueue, Session, status_frame
+from simbridge.protocol import Frame, SendQueue, Session, TokenBucket, status_frame
 from simbridge.web import HttpRequest, WebApp, parse_target
 
 
@@ -54,7 +54,14 @@ WRITE_HIGH_WATER = 64 * 1024
 #: Incoming messages handled back to back before the handler lets other tasks run.
 BATCH = 16
 #: Largest frame read from a connection that still owes a token (an ``auth`` op is small).
-UNAUTHENTICATED_MAX_SIZE = 16 * 1024
+UNAUTHENTICATED_MAX_SIZE = 16 * 1024  # = Limits.unauthenticated_frame_bytes
+#: Seconds of work on one client's frames before the handler lets other tasks run.
+SLICE = 0.005
+#: A client's work budget may run ahead of its share by this many seconds of the loop's time.
+WORK_BURST = 0.0125
+#: Incoming WebSocket messages websockets buffers for a client before it stops reading its
+#: socket (each up to max_message_size): what a client whose frames wait can make us hold.
+MAX_QUEUE = 4
 
 
 def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
@@ -95,8 +102,9 @@ class Client:
         self.auth_timer: asyncio.TimerHandle | None = None
         #: Incoming-message rate limit.
         self.messages = TokenBucket(settings.message_rate, settings.message_burst)
-        #: When the client was last told its messages are dropped for the rate (seconds).
-        self.told_rate = -1e9
+        #: Share of the loop's time its frames may take (seconds of work per second).
+        share = session.limits.work_share
+        self.work = TokenBucket(share, WORK_BURST)
 
     def close_soon(self, code: int, reason: str) -> None:
         """Close the connection after what is queued (e.g. a failed ``auth``)."""
@@ -212,6 +220,7 @@ class BridgeServer:
             s.port,
             process_request=self._process_request,
             max_size=s.max_message_size,
+            max_queue=MAX_QUEUE,
             ping_interval=s.ping_interval,
             ping_timeout=s.ping_timeout,
             compression=None,  # per-client deflate would defeat encode-once
@@ -341,8 +350,7 @@ class BridgeServer:
     def _rate_limited(self, client: Client, now: float) -> bool:
         if client.messages.take(now):
             return False
-        if now - client.told_rate >= 1.0:
-            client.told_rate = now
+        if client.session.may_tell("message_rate", now):
             logger.info("%s sends too fast: dropping messages", client.label)
             if client.session.wants_status("error"):
                 s = self.settings
@@ -364,15 +372,13 @@ class BridgeServer:
         self.clients.add(client)
         self.connections_total += 1
         graph.add_peer(client)
-        access = session.extra.get("access")
-        if not isinstance(access, Access):  # no guard installed: everyone is admitted
-            access = Access(True, "*", False, TokenBucket(0.0, 0.0))
-        if not access.authenticated:
+        if not session.authenticated:  # set on connect by the guard (none: all admitted)
             self._owes_token(client)
         writer = asyncio.create_task(client.write_loop(), name=f"writer-{session.client_id}")
         logger.info("%s connected", client.label)
         loop = asyncio.get_running_loop()
         handled = 0
+        yielded = loop.time()
         try:
             async for message in ws:
                 now = loop.time()
@@ -383,11 +389,19 @@ class BridgeServer:
                 except Exception as err:  # a bug must not cost the client its connection
                     logger.exception("%s: internal error", client.label)
                     client.send(status_frame("error", f"internal error: {err}"))
-                if client.unauthenticated and access.authenticated:
+                if client.unauthenticated and session.authenticated:
                     self._admitted(client)
+                done = loop.time()
                 handled += 1
-                if handled % BATCH == 0:
+                # its share of the loop's time spent: its next frames wait (unread, so TCP
+                # slows it down) while the loop and the other clients run
+                wait = client.work.charge(done, done - now)
+                if wait > 0:
+                    await asyncio.sleep(wait)
+                    yielded = loop.time()
+                elif handled % BATCH == 0 or done - yielded > SLICE:
                     await asyncio.sleep(0)  # a flood must not hold the loop: let ticks run
+                    yielded = loop.time()
         except ConnectionClosed:
             pass
         finally:

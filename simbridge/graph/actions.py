@@ -41,7 +41,7 @@ from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeN
 from simbridge.graph.services import ServiceTable, caller
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
-from simbridge.protocol import OpId, json_frame, ops as o, resolve_name
+from simbridge.protocol import OpId, json_frame, ops as o
 
 
 __all__ = [
@@ -190,7 +190,7 @@ class ActionTable:
         if old is not None:
             self._fail_goals(old, f"action {action.name} was re-advertised by another server")
             if old.provider is not None:
-                old.provider.session.actions.pop(action.name, None)
+                old.provider.session.disown_action(action.name)
         self.actions[action.name] = action
 
         def cancel_goal(request: Any) -> dict[str, Any]:
@@ -204,7 +204,7 @@ class ActionTable:
         )
 
     def _advertise(self, peer: Peer, op: o.AdvertiseAction, now: float) -> None:
-        name = resolve_name(op.action, "action")
+        name = op.name
         existing = self.actions.get(name)
         if existing is not None and existing.server is not None:
             # what the server provides stays the server's: taking it over would break it for
@@ -221,10 +221,10 @@ class ActionTable:
         self._install(
             Action(name, canonical, op.type, BRIDGE_NODE, provider=peer, written=op.action)
         )
-        peer.session.actions[name] = canonical
+        peer.session.own_action(name, canonical)
 
     def _unadvertise(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
-        name = resolve_name(op.action, "action")
+        name = op.name
         if not self.remove(peer, name):
             msg = f"unadvertise_action: action {name} is not advertised by this client"
             raise ProtocolError(msg)
@@ -235,7 +235,7 @@ class ActionTable:
         if action is None or action.provider is not peer:
             return False
         del self.actions[name]
-        peer.session.actions.pop(name, None)
+        peer.session.disown_action(name)
         self.graph.services.services.pop(f"{name}/_action/cancel_goal", None)
         self._fail_goals(action, f"action {name} was unadvertised by its server")
         return True
@@ -256,15 +256,19 @@ class ActionTable:
     # -- goals --------------------------------------------------------------------------------
 
     def _fail(self, peer: Peer, op: o.SendActionGoal, reason: str) -> None:
+        self.fail(peer, op.action, op.id, reason)
+
+    def fail(self, peer: Peer, action: str, op_id: OpId | None, reason: str) -> None:
+        """Answer a goal that was not accepted: ``action_result`` false, status 0 (unknown)."""
         body: dict[str, Any] = {
             "op": "action_result",
-            "action": op.action,
+            "action": action,
             "values": reason,
             "status": UNKNOWN,
             "result": False,
         }
-        if op.id is not None:
-            body["id"] = op.id
+        if op_id is not None:
+            body["id"] = op_id
         peer.send(json_frame(body))
 
     def _goal_message(self, action: Action, args: Any) -> Any:
@@ -282,11 +286,7 @@ class ActionTable:
         return self.graph.converter.from_json(goal_type, args)
 
     def _send_goal(self, peer: Peer, op: o.SendActionGoal, now: float) -> None:
-        try:
-            name = resolve_name(op.action, "action")
-        except ProtocolError as err:
-            self._fail(peer, op, str(err))
-            return
+        name = op.name
         action = self.actions.get(name)
         if action is None:
             self._fail(peer, op, f"Action {name} does not exist (no server advertised it)")
@@ -334,7 +334,7 @@ class ActionTable:
         return None
 
     def _cancel(self, peer: Peer, op: o.CancelActionGoal, now: float) -> None:
-        name = resolve_name(op.action, "action")
+        name = op.name
         goal = self._find_own(peer, op.id, name)
         if goal is None:
             return  # already finished or never sent: nothing to cancel (as rosbridge)

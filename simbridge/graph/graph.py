@@ -25,16 +25,56 @@ from simbridge.graph.services import Handler, ServiceTable, service_response, ty
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
 from simbridge.msgs.cdr import CdrWriter
-from simbridge.protocol import ClientId, Op, Session, ops as o, resolve_name, status_frame
+from simbridge.protocol import (
+    ClientId,
+    Limits,
+    Op,
+    Pool,
+    Refusal,
+    Session,
+    ops as o,
+    status_frame,
+)
 
 
-__all__ = ["ROSOUT", "Graph"]
+__all__ = ["ROSOUT", "Graph", "budgets"]
 
 logger = logging.getLogger(__name__)
 
 ROSOUT = "/rosout"
 _LOG_LEVELS = {"debug": 10, "info": 20, "warn": 30, "error": 40, "fatal": 50}
 OpHandler = Callable[[Peer, Any, float], None]
+
+
+def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
+    """Return the per-client limits and the shared pool that ``settings`` ask for."""
+    s = settings
+    limits = Limits(
+        subscriptions=s.max_subscriptions,
+        subscribe_ids=s.max_subscribe_ids,
+        ids_per_subscription=s.max_ids_per_subscription,
+        advertisements=s.max_advertisements,
+        advertise_ids=s.max_advertise_ids,
+        pending_calls=s.max_pending_calls,
+        call_timeout=s.max_call_timeout,
+        fragment_sets=s.max_fragment_sets,
+        fragment_bytes=s.max_message_size,
+        latched_bytes=s.max_latched_bytes,
+        publish_rate=s.publish_rate,
+        publish_burst=s.publish_burst,
+        statuses_per_second=s.statuses_per_second,
+        work_share=s.client_work_share,
+    )
+    pool = Pool(
+        {
+            "subscribe_ids": s.global_subscribe_ids,
+            "advertise_ids": s.global_advertise_ids,
+            "pending_calls": s.global_pending_calls,
+            "fragment_bytes": s.global_fragment_bytes,
+            "latched_bytes": s.global_latched_bytes,
+        }
+    )
+    return limits, pool
 
 
 class Graph:
@@ -49,6 +89,8 @@ class Graph:
     ) -> None:
         #: Server settings (limits, timeouts).
         self.settings = settings or ServerSettings()
+        #: What each client may hold and do, and what all of them together may hold.
+        self.limits, self.pool = budgets(self.settings)
         #: Interface definitions.
         self.registry = registry or TypeRegistry()
         #: Wall clock for header stamps (nanoseconds since the epoch).
@@ -104,8 +146,8 @@ class Graph:
     # -- clients ------------------------------------------------------------------------------
 
     def new_session(self) -> Session:
-        """Return a fresh session for a connecting client."""
-        return Session(ClientId(next(self._ids)), max_message_size=self.settings.max_message_size)
+        """Return a fresh session for a connecting client (its budgets from the settings)."""
+        return Session(ClientId(next(self._ids)), limits=self.limits, pool=self.pool)
 
     def add_peer(self, peer: Peer) -> None:
         """Register a connected client."""
@@ -114,7 +156,11 @@ class Graph:
             callback(peer)
 
     def remove_peer(self, peer: Peer) -> None:
-        """Forget a client and everything it owned (subscriptions, publishers, services)."""
+        """Forget a client and everything it owned (subscriptions, publishers, services).
+
+        Every callback runs, whatever an earlier one raised; the session's budgets are given
+        back last.
+        """
         self.peers.discard(peer)
         # each part runs whatever failed before it: stop-on-disconnect must never be skipped
         for callback in (self.topics.drop_peer, self.services.drop_peer, *self.on_disconnect):
@@ -122,17 +168,23 @@ class Graph:
                 callback(peer)
             except Exception:
                 logger.exception("%s: cleanup after disconnect failed in %r", peer.label, callback)
+        peer.session.close()
 
     def receive(self, peer: Peer, data: str | bytes, now: float) -> None:
-        """Handle one frame from ``peer``: every op in it, in order."""
+        """Handle one frame from ``peer``: every op in it, in order.
+
+        The straight line of every op: the client's session parses it (names resolved, strings
+        checked, nothing but ``auth`` before the client is admitted), the gates decide whether
+        it is allowed, its handler carries it out on the graph.
+        """
         for item in peer.session.parse(data, now):
             if isinstance(item, ProtocolError):
-                self.reject(peer, str(item), None)
+                self.refuse(peer, item, now)
             else:
                 self.dispatch(peer, item, now)
 
     def dispatch(self, peer: Peer, op: Op, now: float) -> None:
-        """Carry out one op; a :class:`SimbridgeError` becomes a ``status`` to the sender."""
+        """Carry out one op; a :class:`SimbridgeError` becomes an answer to the sender."""
         handler = self.handlers.get(type(op))
         try:
             for gate in self.gates:
@@ -143,11 +195,44 @@ class Graph:
                 msg = f"operation {name} is not supported by this server yet"
                 raise ProtocolError(msg)
             handler(peer, op, now)
+        except Refusal as err:
+            self.refuse(peer, err, now, op)
         except SimbridgeError as err:
-            self.reject(peer, str(err), getattr(op, "id", None))
+            self.refuse(peer, Refusal(str(err), op_id=getattr(op, "id", None)), now, op)
+
+    def refuse(self, peer: Peer, err: ProtocolError, now: float, op: Op | None = None) -> None:
+        """Answer ``peer`` (only) that an op was refused, in the shape its op needs.
+
+        A call (``call_service``, ``send_action_goal``) always gets its failed answer: its
+        caller waits for one. Anything else gets a ``status`` error within the client's status
+        budget (:meth:`Session.may_tell`).
+        """
+        if isinstance(op, o.CallService):
+            kind, target, op_id = "call_service", op.service, op.id
+        elif isinstance(op, o.SendActionGoal):
+            kind, target, op_id = "send_action_goal", op.action, op.id
+        elif isinstance(err, Refusal):
+            kind, target, op_id = err.op, err.target, err.op_id
+        else:
+            kind, target, op_id = "", "", None
+        text = str(err)
+        logger.debug("%s: %s", peer.label, text)
+        if kind == "call_service":
+            self.services.reply(peer, service_response(target, text, result=False, op_id=op_id))
+            return
+        if kind == "send_action_goal":
+            self.actions.fail(peer, target, op_id, text)
+            return
+        cause = err.cause if isinstance(err, Refusal) else text[:120]
+        if op is not None:
+            # one text for two kinds of op is two causes: a page that subscribed with the wrong
+            # type still hears why its advertise is refused (it waits for that id's answer)
+            cause = f"{type(op).__name__}: {cause}"
+        if peer.session.wants_status("error") and peer.session.may_tell(cause, now):
+            peer.send(status_frame("error", text, op_id))
 
     def reject(self, peer: Peer, text: str, op_id: object) -> None:
-        """Tell ``peer`` (only) that its op failed, as a ``status`` error."""
+        """Tell ``peer`` (only) that its op failed, as a ``status`` error (not budgeted)."""
         logger.debug("%s: %s", peer.label, text)
         if peer.session.wants_status("error"):
             peer.send(status_frame("error", text, op_id))
@@ -208,27 +293,27 @@ class Graph:
     # -- op handlers ------------------------------------------------------------------------
 
     def _advertise(self, peer: Peer, op: o.Advertise, now: float) -> None:
-        name = resolve_name(op.topic)
-        topic = self.topics.advertise(name, op.type, peer, op.id, latch=op.latch)
-        peer.session.advertisements.setdefault(name, {})[op.id] = topic.type or op.type
+        fresh = peer.session.advertise(op.name, op.id, op.type)
+        try:
+            topic = self.topics.advertise(op.name, op.type, peer, op.id, latch=op.latch)
+        except ProtocolError:
+            if fresh:
+                peer.session.unadvertise(op.name, op.id)
+            raise
+        peer.session.advertisements[op.name][op.id] = topic.type or op.type
 
     def _unadvertise(self, peer: Peer, op: o.Unadvertise, now: float) -> None:
-        name = resolve_name(op.topic)
-        ads = peer.session.advertisements.get(name)
+        ads = peer.session.advertisements.get(op.name)
         if ads is None:
             return
-        if op.id is None or op.id not in ads:
-            ads.clear()
-            self.topics.unadvertise(name, peer, None)
-        else:
-            del ads[op.id]
-            self.topics.unadvertise(name, peer, op.id)
-        if not ads:
-            del peer.session.advertisements[name]
+        one = op.id if op.id is not None and op.id in ads else None
+        peer.session.unadvertise(op.name, one)
+        self.topics.unadvertise(op.name, peer, one)
 
     def _publish(self, peer: Peer, op: o.Publish, now: float) -> None:
-        name = resolve_name(op.topic)
+        name = op.name
         topic = self.topics.topics.get(name)
+        session = peer.session
         if op.type is not None or topic is None or topic.type is None:
             if op.type is None:
                 msg = (
@@ -236,25 +321,30 @@ class Graph:
                     "advertise it first or give a type"
                 )
                 raise ProtocolError(msg)
-            topic = self.topics.advertise(name, op.type, peer, None)
-            peer.session.advertisements.setdefault(name, {}).setdefault(None, op.type)
-        elif name not in peer.session.advertisements:
+            new = name not in session.advertisements
+            session.advertise(name, None, op.type)
+            try:
+                topic = self.topics.advertise(name, op.type, peer, None)
+            except ProtocolError:
+                if new:
+                    session.unadvertise(name, None)
+                raise
+        elif name not in session.advertisements:
             # rosbridge registers a publishing client as a publisher implicitly
+            session.advertise(name, None, topic.type)
             self.topics.advertise(name, topic.type, peer, None)
-            peer.session.advertisements[name] = {None: topic.type}
-        if op.latch:
-            topic.latch = True
         msg = self.topics.convert(topic, op.msg)
         out = self.topics.outgoing(topic, msg, self.stamp())
+        if op.latch or topic.latch:
+            session.latch(name, len(out.json_body()))  # what later subscribers will cost
+            topic.latch = True
         self.topics.deliver(topic, out, now, peer)
 
     def _subscribe(self, peer: Peer, op: o.Subscribe, now: float) -> None:
-        name = resolve_name(op.topic)
         if op.fragment_size is not None:
             peer.session.fragment_size = op.fragment_size
-        had = op.topic in peer.session.subscriptions
-        topic, sub = self.topics.subscribe(peer, op, name)
-        if not had:
+        topic, sub, new = self.topics.subscribe(peer, op)
+        if new:
             self.topics.replay_latched(peer, topic, sub)
 
     def _unsubscribe(self, peer: Peer, op: o.Unsubscribe, now: float) -> None:
@@ -263,25 +353,18 @@ class Graph:
     def _call_service(self, peer: Peer, op: o.CallService, now: float) -> None:
         if op.fragment_size is not None:
             peer.session.fragment_size = op.fragment_size
-        try:
-            name = resolve_name(op.service, "service")
-        except ProtocolError as err:
-            peer.send(service_response(op.service, str(err), result=False, op_id=op.id))
-            return
-        self.services.call(peer, op, name, now)
+        self.services.call(peer, op, op.name, now)
 
     def _advertise_service(self, peer: Peer, op: o.AdvertiseService, now: float) -> None:
-        name = resolve_name(op.service, "service")
         try:
             type_name = normalize_type(op.type, "srv")
         except TypeNotFoundError as err:
             raise ProtocolError(f"advertise_service: {err}") from None
-        self.services.advertise(peer, name, type_name, op.service)
+        self.services.advertise(peer, op.name, type_name, op.service)
 
     def _unadvertise_service(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:
-        name = resolve_name(op.service, "service")
-        if not self.services.unadvertise(peer, name):
-            msg = f"unadvertise_service: service {name} is not advertised by this client"
+        if not self.services.unadvertise(peer, op.name):
+            msg = f"unadvertise_service: service {op.name} is not advertised by this client"
             raise ProtocolError(msg)
 
     def _service_response(self, peer: Peer, op: o.ServiceResponse, now: float) -> None:

@@ -31,24 +31,30 @@ from __future__ import annotations
 import hashlib
 import hmac
 import logging
-import math
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass, field
 from typing import Any
 
 from simbridge.config import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph.graph import Graph
-from simbridge.graph.services import service_response
 from simbridge.graph.topics import Peer
-from simbridge.protocol import Op, ops as o, resolve_name, status_frame
+from simbridge.protocol import (
+    ANY_SCOPE,
+    NOT_AUTHENTICATED,
+    Op,
+    Refusal,
+    Session,
+    TokenBucket,
+    ops as o,
+    status_frame,
+)
 
 
 __all__ = [
     "ADMIN_SCOPE",
+    "ANY_SCOPE",
     "DEFAULT_ADMIN_SERVICES",
     "MIN_FRAGMENT_SIZE",
-    "Access",
     "Guard",
     "TokenBucket",
     "rosauth_mac",
@@ -57,8 +63,6 @@ __all__ = [
 
 logger = logging.getLogger(__name__)
 
-#: The scope that reaches every topic (what an unauthenticated server gives everyone).
-ANY_SCOPE = "*"
 #: The rosauth ``level`` (and token scope) of an administrator.
 ADMIN_SCOPE = "admin"
 #: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
@@ -78,41 +82,6 @@ DEFAULT_ADMIN_SERVICES = frozenset(
 )
 #: Name endings of administrative services of any node (ROS 2 parameter services).
 ADMIN_SUFFIXES = ("/set_parameters", "/set_parameters_atomically")
-
-
-@dataclass(slots=True)
-class TokenBucket:
-    """``rate`` events per second sustained, ``burst`` at once (monotonic seconds)."""
-
-    rate: float
-    burst: float
-    tokens: float = math.nan
-    last: float = -math.inf
-
-    def take(self, now: float) -> bool:
-        """Spend one token if there is one; return whether the event may go on."""
-        if math.isnan(self.tokens):
-            self.tokens = self.burst
-        elif now > self.last:
-            self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
-        self.last = max(self.last, now)
-        if self.tokens >= 1.0:
-            self.tokens -= 1.0
-            return True
-        return False
-
-
-@dataclass(slots=True)
-class Access:
-    """What one client may do (kept in ``session.extra["access"]``)."""
-
-    authenticated: bool
-    #: ``"*"`` (any topic) or a robot name (its namespace only).
-    scope: str
-    admin: bool
-    publishes: TokenBucket
-    #: When each kind of rate-limited refusal was last told (monotonic seconds).
-    told: dict[str, float] = field(default_factory=dict)
 
 
 def rosauth_mac(
@@ -172,28 +141,22 @@ class Guard:
     def connect(self, peer: Peer) -> None:
         """Give a new client its access from its connection token (``session.extra``)."""
         s = self.settings
-        token = peer.session.extra.get("token")
+        session = peer.session
+        token = session.extra.get("token")
         granted = token_access(s, token if isinstance(token, str) else None)
         if granted is not None:
             scope, admin = granted
-            authenticated = True
         else:
             scope, admin = ANY_SCOPE, False
-            authenticated = not s.auth_required
         # without an admin token, administration is open to whoever may use every topic
         admin = admin or (s.admin_token is None and scope == ANY_SCOPE)
-        peer.session.extra["access"] = Access(
-            authenticated, scope, admin, TokenBucket(s.publish_rate, s.publish_burst)
-        )
+        session.admit(scope, admin)
+        if granted is None and s.auth_required:
+            session.authenticated = False  # only auth is read until it succeeds
 
-    def access(self, peer: Peer) -> Access:
-        """Return the access of ``peer`` (set up on connect)."""
-        access = peer.session.extra.get("access")
-        if not isinstance(access, Access):
-            self.connect(peer)
-            access = peer.session.extra["access"]
-        assert isinstance(access, Access)
-        return access
+    def access(self, peer: Peer) -> Session:
+        """Return the session of ``peer``: its access (scope, admin, rate) lives there."""
+        return peer.session
 
     # -- the gate -------------------------------------------------------------------------
 
@@ -201,154 +164,116 @@ class Guard:
         """Return whether ``op`` may be carried out; refuse it (and tell the client) if not.
 
         Raises:
-            ProtocolError: the op is refused (the graph tells the client).
+            Refusal: the op is refused (the graph answers the client).
         """
-        access = self.access(peer)
-        if not access.authenticated and not isinstance(op, o.Auth):
-            msg = (
-                "not authenticated: this server requires a token; connect with "
-                "ws://HOST:PORT/?token=YOUR_TOKEN or send an auth op first"
-            )
-            if isinstance(op, o.CallService):
-                peer.send(service_response(op.service, msg, result=False, op_id=op.id))
-                return False
-            raise ProtocolError(msg)
+        session = peer.session
+        if not session.authenticated and not isinstance(op, o.Auth):
+            raise Refusal(NOT_AUTHENTICATED, cause="unauthenticated")
         size = getattr(op, "fragment_size", None)
         if size is not None and size < MIN_FRAGMENT_SIZE:
             msg = (
                 f"fragment_size {size} is too small: at least {MIN_FRAGMENT_SIZE} bytes "
                 "(tiny fragments multiply the server's work)"
             )
-            raise ProtocolError(msg)
+            raise Refusal(msg, cause="fragment_size")
         check = self._checks.get(type(op))
-        return True if check is None else check(self, peer, access, op, now)
+        return True if check is None else check(self, peer, session, op, now)
 
-    def _tell_rarely(self, peer: Peer, access: Access, kind: str, text: str, now: float) -> None:
-        if now - access.told.get(kind, -math.inf) >= 1.0:
-            access.told[kind] = now
-            logger.info("%s: %s", peer.label, text)
-            if peer.session.wants_status("error"):
-                peer.send(status_frame("error", text))
-
-    def _owned(self, peer: Peer) -> int:
-        s = peer.session
-        return len(s.advertisements) + len(s.services) + len(s.actions)
-
-    def _may_own(self, peer: Peer, access: Access, what: str, name: str, new: bool) -> None:
-        if not in_namespace(access.scope, name):
+    def _may_own(self, session: Session, what: str, name: str, new: bool) -> None:
+        if not in_namespace(session.scope, name):
             msg = (
                 f"{what} {name}: not allowed; this connection may only use names under "
-                f"/{access.scope}/ (its robot)"
+                f"/{session.scope}/ (its robot)"
             )
-            raise ProtocolError(msg)
-        limit = self.settings.max_advertisements
-        if new and self._owned(peer) >= limit:
-            msg = (
-                f"{what} {name}: refused, this client already advertises {limit} topics, "
-                "services and actions (the server's max_advertisements); unadvertise some first"
-            )
-            raise ProtocolError(msg)
+            raise Refusal(msg, cause=f"scope {what}")
+        session.may_own(what, name, new)
 
-    def _may_reach(self, access: Access, name: str) -> bool:
+    def _may_reach(self, session: Session, name: str) -> bool:
         """Whether a call or goal to ``name`` stays out of other robots' namespaces."""
-        if access.scope == ANY_SCOPE:
+        if session.scope == ANY_SCOPE:
             return True
         return not any(
-            robot and robot != access.scope and in_namespace(robot, name) for robot in self.robots()
+            robot and robot != session.scope and in_namespace(robot, name)
+            for robot in self.robots()
         )
 
-    def _publish(self, peer: Peer, access: Access, op: o.Publish, now: float) -> bool:
-        name = resolve_name(op.topic)
-        if not access.publishes.take(now):
+    def _publish(self, peer: Peer, session: Session, op: o.Publish, now: float) -> bool:
+        if not session.publishes.take(now):
             s = self.settings
             text = (
-                f"publish {name}: dropped, more than {s.publish_rate:g} publishes per second "
+                f"publish {op.name}: dropped, more than {s.publish_rate:g} publishes per second "
                 f"(the server's publish_rate, burst {s.publish_burst}); slow down"
             )
-            self._tell_rarely(peer, access, "publish_rate", text, now)
+            if session.may_tell("publish_rate", now):
+                logger.info("%s: %s", peer.label, text)
+                if session.wants_status("error"):
+                    peer.send(status_frame("error", text))
             return False
-        self._may_own(peer, access, "publish", name, name not in peer.session.advertisements)
+        self._may_own(session, "publish", op.name, op.name not in session.advertisements)
         return True
 
-    def _advertise(self, peer: Peer, access: Access, op: o.Advertise, now: float) -> bool:
-        name = resolve_name(op.topic)
-        self._may_own(peer, access, "advertise", name, name not in peer.session.advertisements)
+    def _advertise(self, peer: Peer, session: Session, op: o.Advertise, now: float) -> bool:
+        self._may_own(session, "advertise", op.name, op.name not in session.advertisements)
         return True
 
-    def _subscribe(self, peer: Peer, access: Access, op: o.Subscribe, now: float) -> bool:
-        if op.type and access.scope != ANY_SCOPE:
+    def _subscribe(self, peer: Peer, session: Session, op: o.Subscribe, now: float) -> bool:
+        if op.type and session.scope != ANY_SCOPE:
             # a typed subscription fixes the type of a topic nobody publishes yet: outside its
             # own namespace that would squat a name (a robot spawned later could not take it)
-            name = resolve_name(op.topic)
+            name = op.name
             topic = self.graph.topics.topics.get(name)
-            if not in_namespace(access.scope, name) and (topic is None or topic.type is None):
+            if not in_namespace(session.scope, name) and (topic is None or topic.type is None):
                 msg = (
-                    f"subscribe {name}: refused with a type, the topic is outside /{access.scope}/ "
-                    "and nothing publishes it yet (the type would claim the name); subscribe "
-                    "without a type and it waits for the topic"
+                    f"subscribe {name}: refused with a type, the topic is outside "
+                    f"/{session.scope}/ and nothing publishes it yet (the type would claim the "
+                    "name); subscribe without a type and it waits for the topic"
                 )
-                raise ProtocolError(msg)
-        limit = self.settings.max_subscriptions
-        subs = peer.session.subscriptions
-        if op.topic not in subs and len(subs) >= limit:
-            msg = (
-                f"subscribe {op.topic}: refused, this client already has {limit} subscriptions "
-                "(the server's max_subscriptions); unsubscribe from some first"
-            )
-            raise ProtocolError(msg)
+                raise Refusal(msg, cause="typed subscribe outside scope")
         return True
 
     def _advertise_service(
-        self, peer: Peer, access: Access, op: o.AdvertiseService, now: float
+        self, peer: Peer, session: Session, op: o.AdvertiseService, now: float
     ) -> bool:
-        name = resolve_name(op.service, "service")
-        existing = self.graph.services.services.get(name)
+        existing = self.graph.services.services.get(op.name)
         if existing is not None and existing.handler is not None:
             msg = (
-                f"advertise_service {name}: refused, the server provides this service itself; "
-                "choose another name"
+                f"advertise_service {op.name}: refused, the server provides this service "
+                "itself; choose another name"
             )
-            raise ProtocolError(msg)
-        self._may_own(peer, access, "advertise_service", name, name not in peer.session.services)
+            raise Refusal(msg, cause="server service")
+        self._may_own(session, "advertise_service", op.name, op.name not in session.services)
         return True
 
     def _advertise_action(
-        self, peer: Peer, access: Access, op: o.AdvertiseAction, now: float
+        self, peer: Peer, session: Session, op: o.AdvertiseAction, now: float
     ) -> bool:
-        name = resolve_name(op.action, "action")
-        self._may_own(peer, access, "advertise_action", name, name not in peer.session.actions)
+        self._may_own(session, "advertise_action", op.name, op.name not in session.actions)
         return True
 
-    def _call_service(self, peer: Peer, access: Access, op: o.CallService, now: float) -> bool:
-        try:
-            name = resolve_name(op.service, "service")
-        except ProtocolError:
-            return True  # the graph answers the bad name
-        reason = None
+    def _call_service(self, peer: Peer, session: Session, op: o.CallService, now: float) -> bool:
+        name = op.name
         admin_only = name in self.graph.admin_services or name.endswith(ADMIN_SUFFIXES)
-        if admin_only and not access.admin:
+        if admin_only and not session.admin:
             reason = (
                 f"service {name} is administrative: connect with the admin token "
                 "(?token=ADMIN_TOKEN) to call it"
             )
-        elif not self._may_reach(access, name):
+        elif not self._may_reach(session, name):
             reason = f"service {name} belongs to another robot; this connection may not call it"
-        if reason is None:
+        else:
             return True
         logger.info("%s: %s", peer.label, reason)
-        peer.send(service_response(op.service, reason, result=False, op_id=op.id))
-        return False
+        raise Refusal(reason, op="call_service", target=op.service, op_id=op.id)
 
     def _send_action_goal(
-        self, peer: Peer, access: Access, op: o.SendActionGoal, now: float
+        self, peer: Peer, session: Session, op: o.SendActionGoal, now: float
     ) -> bool:
-        name = resolve_name(op.action, "action")
-        if not self._may_reach(access, name):
-            msg = f"action {name} belongs to another robot; this connection may not use it"
-            raise ProtocolError(msg)
+        if not self._may_reach(session, op.name):
+            msg = f"action {op.name} belongs to another robot; this connection may not use it"
+            raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
         return True
 
-    _checks: dict[type, Callable[[Any, Peer, Access, Any, float], bool]] = {
+    _checks: dict[type, Callable[[Any, Peer, Session, Any, float], bool]] = {
         o.Publish: _publish,
         o.Advertise: _advertise,
         o.Subscribe: _subscribe,
@@ -361,7 +286,7 @@ class Guard:
     # -- the auth op ---------------------------------------------------------------------
 
     def _auth(self, peer: Peer, op: o.Auth, now: float) -> None:
-        access = self.access(peer)
+        session = peer.session
         secret = self.settings.auth_secret
         if secret is None:
             msg = "auth: this server takes no rosauth MAC; connect with ?token=YOUR_TOKEN"
@@ -379,14 +304,12 @@ class Guard:
             if callable(close):
                 close(1008, "authentication failed")
             return
-        access.authenticated = True
         if op.level == ADMIN_SCOPE:
-            access.scope, access.admin = ANY_SCOPE, True
+            session.admit(ANY_SCOPE, True)
         elif op.level and op.level in set(self.robots()):
-            access.scope, access.admin = op.level, False
+            session.admit(op.level, False)
         else:  # "user" and other rosauth levels: every topic, admin only without admin token
-            access.scope = ANY_SCOPE
-            access.admin = self.settings.admin_token is None
-        logger.info("%s authenticated (scope %s)", peer.label, access.scope)
-        if peer.session.wants_status("info"):
-            peer.send(status_frame("info", f"auth: authenticated, scope {access.scope}"))
+            session.admit(ANY_SCOPE, self.settings.admin_token is None)
+        logger.info("%s authenticated (scope %s)", peer.label, session.scope)
+        if session.wants_status("info"):
+            peer.send(status_frame("info", f"auth: authenticated, scope {session.scope}"))

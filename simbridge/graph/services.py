@@ -21,10 +21,10 @@ section 8, item 14), so simbridge reads it as follows:
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import json
 import logging
-import math
 from collections.abc import Callable
 from contextvars import ContextVar
 from dataclasses import dataclass
@@ -161,6 +161,11 @@ class ServiceTable:
         self.services: dict[str, Service] = {}
         #: Calls forwarded to providers, by server id.
         self.pending: dict[str, PendingCall] = {}
+        # the same calls by caller and by service, and their deadlines in a heap: answering,
+        # expiring or dropping one never scans the others
+        self._by_caller: dict[Peer, dict[str, PendingCall]] = {}
+        self._by_service: dict[Service, dict[str, PendingCall]] = {}
+        self._deadlines: list[tuple[float, int, str]] = []
         #: Validates and completes requests of known service types (set by the graph).
         self.prepare: Prepare | None = None
         #: Validates and completes provider responses of known service types (set by the graph).
@@ -180,10 +185,10 @@ class ServiceTable:
         if old is not None:
             self._fail_pending(old, f"service {name} was re-advertised by another provider")
             if old.provider is not None:
-                old.provider.session.services.pop(name, None)
+                old.provider.session.disown_service(name)
         service = Service(name, type_name, BRIDGE_NODE, provider=peer, written=written or name)
         self.services[name] = service
-        peer.session.services[name] = type_name
+        peer.session.own_service(name, type_name)
         return service
 
     def unadvertise(self, peer: Peer, name: str) -> bool:
@@ -192,7 +197,7 @@ class ServiceTable:
         if service is None or service.provider is not peer:
             return False
         del self.services[name]
-        peer.session.services.pop(name, None)
+        peer.session.disown_service(name)
         self._fail_pending(service, f"service {name} was unadvertised by its provider")
         return True
 
@@ -232,10 +237,15 @@ class ServiceTable:
             return
         provider = service.provider
         assert provider is not None
-        timeout = self.default_timeout if op.timeout is None else op.timeout
-        deadline = now + timeout if timeout > 0 else math.inf
-        server_id = f"service_request:{name}:{next(self._counter)}"
-        self.pending[server_id] = PendingCall(server_id, service, peer, op.id, op.service, deadline)
+        peer.session.start_call(op.service, op.id)  # raises Refusal past its budget
+        deadline = now + peer.session.call_timeout(op.timeout, self.default_timeout)
+        seq = next(self._counter)
+        server_id = f"service_request:{name}:{seq}"
+        call = PendingCall(server_id, service, peer, op.id, op.service, deadline)
+        self.pending[server_id] = call
+        self._by_caller.setdefault(peer, {})[server_id] = call
+        self._by_service.setdefault(service, {})[server_id] = call
+        heapq.heappush(self._deadlines, (deadline, seq, server_id))
         args = request if request is not None else {}
         provider.send(
             json_frame(
@@ -259,7 +269,7 @@ class ServiceTable:
         call = self.pending[op.id]
         if call.service.provider is not peer:
             return f"service_response for {op.id!r} from a client that does not provide it"
-        del self.pending[op.id]
+        self._forget(call)
         values = op.values
         if isinstance(values, dict) or (op.result is True and values is None):
             ok, values = True, values if isinstance(values, dict) else {}
@@ -283,9 +293,13 @@ class ServiceTable:
 
     def expire(self, now: float) -> None:
         """Answer every call whose deadline has passed with a timeout failure."""
-        late = [c for c in self.pending.values() if c.deadline <= now]
-        for call in late:
-            del self.pending[call.server_id]
+        heap = self._deadlines
+        while heap and heap[0][0] <= now:
+            _deadline, _seq, server_id = heapq.heappop(heap)
+            call = self.pending.get(server_id)
+            if call is None:
+                continue  # answered or dropped before its deadline
+            self._forget(call)
             self.reply(
                 call.caller,
                 service_response(
@@ -295,17 +309,32 @@ class ServiceTable:
                     op_id=call.caller_id,
                 ),
             )
+        if not self.pending:
+            heap.clear()
 
     def drop_peer(self, peer: Peer) -> None:
         """Remove the services of a client that left and fail the calls waiting on them."""
         for name in list(peer.session.services):
             self.unadvertise(peer, name)
-        for call in [c for c in self.pending.values() if c.caller is peer]:
-            del self.pending[call.server_id]
+        for call in list(self._by_caller.get(peer, {}).values()):
+            self._forget(call)
+
+    def _forget(self, call: PendingCall) -> None:
+        """Remove a pending call from every index and end it in its caller's budget."""
+        del self.pending[call.server_id]
+        mine = self._by_caller.get(call.caller, {})
+        mine.pop(call.server_id, None)
+        if not mine:
+            self._by_caller.pop(call.caller, None)
+        theirs = self._by_service.get(call.service, {})
+        theirs.pop(call.server_id, None)
+        if not theirs:
+            self._by_service.pop(call.service, None)
+        call.caller.session.end_call()
 
     def _fail_pending(self, service: Service, reason: str) -> None:
-        for call in [c for c in self.pending.values() if c.service is service]:
-            del self.pending[call.server_id]
+        for call in list(self._by_service.get(service, {}).values()):
+            self._forget(call)
             self.reply(
                 call.caller,
                 service_response(call.written, reason, result=False, op_id=call.caller_id),

@@ -76,6 +76,8 @@ class Topic:
     latched: Outgoing | None = None
     #: How a message reaches the client subscribers (rebuilt when subscriptions change).
     plan: _Plan | None = None
+    #: The client whose message is latched (charged to its latched-bytes budget), if any.
+    latched_by: Peer | None = None
 
     def unused(self) -> bool:
         """Return whether nothing refers to the topic any more."""
@@ -177,37 +179,39 @@ class TopicTable:
         if not ids:
             del topic.publishers[owner]
             if not topic.publishers:
-                topic.latched = None
+                self.unlatch(topic)
         self._forget_if_unused(topic)
 
-    def subscribe(self, peer: Peer, op: Subscribe, resolved: str) -> tuple[Topic, Subscription]:
-        """Add a subscribe id of ``peer``; return the topic and the merged subscription.
+    def unlatch(self, topic: Topic) -> None:
+        """Drop the latched message of ``topic`` (and give its bytes back to its publisher)."""
+        if topic.latched_by is not None:
+            topic.latched_by.session.unlatch(topic.name)
+            topic.latched_by = None
+        topic.latched = None
+
+    def subscribe(self, peer: Peer, op: Subscribe) -> tuple[Topic, Subscription, bool]:
+        """Add a subscribe id of ``peer``; return the topic, the subscription, and if it is new.
 
         Raises:
-            ProtocolError: the type conflicts with the topic's type or is malformed.
+            ProtocolError: the type conflicts with the topic's type or is malformed, or the
+                client's subscription budget is spent (:meth:`Session.subscribe`).
         """
-        topic = self.topics.get(resolved) or Topic(resolved)
+        topic = self.topics.get(op.name) or Topic(op.name)
         if op.type:
             self._typed(topic, op.type)  # raises before anything is registered
-        self.topics[resolved] = topic
-        key = (peer, op.topic)
-        sub = topic.subscriptions.get(key)
-        if sub is None:
-            sub = Subscription(op.topic, resolved)
-            topic.subscriptions[key] = sub
-            peer.session.subscriptions[op.topic] = sub
-        sub.add(op)
+        sub, new = peer.session.subscribe(op)
+        self.topics[op.name] = topic
+        topic.subscriptions[(peer, op.topic)] = sub
         self.generation += 1
-        return topic, sub
+        return topic, sub, new
 
     def unsubscribe(self, peer: Peer, written: str, op_id: OpId | None) -> None:
         """Remove one subscribe id (``None``: all) of ``peer`` on a topic spelling."""
-        sub = peer.session.subscriptions.get(written)
-        if sub is None:
+        if written not in peer.session.subscriptions:
             return
         self.generation += 1
-        if sub.remove(op_id):
-            del peer.session.subscriptions[written]
+        sub = peer.session.unsubscribe(written, op_id)
+        if sub is not None:
             topic = self.topics.get(sub.resolved)
             if topic is not None:
                 topic.subscriptions.pop((peer, written), None)
@@ -234,11 +238,17 @@ class TopicTable:
 
     def drop_peer(self, peer: Peer) -> None:
         """Remove every subscription and advertisement of a client that left."""
-        for written in list(peer.session.subscriptions):
+        session = peer.session
+        for written in list(session.subscriptions):
             self.unsubscribe(peer, written, None)
-        for name in list(peer.session.advertisements):
+        for name in list(session.advertisements):
             self.unadvertise(name, peer, None)
-        peer.session.advertisements.clear()
+            session.unadvertise(name, None)
+        for name in list(session.latched):
+            topic = self.topics.get(name)
+            if topic is not None and topic.latched_by is peer:
+                self.unlatch(topic)  # its message goes with it: the bytes were its budget
+            session.unlatch(name)
 
     def _forget_if_unused(self, topic: Topic) -> None:
         if topic.unused() and self.topics.get(topic.name) is topic:
@@ -276,7 +286,10 @@ class TopicTable:
         for tap in self.taps:
             tap(topic, out, source)
         if topic.latch:
+            if topic.latched_by is not None and topic.latched_by is not source:
+                topic.latched_by.session.unlatch(topic.name)
             topic.latched = out
+            topic.latched_by = source
         if topic.subscriptions:
             default_limit = self.default_queue_length
             if self.send_many is not None:

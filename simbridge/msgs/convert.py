@@ -40,7 +40,7 @@ from simbridge.errors import ConversionError
 from simbridge.msgs.registry import FieldSpec, TypeRegistry
 
 
-__all__ = ["INT_RANGES", "NUMPY_DTYPES", "Converter", "Stamp"]
+__all__ = ["FLOAT32_MAX", "INT_RANGES", "NUMPY_DTYPES", "Converter", "Stamp"]
 
 #: A clock giving (sec, nanosec) of "now" for header stamps and ``"now"`` times.
 Stamp = Callable[[], tuple[int, int]]
@@ -71,7 +71,12 @@ INT_RANGES: dict[str, tuple[int, int]] = {
     "uint64": (0, 2**64 - 1),
 }
 
+#: Largest finite float32: a finite number above it cannot be a float32 (it is refused, not
+#: turned into infinity by one encoder and into an error by another).
+FLOAT32_MAX = float(np.finfo(np.float32).max)
 _BYTES_BASES = frozenset({"uint8", "char", "byte"})
+_FLOAT_ELEMENTS = frozenset({int, float, type(None)})
+_INT_ELEMENTS = frozenset({int})
 _FLOATS = frozenset({"float32", "float64"})
 #: Largest finite double: a JSON integer above it cannot become a float.
 _FLOAT_MAX = sys.float_info.max
@@ -205,24 +210,42 @@ class Converter:
         self, base: str, dtype: type[np.generic], value: list[Any], root: str, path: str
     ) -> Any:
         floats = base in _FLOATS
-        for i, v in enumerate(value):
-            t = type(v)
-            if t is int or (floats and (t is float or v is None)):
-                continue
-            want = "number" if floats else "integer"
-            msg = f"{root} field {path}[{i}] must be a {want}, got {_jtype(v)} {v!r}"
-            raise ConversionError(msg)
-        if floats:
+        # the element types at C speed; the per-element walks below only run when needed
+        types = set(map(type, value))
+        if not types <= (_FLOAT_ELEMENTS if floats else _INT_ELEMENTS):
             for i, v in enumerate(value):
-                if type(v) is int and abs(v) > _FLOAT_MAX:
-                    msg = f"{root} field {path}[{i}] = {v} is out of range for {base}"
-                    raise ConversionError(msg)
-            return np.array([math.nan if v is None else v for v in value], dtype=dtype)
-        lo, hi = INT_RANGES[base]
-        for i, v in enumerate(value):
-            if not lo <= v <= hi:
-                msg = f"{root} field {path}[{i}] = {v} is out of range for {base} [{lo}, {hi}]"
+                t = type(v)
+                if t is int or (floats and (t is float or v is None)):
+                    continue
+                want = "number" if floats else "integer"
+                msg = f"{root} field {path}[{i}] must be a {want}, got {_jtype(v)} {v!r}"
                 raise ConversionError(msg)
+        if floats:
+            if int in types:
+                for i, v in enumerate(value):
+                    if type(v) is int and abs(v) > _FLOAT_MAX:
+                        msg = f"{root} field {path}[{i}] = {v} is out of range for {base}"
+                        raise ConversionError(msg)
+            if type(None) in types:
+                value = [math.nan if v is None else v for v in value]
+            array = np.array(value, dtype=np.float64)
+            if base == "float32":
+                with np.errstate(invalid="ignore"):
+                    over = np.flatnonzero(np.isfinite(array) & (np.abs(array) > FLOAT32_MAX))
+                if over.size:
+                    i = int(over[0])
+                    msg = (
+                        f"{root} field {path}[{i}] = {value[i]!r} is out of range for float32 "
+                        f"(at most {FLOAT32_MAX:.8g} in magnitude)"
+                    )
+                    raise ConversionError(msg)
+            return array.astype(dtype, copy=False)
+        lo, hi = INT_RANGES[base]
+        if value and not lo <= min(value) <= max(value) <= hi:
+            for i, v in enumerate(value):
+                if not lo <= v <= hi:
+                    msg = f"{root} field {path}[{i}] = {v} is out of range for {base} [{lo}, {hi}]"
+                    raise ConversionError(msg)
         return np.array(value, dtype=dtype)
 
     def _bytes(self, value: object, root: str, path: str) -> bytes:
@@ -255,13 +278,19 @@ class Converter:
         if base in _FLOATS:
             if value is None:
                 return math.nan
-            if type(value) is float:
-                return value
             if type(value) is int:
                 if abs(value) > _FLOAT_MAX:  # float() would raise OverflowError
                     msg = f"{root} field {path} = {value} is out of range for {base}"
                     raise ConversionError(msg)
-                return float(value)
+                value = float(value)
+            if type(value) is float:
+                if base == "float32" and math.isfinite(value) and abs(value) > FLOAT32_MAX:
+                    msg = (
+                        f"{root} field {path} = {value!r} is out of range for float32 "
+                        f"(at most {FLOAT32_MAX:.8g} in magnitude)"
+                    )
+                    raise ConversionError(msg)
+                return value
         elif base == "bool":
             if isinstance(value, bool):
                 return value
@@ -269,6 +298,9 @@ class Converter:
             if isinstance(value, str):
                 if field.string_bound and len(value) > field.string_bound:
                     msg = f"{root} field {path} holds at most {field.string_bound} characters"
+                    raise ConversionError(msg)
+                if "\x00" in value:  # a ROS string ends at its first NUL (CDR, rcl)
+                    msg = f"{root} field {path} must not contain a NUL character (\\u0000)"
                     raise ConversionError(msg)
                 return value
         else:

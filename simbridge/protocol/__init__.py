@@ -6,6 +6,7 @@ Nothing here imports asyncio or websockets: bytes and decoded objects go in, fra
 from __future__ import annotations
 
 from simbridge.protocol import cbor, png
+from simbridge.protocol.budget import GLOBAL_LIMITS, Limits, Pool, TokenBucket
 from simbridge.protocol.cbor import encode_cbor
 from simbridge.protocol.encoding import (
     Frame,
@@ -20,23 +21,38 @@ from simbridge.protocol.ops import (
     ClientId,
     Op,
     OpId,
+    Refusal,
     parse_op,
+    resolve_name,
 )
 from simbridge.protocol.queue import SendQueue
-from simbridge.protocol.session import STATUS_LEVELS, Session, Subscription, resolve_name
+from simbridge.protocol.session import (
+    ANY_SCOPE,
+    NOT_AUTHENTICATED,
+    STATUS_LEVELS,
+    Session,
+    Subscription,
+)
 
 
 __all__ = [
+    "ANY_SCOPE",
+    "GLOBAL_LIMITS",
+    "NOT_AUTHENTICATED",
     "STATUS_LEVELS",
     "ClientId",
     "Defragmenter",
     "Frame",
+    "Limits",
     "Op",
     "OpId",
     "Outgoing",
+    "Pool",
+    "Refusal",
     "SendQueue",
     "Session",
     "Subscription",
+    "TokenBucket",
     "decode_frame",
     "encode_cbor",
     "encode_json",

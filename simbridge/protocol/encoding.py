@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import base64
 import json
+import re
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
@@ -142,7 +143,43 @@ def decode_frame(data: str | bytes) -> list[Any]:
     if not values:
         msg = "received an empty frame; send one JSON object per message"
         raise ProtocolError(msg)
+    _check_unicode(values)
     return values
+
+
+_SURROGATE = re.compile("[\ud800-\udfff]")
+
+
+def _check_unicode(values: list[Any]) -> None:
+    r"""Refuse strings (keys too) holding a lone UTF-16 surrogate such as ``"\ud800"``.
+
+    Python's JSON decoder accepts the escape; no encoder can write it out again (UTF-8 has no
+    surrogates), so a stored one would fail every later delivery. orjson refuses them itself:
+    only the lenient path needs this walk.
+
+    Raises:
+        ProtocolError: a string holds a lone surrogate.
+    """
+    stack: list[Any] = list(values)
+    while stack:
+        value = stack.pop()
+        if isinstance(value, str):
+            found = _SURROGATE.search(value)
+        elif isinstance(value, dict):
+            stack.extend(value.values())
+            found = next((m for k in value if (m := _SURROGATE.search(k))), None)
+        elif isinstance(value, list):
+            stack.extend(value)
+            continue
+        else:
+            continue
+        if found is not None:
+            code = f"\\u{ord(found.group()):04x}"
+            msg = (
+                f"a string holds the lone UTF-16 surrogate {code}, which is not valid Unicode "
+                "(pair it, or send the text as UTF-8)"
+            )
+            raise ProtocolError(msg)
 
 
 #: Builds the frame of a published message for one compression: ``(outgoing, topic) -> Frame``.

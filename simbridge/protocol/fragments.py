@@ -4,18 +4,31 @@ Shape (protocol reference section 2.16): ``{"op": "fragment", "id", "data", "num
 concatenating every ``data`` in ``num`` order gives the JSON text of the original message.
 simbridge sends ``total`` as an integer (rosbridge sends a float; roslibjs 2.1 floors it) and
 each fragmented message gets its own id.
+
+Incoming pieces are held within budgets counted in what they cost (UTF-8 bytes, not
+characters): at most ``max_sets`` messages open at once and ``max_bytes`` buffered per client,
+and whatever the shared :class:`~simbridge.protocol.budget.Pool` allows for every client
+together. Each piece costs O(1) work plus its own length: the open messages are kept in
+arrival order, so expiry looks only at the oldest.
 """
 
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass, field
 
 from simbridge.errors import ProtocolError
+from simbridge.protocol.budget import Pool
 from simbridge.protocol.encoding import Frame, encode_json
-from simbridge.protocol.ops import Fragment, OpId
+from simbridge.protocol.ops import Fragment, OpId, Refusal
 
 
-__all__ = ["Defragmenter", "split_frame"]
+__all__ = ["Defragmenter", "split_frame", "utf8_size"]
+
+
+def utf8_size(text: str) -> int:
+    """Return the UTF-8 size of ``text`` in bytes (O(1) for ASCII text)."""
+    return len(text) if text.isascii() else len(text.encode("utf-8", "surrogatepass"))
 
 
 @dataclass(slots=True)
@@ -29,48 +42,98 @@ class _Partial:
 class Defragmenter:
     """Collects incoming fragments per id until a message is complete."""
 
-    def __init__(self, *, max_bytes: int = 10_000_000, timeout: float = 60.0) -> None:
-        #: Largest reassembled message, in characters.
+    def __init__(
+        self,
+        *,
+        max_bytes: int = 10_000_000,
+        timeout: float = 60.0,
+        max_sets: int = 16,
+        pool: Pool | None = None,
+    ) -> None:
+        #: Largest reassembled message, and most bytes buffered at once, in UTF-8 bytes.
         self.max_bytes = max_bytes
         #: Seconds an incomplete message may wait for its missing pieces.
         self.timeout = timeout
-        self._partials: dict[OpId, _Partial] = {}
+        #: Incomplete messages open at once.
+        self.max_sets = max_sets
+        #: The budget shared with every other client (``fragment_bytes``).
+        self.pool = pool or Pool()
+        #: Bytes buffered now.
+        self.buffered = 0
+        self._partials: OrderedDict[OpId, _Partial] = OrderedDict()
+
+    def __len__(self) -> int:
+        return len(self._partials)
 
     def add(self, frag: Fragment, now: float) -> str | None:
         """Store one piece; return the whole JSON text once every piece has arrived.
 
         Raises:
-            ProtocolError: pieces of one id disagree on ``total``, or the message is too big.
+            Refusal: pieces of one id disagree on ``total``, the message is too big, or a
+                budget (open messages, bytes of this client, bytes of every client) is spent.
         """
         self.expire(now)
         partial = self._partials.get(frag.id)
         if partial is None:
+            if len(self._partials) >= self.max_sets:
+                msg = (
+                    f"fragment {frag.id!r}: refused, {self.max_sets} fragmented messages are "
+                    "already incomplete (the server's max_fragment_sets); finish them first"
+                )
+                raise Refusal(msg, op="fragment", cause="max_fragment_sets")
             partial = self._partials[frag.id] = _Partial(frag.total, now)
         elif partial.total != frag.total:
-            del self._partials[frag.id]
+            self._drop(frag.id)
             msg = f"fragment {frag.id!r}: total changed from {partial.total} to {frag.total}"
             raise ProtocolError(msg)
-        if frag.num not in partial.pieces:
-            partial.pieces[frag.num] = frag.data
-            partial.size += len(frag.data)
-        if partial.size > self.max_bytes or self._buffered() > 4 * self.max_bytes:
-            del self._partials[frag.id]
-            msg = f"fragment {frag.id!r}: message larger than {self.max_bytes} bytes"
-            raise ProtocolError(msg)
+        if frag.num in partial.pieces:
+            return None
+        size = utf8_size(frag.data)
+        if partial.size + size > self.max_bytes or self.buffered + size > self.max_bytes:
+            self._drop(frag.id)
+            msg = (
+                f"fragment {frag.id!r}: refused, more than {self.max_bytes} bytes of "
+                "fragments (the server's max_fragment_bytes, the same as max_message_size)"
+            )
+            raise Refusal(msg, op="fragment", cause="max_fragment_bytes")
+        if not self.pool.take("fragment_bytes", size):
+            self._drop(frag.id)
+            msg = (
+                f"fragment {frag.id!r}: refused, the server holds its limit of "
+                f"{self.pool.limit('fragment_bytes')} bytes of incomplete fragments for all "
+                "clients (global_fragment_bytes); try again later"
+            )
+            raise Refusal(msg, op="fragment", cause="global_fragment_bytes")
+        partial.pieces[frag.num] = frag.data
+        partial.size += size
+        self.buffered += size
         if len(partial.pieces) < partial.total:
             return None
-        del self._partials[frag.id]
+        self._drop(frag.id)
         return "".join(partial.pieces[k] for k in range(partial.total))
 
     def expire(self, now: float) -> list[OpId]:
         """Forget incomplete messages older than the timeout; return their ids."""
-        old = [k for k, p in self._partials.items() if now - p.started > self.timeout]
-        for k in old:
-            del self._partials[k]
+        old: list[OpId] = []
+        partials = self._partials
+        while partials:
+            key, partial = next(iter(partials.items()))
+            if now - partial.started <= self.timeout:
+                break
+            self._drop(key)
+            old.append(key)
         return old
 
-    def _buffered(self) -> int:
-        return sum(p.size for p in self._partials.values())
+    def clear(self) -> None:
+        """Forget every incomplete message (the client left) and give back its bytes."""
+        for key in list(self._partials):
+            self._drop(key)
+
+    def _drop(self, key: OpId) -> None:
+        partial = self._partials.pop(key, None)
+        if partial is not None and partial.size:
+            self.buffered -= partial.size
+            self.pool.give("fragment_bytes", partial.size)
 
 
 def split_frame(frame: Frame, size: int, frag_id: OpId) -> list[Frame]:

@@ -12,9 +12,10 @@ Ids (``id``) are opaque: a string or an integer, echoed back exactly as received
 from __future__ import annotations
 
 import math
+import re
 import sys
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Literal, NewType, TypeAlias
 
 from simbridge.errors import ProtocolError
@@ -37,6 +38,7 @@ __all__ = [
     "Op",
     "OpId",
     "Publish",
+    "Refusal",
     "SendActionGoal",
     "ServiceResponse",
     "SetLevel",
@@ -46,6 +48,7 @@ __all__ = [
     "UnadvertiseService",
     "Unsubscribe",
     "parse_op",
+    "resolve_name",
 ]
 
 #: Identifies one connected client for the lifetime of the process.
@@ -54,6 +57,63 @@ ClientId = NewType("ClientId", int)
 OpId: TypeAlias = str | int
 Compression = Literal["none", "png", "cbor", "cbor-raw"]
 COMPRESSIONS: tuple[str, ...] = ("none", "png", "cbor", "cbor-raw")
+_NAME = re.compile(r"^/?[A-Za-z_~][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*/?$")
+
+
+def resolve_name(name: str, what: str = "topic") -> str:
+    """Return the absolute ROS name of ``name`` relative to the root namespace.
+
+    ``rosapi/topics`` becomes ``/rosapi/topics`` (roslibjs 2.1 sends relative names); a
+    trailing slash is dropped. A NUL, a percent sign or any other character outside ROS names
+    is refused here, once, for every op that names a topic, service or action.
+
+    Raises:
+        ProtocolError: not a valid ROS name.
+    """
+    if len(name) > 256 or not _NAME.match(name) or name in ("/", "~"):
+        shown = name if len(name) <= 60 else name[:57] + "..."
+        shown = shown.encode("unicode_escape").decode("ascii")  # a NUL shows as \x00
+        msg = (
+            f"{what} name '{shown}' is not a valid ROS name "
+            "(letters, digits and underscores, separated by '/')"
+        )
+        raise ProtocolError(msg)
+    name = name.rstrip("/")
+    return name if name.startswith("/") else "/" + name
+
+
+class Refusal(ProtocolError):
+    """An op the server will not carry out, with what its answer needs.
+
+    A ``call_service`` is answered with a failed ``service_response`` and a
+    ``send_action_goal`` with a failed ``action_result`` (their callers wait for one); every
+    other op with a ``status`` error. ``cause`` groups refusals for the status budget (one
+    ``status`` per cause per second, see :meth:`Session.refusal
+    <simbridge.protocol.session.Session.refusal>`).
+    """
+
+    def __init__(
+        self,
+        text: str,
+        *,
+        op: str = "",
+        target: str = "",
+        op_id: OpId | None = None,
+        cause: str = "",
+    ) -> None:
+        super().__init__(text)
+        #: The op refused (``"call_service"``...), or ``""`` when unknown.
+        self.op = op
+        #: The service or action as the client wrote it (echoed in the answer).
+        self.target = target
+        #: The client's id of the op.
+        self.op_id = op_id
+        #: What was exceeded or wrong (the budget's key), for rate-limiting the answers.
+        self.cause = cause or text
+
+
+def _named(obj: object, value: str, what: str = "topic") -> None:
+    object.__setattr__(obj, "name", resolve_name(value, what))
 
 
 @dataclass(frozen=True, slots=True)
@@ -65,6 +125,11 @@ class Advertise:
     id: OpId | None = None
     latch: bool = False
     queue_size: int = 100
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.topic)
 
 
 @dataclass(frozen=True, slots=True)
@@ -73,6 +138,11 @@ class Unadvertise:
 
     topic: str
     id: OpId | None = None
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.topic)
 
 
 @dataclass(frozen=True, slots=True)
@@ -84,6 +154,11 @@ class Publish:
     id: OpId | None = None
     latch: bool = False
     type: str | None = None
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.topic)
 
 
 @dataclass(frozen=True, slots=True)
@@ -97,6 +172,11 @@ class Subscribe:
     queue_length: int = 0
     fragment_size: int | None = None
     compression: str = "none"
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.topic)
 
 
 @dataclass(frozen=True, slots=True)
@@ -105,6 +185,11 @@ class Unsubscribe:
 
     topic: str
     id: OpId | None = None
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.topic)
 
 
 @dataclass(frozen=True, slots=True)
@@ -118,6 +203,11 @@ class CallService:
     timeout: float | None = None
     fragment_size: int | None = None
     compression: str = "none"
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.service, "service")
 
 
 @dataclass(frozen=True, slots=True)
@@ -126,6 +216,11 @@ class AdvertiseService:
 
     service: str
     type: str
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.service, "service")
 
 
 @dataclass(frozen=True, slots=True)
@@ -133,6 +228,11 @@ class UnadvertiseService:
     """``unadvertise_service``."""
 
     service: str
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.service, "service")
 
 
 @dataclass(frozen=True, slots=True)
@@ -152,6 +252,11 @@ class AdvertiseAction:
 
     action: str
     type: str
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.action, "action")
 
 
 @dataclass(frozen=True, slots=True)
@@ -159,6 +264,11 @@ class UnadvertiseAction:
     """``unadvertise_action``."""
 
     action: str
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.action, "action")
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,6 +282,11 @@ class SendActionGoal:
     feedback: bool = False
     fragment_size: int | None = None
     compression: str = "none"
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.action, "action")
 
 
 @dataclass(frozen=True, slots=True)
@@ -180,6 +295,11 @@ class CancelActionGoal:
 
     action: str
     id: OpId | None = None
+    #: The absolute name (resolved once, when the op is made).
+    name: str = field(init=False, default="", compare=False, repr=False)
+
+    def __post_init__(self) -> None:
+        _named(self, self.action, "action")
 
 
 @dataclass(frozen=True, slots=True)
@@ -294,6 +414,9 @@ class _Reader:
             return None
         if isinstance(value, bool) or not isinstance(value, str | int):
             raise self._fail("id", "a string or an integer", value)
+        if isinstance(value, str) and "\x00" in value:
+            msg = f"{self.op}: field id must not contain a NUL character (\\u0000)"
+            raise ProtocolError(msg)
         return value
 
     def flag(self, field: str, default: bool) -> bool:
@@ -380,6 +503,11 @@ def _subscribe(r: _Reader) -> Op:
 
 
 def _call_service(r: _Reader) -> Op:
+    service = r.text("service", required=True)
+    try:
+        resolve_name(service, "service")
+    except ProtocolError as err:  # answered as a failed call: the caller waits for one
+        raise Refusal(str(err), op="call_service", target=service, op_id=r.id()) from None
     return CallService(
         service=r.text("service", required=True),
         args=r.args("args"),
@@ -405,6 +533,11 @@ def _service_response(r: _Reader) -> Op:
 
 
 def _send_action_goal(r: _Reader) -> Op:
+    action = r.text("action", required=True)
+    try:
+        resolve_name(action, "action")
+    except ProtocolError as err:
+        raise Refusal(str(err), op="send_action_goal", target=action, op_id=r.id()) from None
     return SendActionGoal(
         action=r.text("action", required=True),
         action_type=r.text("action_type", required=True),

@@ -6,7 +6,9 @@ bound to what is waiting for a slow client's socket, and adds a byte budget per 
 client that stops reading can never grow the server's memory without bound (rosbridge #212).
 
 Messages without a key (service responses, status) are never dropped by the per-key bound; the
-byte budget drops the oldest *keyed* messages first.
+byte budget drops the oldest *keyed* messages first, and covers every frame: when unkeyed frames
+alone fill it (a client that calls services without reading the answers), a new unkeyed frame is
+dropped instead of queued.
 
 Dropping from the middle of a FIFO is done with tombstones: each entry also sits in the deque of
 its key, and a dropped entry is marked dead and skipped when popped.
@@ -74,6 +76,10 @@ class SendQueue:
                 dropped += 1
         if self.bytes > self.max_bytes:
             dropped += self._shed()
+            if self.bytes > self.max_bytes and key is None and self.pending > 1:
+                self._fifo.pop()  # the entry just appended: nothing older may be dropped
+                self._kill(entry)
+                dropped += 1
         if len(self._fifo) > 2 * self.pending + 64:
             self._fifo = deque(e for e in self._fifo if e.frame is not None)
         self.dropped += dropped

@@ -1,8 +1,13 @@
-"""Per-client protocol state: subscriptions and their delivery rules, ownership, fragments.
+"""Per-client protocol state: access, subscriptions, ownership, fragments and budgets.
 
-A :class:`Session` is sans-I/O. It turns incoming frames into typed ops
-(:meth:`Session.parse`) and keeps what the client owns (subscriptions, advertisements,
-services, actions) so that the graph can route messages to it and clean up when it leaves.
+A :class:`Session` is sans-I/O and owns everything simbridge keeps for one client. It turns
+incoming frames into typed ops (:meth:`Session.parse`: names resolved, strings checked, nothing
+but ``auth`` before the client is admitted), and keeps what the client owns (subscriptions,
+advertisements, services, actions, pending calls, latched bytes) within its budgets
+(:class:`~simbridge.protocol.budget.Limits`, and the :class:`~simbridge.protocol.budget.Pool`
+shared by every client). The graph asks it before taking anything on the client's behalf; a
+budget that is spent raises :class:`~simbridge.protocol.ops.Refusal` naming the limit, and
+:meth:`Session.close` gives everything back when the client leaves.
 
 Subscription rules (protocol reference section 2.4): a client receives each message of a topic
 once, however many subscribe ids it holds on it; the ids' options merge as
@@ -14,43 +19,48 @@ jitter allowance).
 
 from __future__ import annotations
 
+import dataclasses
 import math
-import re
 from dataclasses import dataclass, field
 from typing import Any
 
 from simbridge.errors import ProtocolError
+from simbridge.protocol.budget import Limits, Pool, TokenBucket
 from simbridge.protocol.encoding import decode_frame
 from simbridge.protocol.fragments import Defragmenter
-from simbridge.protocol.ops import ClientId, Fragment, Op, OpId, Subscribe, parse_op
+from simbridge.protocol.ops import (
+    ClientId,
+    Fragment,
+    Op,
+    OpId,
+    Refusal,
+    Subscribe,
+    parse_op,
+    resolve_name,
+)
 
 
-__all__ = ["STATUS_LEVELS", "Session", "Subscription", "resolve_name"]
+__all__ = [
+    "ANY_SCOPE",
+    "NOT_AUTHENTICATED",
+    "STATUS_LEVELS",
+    "Session",
+    "Subscription",
+    "resolve_name",
+]
 
 #: ``status`` levels, most verbose first (ROSBRIDGE_PROTOCOL.md section 3.2).
 STATUS_LEVELS: tuple[str, ...] = ("info", "warning", "error", "none")
 _COMPRESSION_RANK = {"none": 0, "png": 1, "cbor": 2, "cbor-raw": 3}
-_NAME = re.compile(r"^/?[A-Za-z_~][A-Za-z0-9_]*(/[A-Za-z_][A-Za-z0-9_]*)*/?$")
-
-
-def resolve_name(name: str, what: str = "topic") -> str:
-    """Return the absolute ROS name of ``name`` relative to the root namespace.
-
-    ``rosapi/topics`` becomes ``/rosapi/topics`` (roslibjs 2.1 sends relative names); a
-    trailing slash is dropped.
-
-    Raises:
-        ProtocolError: not a valid ROS name.
-    """
-    if len(name) > 256 or not _NAME.match(name) or name in ("/", "~"):
-        shown = name if len(name) <= 60 else name[:57] + "..."
-        msg = (
-            f"{what} name '{shown}' is not a valid ROS name "
-            "(letters, digits and underscores, separated by '/')"
-        )
-        raise ProtocolError(msg)
-    name = name.rstrip("/")
-    return name if name.startswith("/") else "/" + name
+#: The scope that reaches every topic (what an unauthenticated server gives everyone).
+ANY_SCOPE = "*"
+#: What a client that still owes a token is told for anything but ``auth``.
+NOT_AUTHENTICATED = (
+    "not authenticated: this server requires a token; connect with "
+    "ws://HOST:PORT/?token=YOUR_TOKEN or send an auth op first"
+)
+#: Distinct refusal causes remembered for the status budget before the memory starts over.
+_MAX_CAUSES = 256
 
 
 @dataclass(slots=True, eq=False)
@@ -117,26 +127,66 @@ class Session:
         self,
         client_id: ClientId,
         *,
-        max_message_size: int = 10_000_000,
-        fragment_timeout: float = 60.0,
+        limits: Limits | None = None,
+        pool: Pool | None = None,
+        max_message_size: int | None = None,
+        fragment_timeout: float | None = None,
     ) -> None:
+        limits = limits or Limits()
+        if max_message_size is not None:
+            limits = dataclasses.replace(limits, fragment_bytes=max_message_size)
+        if fragment_timeout is not None:
+            limits = dataclasses.replace(limits, fragment_timeout=fragment_timeout)
         #: Process-unique id of this client.
         self.client_id = client_id
+        #: What this client may hold and do.
+        self.limits = limits
+        #: What every client together may hold (shared by the sessions of one graph).
+        self.pool = pool or Pool()
+        # -- access (set on connect from the token, or by a successful ``auth`` op) --
+        #: The client is admitted: its ops are carried out (else only ``auth`` is read).
+        self.authenticated = True
+        #: ``"*"`` (any topic) or a robot name (its namespace only).
+        self.scope = ANY_SCOPE
+        #: The client may call administrative services.
+        self.admin = False
+        #: ``publish`` rate limit.
+        self.publishes = TokenBucket(limits.publish_rate, limits.publish_burst)
+        # -- what the client holds --
         #: Subscriptions by topic as written by the client.
         self.subscriptions: dict[str, Subscription] = {}
+        #: Subscribe ids over every subscription.
+        self.subscribe_ids = 0
         #: Advertised topics: absolute name -> {advertise id -> type}.
         self.advertisements: dict[str, dict[OpId | None, str]] = {}
+        #: Advertise ids over every topic.
+        self.advertise_ids = 0
         #: Services this client provides: absolute name -> type.
         self.services: dict[str, str] = {}
         #: Actions this client serves: absolute name -> type.
         self.actions: dict[str, str] = {}
+        #: Calls of this client waiting for a client provider.
+        self.pending_calls = 0
+        #: Bytes of the latched message this client published last, by topic.
+        self.latched: dict[str, int] = {}
+        self.latched_bytes = 0
         self._fragment_size: int | None = None
         #: Lowest ``status`` level sent to this client (``set_level``).
         self.status_level = "error"
         #: Reassembly of incoming ``fragment`` ops.
-        self.defrag = Defragmenter(max_bytes=max_message_size, timeout=fragment_timeout)
-        #: Free-form per-client data of extensions (auth state, rate limits...).
+        self.defrag = Defragmenter(
+            max_bytes=limits.fragment_bytes,
+            timeout=limits.fragment_timeout,
+            max_sets=limits.fragment_sets,
+            pool=self.pool,
+        )
+        #: Refusals not told (past the status budget), since the session began.
+        self.refusals_untold = 0
+        self._told: dict[str, float] = {}
+        self._statuses = TokenBucket(limits.statuses_per_second, limits.statuses_per_second)
+        #: Free-form per-client data of extensions.
         self.extra: dict[str, Any] = {}
+        self.closed = False
 
     #: Bumped whenever any session's :attr:`fragment_size` changes (delivery plans of topics
     #: depend on it; see :class:`~simbridge.graph.topics.TopicTable`).
@@ -153,12 +203,17 @@ class Session:
             self._fragment_size = size
             Session.epoch += 1
 
+    # -- frames in ------------------------------------------------------------------------
+
     def parse(self, data: str | bytes, now: float) -> list[Op | ProtocolError]:
         """Decode one incoming frame into ops; errors come back in place, never raised.
 
         Complete ``fragment`` sequences are reassembled and parsed here; an incomplete one
-        yields nothing yet.
+        yields nothing yet. Before the client is admitted only a small frame holding ``auth``
+        is read: anything else is refused unparsed, fragments are not reassembled.
         """
+        if not self.authenticated:
+            return self._parse_unadmitted(data)
         try:
             values = decode_frame(data)
         except ProtocolError as err:
@@ -177,6 +232,48 @@ class Session:
                 out.append(err)
         return out
 
+    def _parse_unadmitted(self, data: str | bytes) -> list[Op | ProtocolError]:
+        limit = self.limits.unauthenticated_frame_bytes
+        if len(data) > limit:
+            text = f"{NOT_AUTHENTICATED} (until then frames are limited to {limit} bytes)"
+            return [Refusal(text, cause="unauthenticated_frame_bytes")]
+        try:
+            values = decode_frame(data)
+        except ProtocolError as err:
+            return [err]
+        out: list[Op | ProtocolError] = []
+        for value in values:
+            kind = value.get("op") if isinstance(value, dict) else None
+            if kind == "auth":
+                try:
+                    out.append(parse_op(value))
+                except ProtocolError as err:
+                    out.append(err)
+                continue
+            target = value.get("service") if kind == "call_service" else None
+            op_id = value.get("id") if isinstance(value.get("id"), str | int) else None
+            if isinstance(target, str):  # a caller waits for its answer: give it one
+                out.append(
+                    Refusal(
+                        NOT_AUTHENTICATED,
+                        op="call_service",
+                        target=target,
+                        op_id=op_id,
+                        cause="unauthenticated",
+                    )
+                )
+            else:
+                out.append(Refusal(NOT_AUTHENTICATED, cause="unauthenticated"))
+        return out
+
+    def admit(self, scope: str, admin: bool) -> None:
+        """Admit the client with an access (a token on connect, or a good ``auth`` op)."""
+        self.authenticated = True
+        self.scope = scope
+        self.admin = admin
+
+    # -- status ---------------------------------------------------------------------------
+
     def wants_status(self, level: str) -> bool:
         """Return whether a ``status`` of ``level`` should be sent (per ``set_level``)."""
         if level not in STATUS_LEVELS or self.status_level == "none":
@@ -193,3 +290,275 @@ class Session:
             msg = f"set_level: level '{level}' is not one of {', '.join(STATUS_LEVELS)}"
             raise ProtocolError(msg)
         self.status_level = level
+
+    def may_tell(self, cause: str, now: float) -> bool:
+        """Return whether a refusal of ``cause`` may be told now (and count it if not).
+
+        At most one ``status`` per cause per second and ``statuses_per_second`` in all: a
+        client that sends 300,000 refused ops costs the server 300,000 counts, not 300,000
+        messages.
+        """
+        last = self._told.get(cause)
+        if last is not None and now - last < 1.0:
+            self.refusals_untold += 1
+            return False
+        if not self._statuses.take(now):
+            self.refusals_untold += 1
+            return False
+        if len(self._told) >= _MAX_CAUSES:
+            self._told.clear()
+        self._told[cause] = now
+        return True
+
+    # -- subscriptions --------------------------------------------------------------------
+
+    def subscribe(self, op: Subscribe) -> tuple[Subscription, bool]:
+        """Add a subscribe id; return the merged subscription and whether it is new.
+
+        Raises:
+            Refusal: a subscription, subscribe-id or global budget is spent.
+        """
+        sub = self.subscriptions.get(op.topic)
+        limits = self.limits
+        if sub is None and len(self.subscriptions) >= limits.subscriptions:
+            msg = (
+                f"subscribe {op.topic}: refused, this client already has {limits.subscriptions} "
+                "subscriptions (the server's max_subscriptions); unsubscribe from some first"
+            )
+            raise Refusal(msg, op="subscribe", op_id=op.id, cause="max_subscriptions")
+        fresh_id = sub is None or op.id not in sub.ids
+        if fresh_id:
+            if sub is not None and len(sub.ids) >= limits.ids_per_subscription:
+                msg = (
+                    f"subscribe {op.topic}: refused, this client already holds "
+                    f"{limits.ids_per_subscription} subscribe ids on it (the server's "
+                    "max_ids_per_subscription); reuse an id or unsubscribe one"
+                )
+                raise Refusal(msg, op="subscribe", op_id=op.id, cause="max_ids_per_subscription")
+            self._take(
+                "subscribe_ids",
+                self.subscribe_ids,
+                limits.subscribe_ids,
+                f"subscribe {op.topic}",
+                "subscribe ids",
+                op.id,
+            )
+            self.subscribe_ids += 1
+        new = sub is None
+        if sub is None:
+            sub = self.subscriptions[op.topic] = Subscription(op.topic, op.name)
+        sub.add(op)
+        return sub, new
+
+    def unsubscribe(self, written: str, op_id: OpId | None) -> Subscription | None:
+        """Remove one subscribe id (``None``: all) of a topic spelling.
+
+        Returns the subscription when it is now empty (and forgotten), else ``None``.
+        """
+        sub = self.subscriptions.get(written)
+        if sub is None:
+            return None
+        before = len(sub.ids)
+        empty = sub.remove(op_id)
+        released = before - len(sub.ids)
+        self.subscribe_ids -= released
+        self.pool.give("subscribe_ids", released)
+        if not empty:
+            return None
+        del self.subscriptions[written]
+        return sub
+
+    # -- advertisements, services, actions ------------------------------------------------
+
+    def owned(self) -> int:
+        """Return how many names (topics, services, actions) this client advertises."""
+        return len(self.advertisements) + len(self.services) + len(self.actions)
+
+    def may_own(self, what: str, name: str, new: bool) -> None:
+        """Check that the client may advertise one more name (when ``new``).
+
+        Raises:
+            Refusal: the advertisement budget is spent.
+        """
+        limit = self.limits.advertisements
+        if new and self.owned() >= limit:
+            msg = (
+                f"{what} {name}: refused, this client already advertises {limit} topics, "
+                "services and actions (the server's max_advertisements); unadvertise some first"
+            )
+            raise Refusal(msg, op=what, cause="max_advertisements")
+
+    def advertise(self, name: str, op_id: OpId | None, type_name: str) -> bool:
+        """Record an advertise id of topic ``name``; return whether the id is new.
+
+        Raises:
+            Refusal: the advertisement or advertise-id budget is spent.
+        """
+        ads = self.advertisements.get(name)
+        self.may_own("advertise", name, ads is None)
+        if ads is not None and op_id in ads:
+            return False
+        self._take(
+            "advertise_ids",
+            self.advertise_ids,
+            self.limits.advertise_ids,
+            f"advertise {name}",
+            "advertise ids",
+            op_id,
+        )
+        self.advertise_ids += 1
+        if ads is None:
+            ads = self.advertisements[name] = {}
+        ads[op_id] = type_name
+        return True
+
+    def unadvertise(self, name: str, op_id: OpId | None) -> bool:
+        """Remove one advertise id of ``name`` (``None`` or unknown: all of them).
+
+        Returns whether the client no longer advertises ``name`` at all.
+        """
+        ads = self.advertisements.get(name)
+        if ads is None:
+            return True
+        if op_id is not None and op_id in ads:
+            del ads[op_id]
+            released = 1
+        else:
+            released = len(ads)
+            ads.clear()
+        self.advertise_ids -= released
+        self.pool.give("advertise_ids", released)
+        if ads:
+            return False
+        del self.advertisements[name]
+        return True
+
+    def own_service(self, name: str, type_name: str) -> None:
+        """Record that the client provides service ``name``."""
+        self.services[name] = type_name
+
+    def disown_service(self, name: str) -> None:
+        """Forget service ``name`` (unadvertised, or taken over by another provider)."""
+        self.services.pop(name, None)
+
+    def own_action(self, name: str, type_name: str) -> None:
+        """Record that the client serves action ``name``."""
+        self.actions[name] = type_name
+
+    def disown_action(self, name: str) -> None:
+        """Forget action ``name``."""
+        self.actions.pop(name, None)
+
+    # -- calls and latched messages -------------------------------------------------------
+
+    def call_timeout(self, requested: float | None, default: float) -> float:
+        """Return how long a call may wait for a client provider, in seconds.
+
+        No ``timeout`` means ``default``; ``0`` (rosbridge: "wait forever") and anything
+        longer than the ``call_timeout`` budget mean the budget: no call waits without end.
+        """
+        longest = self.limits.call_timeout
+        if requested is None:
+            return min(default, longest)
+        if requested <= 0:
+            return longest
+        return min(requested, longest)
+
+    def start_call(self, service: str, op_id: OpId | None) -> None:
+        """Count one more call waiting for a client provider.
+
+        Raises:
+            Refusal: the pending-call budget is spent (answered as a failed call).
+        """
+        limit = self.limits.pending_calls
+        if self.pending_calls >= limit:
+            msg = (
+                f"call_service {service}: refused, this client already waits for {limit} "
+                "answers (the server's max_pending_calls); wait for them first"
+            )
+            raise Refusal(
+                msg, op="call_service", target=service, op_id=op_id, cause="max_pending_calls"
+            )
+        if not self.pool.take("pending_calls"):
+            msg = (
+                f"call_service {service}: refused, the server waits for its limit of "
+                f"{self.pool.limit('pending_calls')} answers for all clients "
+                "(global_pending_calls); try again later"
+            )
+            raise Refusal(
+                msg, op="call_service", target=service, op_id=op_id, cause="global_pending_calls"
+            )
+        self.pending_calls += 1
+
+    def end_call(self) -> None:
+        """A call of this client was answered, timed out or dropped."""
+        if self.pending_calls > 0:
+            self.pending_calls -= 1
+            self.pool.give("pending_calls")
+
+    def latch(self, name: str, size: int) -> None:
+        """Charge the latched message (``size`` bytes) this client leaves on topic ``name``.
+
+        It replaces the client's previous one on that topic.
+
+        Raises:
+            Refusal: the latched-bytes budget of the client or of the server is spent.
+        """
+        old = self.latched.get(name, 0)
+        limit = self.limits.latched_bytes
+        if self.latched_bytes - old + size > limit:
+            msg = (
+                f"publish {name}: refused, this client's latched messages would take more than "
+                f"{limit} bytes (the server's max_latched_bytes); publish it without latch"
+            )
+            raise Refusal(msg, op="publish", cause="max_latched_bytes")
+        if size > old and not self.pool.take("latched_bytes", size - old):
+            msg = (
+                f"publish {name}: refused, the server keeps its limit of "
+                f"{self.pool.limit('latched_bytes')} bytes of latched messages for all clients "
+                "(global_latched_bytes); publish it without latch"
+            )
+            raise Refusal(msg, op="publish", cause="global_latched_bytes")
+        if size < old:
+            self.pool.give("latched_bytes", old - size)
+        self.latched[name] = size
+        self.latched_bytes += size - old
+
+    def unlatch(self, name: str) -> None:
+        """The server no longer keeps this client's latched message of topic ``name``."""
+        old = self.latched.pop(name, 0)
+        self.latched_bytes -= old
+        self.pool.give("latched_bytes", old)
+
+    # -- leaving --------------------------------------------------------------------------
+
+    def close(self) -> None:
+        """Give back everything the client held to the shared pool (it left)."""
+        if self.closed:
+            return
+        self.closed = True
+        self.defrag.clear()
+        for written in list(self.subscriptions):
+            self.unsubscribe(written, None)
+        for name in list(self.advertisements):
+            self.unadvertise(name, None)
+        for name in list(self.latched):
+            self.unlatch(name)
+        while self.pending_calls:
+            self.end_call()
+
+    def _take(
+        self, what: str, used: int, limit: int, doing: str, things: str, op_id: OpId | None
+    ) -> None:
+        if used >= limit:
+            msg = (
+                f"{doing}: refused, this client already holds {limit} {things} "
+                f"(the server's max_{what}); release some first"
+            )
+            raise Refusal(msg, op=doing.split()[0], op_id=op_id, cause=f"max_{what}")
+        if not self.pool.take(what):
+            msg = (
+                f"{doing}: refused, the server holds its limit of {self.pool.limit(what)} "
+                f"{things} for all clients (global_{what}); try again later"
+            )
+            raise Refusal(msg, op=doing.split()[0], op_id=op_id, cause=f"global_{what}")

@@ -17,10 +17,11 @@ TOKENS = {"token-for-r1-aaaa": "r1", "token-for-all-bbb": "*", "teacher-token-cc
 
 
 def make(**settings: Any) -> tuple[Graph, Guard]:
-    graph = Graph(wall_clock_ns=lambda: int(WALL * 1e9))
+    s = ServerSettings(**settings)
+    graph = Graph(settings=s, wall_clock_ns=lambda: int(WALL * 1e9))
     install_rosapi(graph)
     graph.add_service("/reset", "std_srvs/srv/Empty", "/virtual_robot", lambda args: {})
-    guard = Guard(graph, ServerSettings(**settings), robots=lambda: ["r1", "r2"])
+    guard = Guard(graph, s, robots=lambda: ["r1", "r2"])
     return graph, guard
 
 
@@ -72,11 +73,17 @@ def test_without_authentication_configured_every_client_may_do_everything() -> N
 
 
 def test_unauthenticated_client_can_do_nothing_but_auth() -> None:
-    """With client tokens configured, a client without one gets a status error for any op."""
+    """With client tokens configured, a client without one gets a status error for any op.
+
+    The same refusal is told once a second (the status budget), the rest counted.
+    """
     graph, guard = make(client_tokens=TOKENS)
     p = peer(graph, guard)
     assert "not authenticated" in errors(op(p, graph, op="subscribe", topic="/odom"))[0]
-    assert "not authenticated" in errors(op(p, graph, op="advertise", topic="/x", type="a/B"))[0]
+    assert not errors(op(p, graph, op="subscribe", topic="/odom"))
+    assert p.session.refusals_untold == 1
+    refused = op(p, graph, now=1.0, op="advertise", topic="/x", type="a/B")
+    assert "not authenticated" in errors(refused)[0]
     reply = op(p, graph, op="call_service", service="/rosapi/topics", id="c")
     assert reply[0]["op"] == "service_response" and reply[0]["result"] is False
     assert "not authenticated" in reply[0]["values"]
@@ -146,7 +153,11 @@ def test_subscription_and_advertisement_limits_are_refused_clearly() -> None:
     assert not errors(op(p, graph, op="advertise_service", service="/s0", type="std_srvs/Trigger"))
     refused = errors(op(p, graph, op="advertise", topic="/a1", type="std_msgs/String"))
     assert "max_advertisements" in refused[0]
-    refused = errors(op(p, graph, op="publish", topic="/a2", type="std_msgs/String", msg={}))
+    # the same cause again within a second is counted, not told; a second later it is told
+    assert not errors(op(p, graph, op="advertise", topic="/a1", type="std_msgs/String"))
+    refused = errors(
+        op(p, graph, now=1.0, op="publish", topic="/a2", type="std_msgs/String", msg={})
+    )
     assert "max_advertisements" in refused[0]
     assert len(p.session.subscriptions) == 3 and "/a1" not in graph.topics.topics
 

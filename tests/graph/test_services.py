@@ -5,6 +5,7 @@ from typing import Any
 
 import pytest
 
+from simbridge.config import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph import Graph
 from tests.helpers import RecordingPeer
@@ -132,6 +133,28 @@ def test_call_times_out_when_the_provider_never_answers(graph: Graph) -> None:
     graph.tick(10.6)
     (answer,) = caller.take()
     assert answer["result"] is False and "timed out" in answer["values"]
+
+
+def test_timeout_0_waits_the_maximum_not_forever_and_calls_are_budgeted() -> None:
+    """A timeout of 0 (rosbridge: forever) waits max_call_timeout; calls are budgeted.
+
+    Past max_pending_calls a call fails at once; expired and dropped calls give the budget back.
+    """
+    graph = Graph(settings=ServerSettings(max_call_timeout=2.0, max_pending_calls=2))
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(provider, graph, op="advertise_service", service="/slow", type="std_srvs/Trigger")
+    for k in range(3):
+        op(caller, graph, 10.0, op="call_service", service="/slow", id=k, timeout=0)
+    (refused,) = caller.take()
+    assert refused["id"] == 2 and "max_pending_calls" in refused["values"]
+    graph.tick(11.9)
+    assert caller.take() == [] and caller.session.pending_calls == 2
+    graph.tick(12.1)
+    assert [m["id"] for m in caller.take()] == [0, 1]
+    assert caller.session.pending_calls == 0 == graph.pool.used["pending_calls"]
+    op(caller, graph, 13.0, op="call_service", service="/slow", id="late")
+    graph.remove_peer(caller)
+    assert not graph.services.pending and graph.pool.used["pending_calls"] == 0
 
 
 def test_provider_disconnect_fails_pending_calls(graph: Graph) -> None:

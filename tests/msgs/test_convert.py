@@ -161,3 +161,20 @@ def test_integer_too_large_for_a_double_is_a_conversion_error(conv: Converter) -
         conv.from_json(
             "geometry_msgs/msg/PoseWithCovariance", {"covariance": [0] + [10**400] + [0] * 34}
         )
+
+
+def test_float32_out_of_range_is_refused_scalars_and_arrays(conv: Converter) -> None:
+    """A finite number beyond float32 is refused at publish; inf and NaN (null) stay allowed."""
+    with pytest.raises(ConversionError, match="out of range for float32"):
+        conv.from_json("std_msgs/msg/Float32", {"data": 1e308})
+    assert conv.from_json("std_msgs/msg/Float32", {"data": 3.0e38})["data"] == 3.0e38
+    assert math.isinf(conv.from_json("std_msgs/msg/Float32", {"data": math.inf})["data"])
+    with pytest.raises(ConversionError, match=r"data\[1\] = 1e\+300 is out of range for float32"):
+        conv.from_json("std_msgs/msg/Float32MultiArray", {"data": [1.0, 1e300]})
+    out = conv.from_json("std_msgs/msg/Float32MultiArray", {"data": [1, None, 2.5]})
+    assert out["data"].dtype == np.float32 and math.isnan(out["data"][1])
+
+
+def test_nul_in_a_ros_string_is_refused(conv: Converter) -> None:
+    with pytest.raises(ConversionError, match="must not contain a NUL"):
+        conv.from_json("std_msgs/msg/String", {"data": "a\x00b"})

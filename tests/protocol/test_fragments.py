@@ -5,7 +5,7 @@ import json
 import pytest
 
 from simbridge.errors import ProtocolError
-from simbridge.protocol import Defragmenter, Frame, split_frame
+from simbridge.protocol import Defragmenter, Frame, Pool, Refusal, split_frame
 from simbridge.protocol.ops import Fragment
 
 
@@ -33,7 +33,7 @@ def test_defragmenter_rejects_changing_totals_and_oversized_messages() -> None:
     d.add(Fragment("a", "12", 0, 3), 0.0)
     with pytest.raises(ProtocolError, match="total changed"):
         d.add(Fragment("a", "34", 1, 4), 0.0)
-    with pytest.raises(ProtocolError, match="larger than"):
+    with pytest.raises(ProtocolError, match="more than 10 bytes"):
         d.add(Fragment("b", "x" * 11, 0, 2), 0.0)
 
 
@@ -43,3 +43,30 @@ def test_incomplete_messages_expire() -> None:
     d.add(Fragment("a", "1", 0, 2), 0.0)
     assert d.expire(10.0) == ["a"]
     assert d.add(Fragment("a", "2", 1, 2), 10.0) is None
+
+
+def test_defragmenter_counts_utf8_bytes_and_the_shared_pool() -> None:
+    """Four-byte characters cost four bytes each, against the client and the pool."""
+    pool = Pool({"fragment_bytes": 30})
+    a = Defragmenter(max_bytes=20, pool=pool)
+    b = Defragmenter(max_bytes=20, pool=pool)
+    a.add(Fragment("x", "\U0001f600" * 4, 0, 2), 0.0)  # 4 characters, 16 bytes
+    assert a.buffered == 16 == pool.used["fragment_bytes"]
+    with pytest.raises(Refusal, match="max_fragment_bytes"):
+        a.add(Fragment("y", "\U0001f600" * 2, 0, 2), 0.0)
+    b.add(Fragment("z", "abcdefghijkl", 0, 2), 0.0)
+    with pytest.raises(Refusal, match="global_fragment_bytes"):
+        b.add(Fragment("w", "abc", 0, 2), 0.0)
+    a.clear()
+    assert pool.used["fragment_bytes"] == 12
+
+
+def test_defragmenter_bounds_open_sets_and_expires_the_oldest_first() -> None:
+    """At most max_sets incomplete messages; expiry frees them in arrival order."""
+    d = Defragmenter(max_sets=2, timeout=10.0)
+    d.add(Fragment("a", "1", 0, 2), 0.0)
+    d.add(Fragment("b", "1", 0, 2), 5.0)
+    with pytest.raises(Refusal, match="max_fragment_sets"):
+        d.add(Fragment("c", "1", 0, 2), 6.0)
+    assert d.expire(10.5) == ["a"] and len(d) == 1
+    assert d.add(Fragment("c", "1", 0, 2), 11.0) is None and len(d) == 2

@@ -61,3 +61,14 @@ def test_clear_empties_everything() -> None:
     q.push(f("x"), "k", 0)
     q.clear()
     assert (len(q), q.bytes, q.pop()) == (0, 0, None)
+
+
+def test_byte_budget_covers_replies_too_the_newest_past_it_is_dropped() -> None:
+    """Replies alone past the budget (a caller that never reads): new ones are dropped."""
+    q = SendQueue(12)
+    assert q.push(f("reply1"), None, 0) == 0
+    assert q.push(f("reply2"), None, 0) == 0
+    assert q.push(f("reply3"), None, 0) == 1
+    assert q.bytes == 12 and q.dropped == 1
+    assert drain(q) == ["reply1", "reply2"]
+    assert q.push(f("a reply bigger than the budget"), None, 0) == 0  # alone: it goes out

@@ -1,11 +1,21 @@
 from __future__ import annotations
 
 import json
+from typing import Any
 
 import pytest
 
 from simbridge.errors import ProtocolError
-from simbridge.protocol import ClientId, Session, Subscription, ops as o, resolve_name
+from simbridge.protocol import (
+    ClientId,
+    Limits,
+    Pool,
+    Refusal,
+    Session,
+    Subscription,
+    ops as o,
+    resolve_name,
+)
 
 
 def test_merged_options_use_min_throttle_min_queue_and_strongest_compression() -> None:
@@ -83,3 +93,111 @@ def test_invalid_names_are_refused(name: str) -> None:
     """Names that are not valid ROS names raise ProtocolError."""
     with pytest.raises(ProtocolError, match="not a valid ROS name"):
         resolve_name(name)
+
+
+def budgeted(**limits: Any) -> tuple[Session, Pool]:
+    pool = Pool({"subscribe_ids": 5, "advertise_ids": 5, "pending_calls": 3, "latched_bytes": 50})
+    return Session(ClientId(1), limits=Limits(**limits), pool=pool), pool
+
+
+def test_subscribe_ids_are_budgeted_per_topic_per_client_and_globally() -> None:
+    """Ids, not topics, are counted; a spent budget is refused by its name; leaving frees."""
+    session, pool = budgeted(subscribe_ids=4, ids_per_subscription=2)
+    session.subscribe(o.Subscribe("/a", id=1))
+    session.subscribe(o.Subscribe("/a", id=1))  # the same id again: replaced, not counted
+    session.subscribe(o.Subscribe("/a", id=2))
+    with pytest.raises(Refusal, match="max_ids_per_subscription"):
+        session.subscribe(o.Subscribe("/a", id=3))
+    session.subscribe(o.Subscribe("/b", id=1))
+    session.subscribe(o.Subscribe("/c", id=1))
+    with pytest.raises(Refusal, match="max_subscribe_ids"):
+        session.subscribe(o.Subscribe("/d", id=1))
+    other = Session(ClientId(2), pool=pool)
+    other.subscribe(o.Subscribe("/x", id=1))
+    with pytest.raises(Refusal, match="global_subscribe_ids"):
+        other.subscribe(o.Subscribe("/y", id=1))
+    assert session.subscribe_ids == 4 and pool.used["subscribe_ids"] == 5
+    assert session.unsubscribe("/a", 1) is None and session.subscribe_ids == 3
+    session.close()
+    assert pool.used["subscribe_ids"] == 1 and not session.subscriptions
+
+
+def test_advertise_ids_and_names_are_budgeted() -> None:
+    session, pool = budgeted(advertise_ids=3, advertisements=2)
+    assert session.advertise("/a", 1, "std_msgs/msg/String")
+    assert not session.advertise("/a", 1, "std_msgs/msg/String")
+    session.advertise("/a", 2, "std_msgs/msg/String")
+    session.advertise("/b", None, "std_msgs/msg/String")
+    with pytest.raises(Refusal, match="max_advertise_ids"):
+        session.advertise("/a", 3, "std_msgs/msg/String")
+    with pytest.raises(Refusal, match="max_advertisements"):
+        session.advertise("/c", None, "std_msgs/msg/String")
+    assert session.unadvertise("/a", 1) is False  # id 2 remains
+    assert session.unadvertise("/a", None) is True and pool.used["advertise_ids"] == 1
+
+
+def test_calls_wait_at_most_the_call_timeout_and_are_budgeted() -> None:
+    """No timeout: the default; 0 (rosbridge: forever) or too long: the maximum."""
+    session, pool = budgeted(pending_calls=2, call_timeout=60.0)
+    assert session.call_timeout(None, 5.0) == 5.0
+    assert session.call_timeout(0.0, 5.0) == 60.0 == session.call_timeout(1e9, 5.0)
+    assert session.call_timeout(2.0, 5.0) == 2.0
+    session.start_call("/s", 1)
+    session.start_call("/s", 2)
+    with pytest.raises(Refusal, match="max_pending_calls") as refused:
+        session.start_call("/s", 3)
+    assert refused.value.op == "call_service" and refused.value.op_id == 3
+    session.end_call()
+    session.close()
+    assert pool.used["pending_calls"] == 0
+
+
+def test_latched_bytes_replace_per_topic_and_are_budgeted() -> None:
+    session, pool = budgeted(latched_bytes=40)
+    session.latch("/a", 30)
+    session.latch("/a", 20)  # replaces its previous message on /a
+    session.latch("/b", 20)
+    with pytest.raises(Refusal, match="max_latched_bytes"):
+        session.latch("/c", 1)
+    assert session.latched_bytes == 40 == pool.used["latched_bytes"]
+    session.unlatch("/a")
+    assert pool.used["latched_bytes"] == 20
+    session.close()
+    assert pool.used["latched_bytes"] == 0
+
+
+def test_before_admission_only_a_small_auth_op_is_read() -> None:
+    """A client that owes a token: fragments are not reassembled, big frames not decoded."""
+    session = Session(ClientId(1), limits=Limits(unauthenticated_frame_bytes=200))
+    session.authenticated = False
+    frag = json.dumps({"op": "fragment", "id": "f", "data": "x", "num": 0, "total": 2})
+    (refused,) = session.parse(frag, 0.0)
+    assert isinstance(refused, Refusal) and "not authenticated" in str(refused)
+    assert len(session.defrag) == 0
+    (big,) = session.parse("[" * 300, 0.0)
+    assert isinstance(big, Refusal) and "limited to 200 bytes" in str(big)
+    (call,) = session.parse('{"op":"call_service","service":"/s","id":7}', 0.0)
+    assert isinstance(call, Refusal) and (call.op, call.target, call.op_id) == (
+        "call_service",
+        "/s",
+        7,
+    )
+    auth = {"op": "auth", "mac": "m", "client": "", "dest": "", "rand": "", "t": 0, "level": ""}
+    (op,) = session.parse(json.dumps(auth | {"end": 0}), 0.0)
+    assert isinstance(op, o.Auth)
+
+
+def test_refusals_are_told_once_per_cause_per_second_and_counted() -> None:
+    session = Session(ClientId(1), limits=Limits(statuses_per_second=3))
+    assert session.may_tell("a", 0.0) and not session.may_tell("a", 0.0)
+    assert session.may_tell("b", 0.0) and session.may_tell("c", 0.0)
+    assert not session.may_tell("d", 0.0)  # three a second in all
+    assert session.may_tell("a", 1.0)
+    assert session.refusals_untold == 2
+
+
+def test_ops_resolve_their_names_once_when_made() -> None:
+    assert o.Subscribe("odom").name == "/odom"
+    assert o.CallService("rosapi/topics").name == "/rosapi/topics"
+    with pytest.raises(ProtocolError, match="not a valid ROS name"):
+        o.Publish("/a\x00", {})
