@@ -133,8 +133,11 @@ class RecordingPeer:
         return out
 
 
-async def stalled_client(port: int, subscribe: dict[str, object]) -> socket.socket:
-    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again."""
+async def stalled_client(port: int, subscribe: dict[str, object], path: str = "/") -> socket.socket:
+    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again.
+
+    ``subscribe`` is the one op sent (any op); ``path`` the request target (``/?token=T``).
+    """
     sock = socket.socket()
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     sock.setblocking(False)
@@ -144,7 +147,7 @@ async def stalled_client(port: int, subscribe: dict[str, object]) -> socket.sock
     await loop.sock_sendall(
         sock,
         (
-            f"GET / HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+            f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
             f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
             "Sec-WebSocket-Version: 13\r\n\r\n"
         ).encode(),
