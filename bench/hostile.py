@@ -41,6 +41,7 @@ import psutil
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
+from bench import stateattacks
 from bench._server import server
 from bench.procs import ROOT, percentile
 
@@ -416,6 +417,11 @@ def fuzz(target: Target) -> str:
         print(f"    fuzz crash: {text}")
     text = f"{sent} frames, {len(crashes)} crashes, {closed} closed for size (1009)"
     return verdict(not crashes, text)
+
+
+# the protocol-state rows (1-7, 16-18, 20): bench/stateattacks.py, one client each (row 7: five)
+for _row, (_title, _run) in stateattacks.ATTACKS.items():
+    attack_async(f"state{_row}", _row, _run)
 
 
 # -- the run --------------------------------------------------------------------------------

@@ -19,7 +19,8 @@ of the issue's table:
 18. float32 ``1e308`` published to a cbor-raw subscriber;
 20. a topic name with a NUL.
 
-``python -m bench.stateattacks [ROW ...]`` runs them alone (a server process per attack, an
+``python -m bench hostile`` runs them as ``state1`` .. ``state20`` beside the other rows of the
+issue; ``python -m bench.stateattacks [ROW ...]`` runs them alone (a server process per attack, an
 observer thread counting /odom by its header stamps), as the before/after figures of issue 17.
 """
 
@@ -351,35 +352,6 @@ ATTACKS: dict[str, tuple[str, Attack]] = {
     "18": ("float32 1e308 to cbor-raw", row18_float32),
     "20": ("NUL in names and ids", row20_nul_name),
 }
-
-
-def register(
-    attack: Callable[[str, str], Callable[[Callable[[Any], str]], Any]],
-    *,
-    student: str,
-    admin: str,
-) -> None:
-    """Register every attack here with ``bench hostile``'s ``attack(name, row)`` decorator.
-
-    Its runs get a target with ``url(token)`` and ``left()`` (seconds to attack); ``student``
-    and ``admin`` are its tokens (the student's robot must be r1).
-    """
-    for row, (_title, run) in ATTACKS.items():
-
-        def adapted(target: Any, run: Attack = run) -> str:
-            tokens = {"student": student, "admin": admin}
-
-            def url(who: str | None) -> str:
-                return str(target.url(None if who is None else tokens[who]))
-
-            async def go() -> str:
-                stop = asyncio.Event()
-                asyncio.get_running_loop().call_later(max(0.0, target.left()), stop.set)
-                return await run(url, stop)
-
-            return asyncio.run(go())
-
-        attack(f"state{row}", row)(adapted)
 
 
 class Observer(threading.Thread):
