@@ -6,6 +6,7 @@ from typing import Any
 
 import pytest
 
+from simbridge.errors import ProtocolError
 from simbridge.graph import Graph
 from simbridge.graph.tfrepublisher import TfBuffer, TfRepublisher
 from tests.helpers import RecordingPeer
@@ -151,7 +152,11 @@ def test_a_goal_that_would_fail_or_cost_too_much_is_refused(args: Any, error: st
     graph = Graph()
     repub = TfRepublisher(graph)
     client = RecordingPeer(graph)
-    graph.dispatch(client, _goal(graph, client, goal_op("g", **args)), 0.0)
+    op = _goal(graph, client, goal_op("g", **args))
+    if isinstance(op, ProtocolError):  # a lone surrogate: the session refuses the whole frame
+        assert error in str(op)
+        return
+    graph.dispatch(client, op, 0.0)
     (result,) = client.take()
     assert (result["op"], result["result"]) == ("action_result", False)
     assert error in result["values"]
