@@ -67,10 +67,9 @@ def connection_rights(peer: Peer | None) -> tuple[str, bool]:
     The guard (:mod:`simbridge.graph.guard`) gives every client its access on connect; a graph
     without a guard (a test, a tool) trusts everyone.
     """
-    access = None if peer is None else peer.session.extra.get("access")
-    if access is None:
+    if peer is None or not peer.session.guarded:
         return "*", True
-    return str(getattr(access, "scope", "*")), bool(getattr(access, "admin", False))
+    return peer.session.scope, peer.session.admin
 
 
 def _credential(peer: Peer | None) -> str | None:

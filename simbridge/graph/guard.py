@@ -151,6 +151,7 @@ class Guard:
         # without an admin token, administration is open to whoever may use every topic
         admin = admin or (s.admin_token is None and scope == ANY_SCOPE)
         session.admit(scope, admin)
+        session.guarded = True
         if granted is None and s.auth_required:
             session.authenticated = False  # only auth is read until it succeeds
 

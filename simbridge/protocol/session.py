@@ -150,6 +150,8 @@ class Session:
         self.scope = ANY_SCOPE
         #: The client may call administrative services.
         self.admin = False
+        #: A guard gave this client its access (a graph without one trusts everyone).
+        self.guarded = False
         #: ``publish`` rate limit.
         self.publishes = TokenBucket(limits.publish_rate, limits.publish_burst)
         # -- what the client holds --
