@@ -21,6 +21,15 @@ from pathlib import Path
 
 
 PORT = 9090
+#: Tests of the suite that never talk to the server under test, deselected, and why.
+NOT_ABOUT_SIMBRIDGE = {
+    "test_ws_headers.py::test_websocket_headers": (
+        "checks roslibpy's request headers against a websockets server the test starts itself on "
+        "port 9000; it sets that server's asyncio.Event from another thread, which does not wake "
+        "the server's loop, so about one run in ten hangs past pytest's 60 s timeout on its own "
+        "(seen with no simbridge running, 1 hang in 14 runs)"
+    ),
+}
 ROOT = Path(__file__).resolve().parent.parent.parent
 
 
@@ -78,7 +87,9 @@ def main() -> int:
         os.chdir(suite)
         import pytest
 
-        args = ["-p", "no:cacheprovider", "-q", "--timeout", "60", f"--junitxml={junit}", "tests"]
+        deselect = [f"--deselect=tests/{test}" for test in NOT_ABOUT_SIMBRIDGE]
+        args = ["-p", "no:cacheprovider", "-q", "--timeout", "60", f"--junitxml={junit}", *deselect]
+        args.append("tests")
         return int(pytest.main(args, plugins=[_ExitWhenDone(server)]))
     finally:
         _stop(server)

@@ -5,8 +5,10 @@ The suite hard-codes ws://127.0.0.1:9090, so each run gets a network namespace o
 the machine's port 9090 is never used, and both transports run at once. scripts/setup-test-deps.sh
 puts the suite in .cache/roslibpy-2.1.0; tests/clients/roslibpy_suite.py runs it.
 
-Every test of tests/ros2 and of the top level passes. Of tests/ros1, the ones in
-:data:`ROS1_CANNOT_PASS` fail, for the reasons given there; the rest pass.
+Every test of tests/ros2 and of the top level passes, but the one that never talks to the server
+(:data:`tests.clients.roslibpy_suite.NOT_ABOUT_SIMBRIDGE`, deselected there, with the reason).
+Of tests/ros1, the ones in :data:`ROS1_CANNOT_PASS` fail, for the reasons given there; the rest
+pass.
 """
 
 from __future__ import annotations
