@@ -37,6 +37,8 @@ import orjson
 
 from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
+from simbridge.graph.estop import connection_rights
+from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.protocol import Frame, Outgoing, Session
@@ -204,6 +206,7 @@ class ZenohLink:
         self._liveliness_sub: Any = None
         graph.topics.taps.append(self._on_deliver)
         self._guard_spawn()
+        self._extend_access()
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -878,6 +881,61 @@ class ZenohLink:
             return spawn(request if isinstance(args, dict) else args)
 
         service.handler = guarded
+
+    def remote_robots(self) -> list[str]:
+        """Return the robots other processes of the classroom simulate (``/NAME/odom``)."""
+        names = set()
+        for entity in self._remote.values():
+            parts = entity.name.split("/")
+            if (
+                entity.kind == "MP"
+                and len(parts) == 3
+                and parts[2] == "odom"
+                and entity.type == "nav_msgs/msg/Odometry"
+            ):
+                names.add(parts[1])
+        return sorted(names)
+
+    def _extend_access(self) -> None:
+        """Add the other processes' robots to ``/simbridge/access`` (the page's robot picker).
+
+        A robot of another process is listed with this process's default parameters (the
+        classroom's shared configuration), no start pose and ``remote: true``.
+        """
+        service = self.graph.services.services.get("/simbridge/access")
+        if service is None or service.handler is None:
+            return
+        access = service.handler
+        robot = self.graph.params.nodes.get("/virtual_robot")
+
+        def extended(args: Any) -> dict[str, Any]:
+            answer = access(args)
+            remote = self.remote_robots()
+            if not remote or not answer.get("success"):
+                return answer
+            doc = orjson.loads(answer["message"])
+            info = doc.setdefault("robot_info", {})
+            flat = robot.read() if robot is not None else {}
+            scope, _ = connection_rights(caller.get())
+            for name in remote:
+                if name in info:
+                    continue
+                info[name] = {
+                    "start": None,
+                    "mass": flat.get("robot.mass"),
+                    "inertia": flat.get("robot.inertia"),
+                    "max_linear_velocity": flat.get("robot.max_linear_velocity"),
+                    "max_angular_velocity": flat.get("robot.max_angular_velocity"),
+                    "radius": flat.get("robot.radius"),
+                    "own_params": False,
+                    "remote": True,
+                }
+                if scope in ("*", name) and name not in doc.get("robots", []):
+                    doc.setdefault("robots", []).append(name)
+            doc["robots"] = sorted(doc.get("robots", []))
+            return {**answer, "message": orjson.dumps(doc).decode()}
+
+        service.handler = extended
 
     # -- logging -----------------------------------------------------------------------------
 

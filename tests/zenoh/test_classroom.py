@@ -7,6 +7,7 @@ across the classroom.
 from __future__ import annotations
 
 import asyncio
+import json
 import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
@@ -80,6 +81,14 @@ async def test_a_client_of_one_process_drives_a_robot_of_another(
             values = (await recv_until(conn, lambda m: m.get("id") == "t"))["values"]
             index = values["topics"].index("/a1/odom")
             assert values["types"][index] == "nav_msgs/msg/Odometry"
+            # ...and in /simbridge/access, where the page takes its robots from
+            call = {"op": "call_service", "service": "/simbridge/access", "id": "a"}
+            await send_json(conn, call)
+            answer = await recv_until(conn, lambda m: m.get("id") == "a")
+            access = json.loads(answer["values"]["message"])
+            assert "a1" in access["robots"] and "" in access["robots"]
+            assert access["robot_info"]["a1"]["remote"] is True
+            assert access["robot_info"]["a1"]["max_linear_velocity"] == 0.5
             # a robot name of another process is refused here, with the reason
             spawn = {"op": "call_service", "service": "/spawn", "id": "s", "args": {"name": "a1"}}
             await send_json(conn, spawn)
