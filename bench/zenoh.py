@@ -190,6 +190,8 @@ time.sleep(3)
 start = count[0]
 time.sleep({seconds})
 print(json.dumps({{"messages": count[0] - start}}), flush=True)
+import os
+os._exit(0)  # without waiting for Zenoh's threads
 """
     return subprocess.Popen(
         [sys.executable, "-c", code], cwd=ROOT, stdout=subprocess.PIPE, text=True
