@@ -203,6 +203,19 @@ class ActionTable:
             cancel_goal,
         )
 
+    def add_provider(self, name: str, type_name: str, node: str, provider: Peer) -> Action:
+        """Declare an action served by ``provider`` outside the protocol (another ROS 2 process).
+
+        Goals reach the provider as ``send_action_goal`` and ``cancel_action_goal`` frames, as
+        they reach a client that advertised the action; it answers through
+        :meth:`Goal.feedback` and :meth:`Goal.finish`. :meth:`remove` withdraws it.
+        """
+        canonical = normalize_type(type_name, "action")
+        action = Action(name, canonical, canonical, node, provider=provider)
+        self._install(action)
+        provider.session.own_action(name, canonical)
+        return action
+
     def _advertise(self, peer: Peer, op: o.AdvertiseAction, now: float) -> None:
         name = op.name
         existing = self.actions.get(name)
@@ -286,33 +299,51 @@ class ActionTable:
         return self.graph.converter.from_json(goal_type, args)
 
     def _send_goal(self, peer: Peer, op: o.SendActionGoal, now: float) -> None:
-        name = op.name
+        outcome = self.submit(
+            peer, op.name, op.args, op_id=op.id, written=op.action, feedback=op.feedback
+        )
+        if isinstance(outcome, str):
+            self._fail(peer, op, outcome)
+
+    def submit(
+        self,
+        peer: Peer,
+        name: str,
+        args: Any,
+        *,
+        op_id: OpId | None,
+        written: str,
+        feedback: bool,
+        goal_uuid: bytes | None = None,
+    ) -> Goal | str:
+        """Send a goal of ``peer`` to action ``name``; return the goal or why it was refused.
+
+        ``goal_uuid`` is the goal's id when the sender chose one (a ROS 2 client does).
+        """
         action = self.actions.get(name)
         if action is None:
-            self._fail(peer, op, f"Action {name} does not exist (no server advertised it)")
-            return
+            return f"Action {name} does not exist (no server advertised it)"
         try:
-            message = self._goal_message(action, op.args)
+            message = self._goal_message(action, args)
         except ConversionError as err:
-            self._fail(peer, op, f"invalid goal for {action.type}: {err}")
-            return
+            return f"invalid goal for {action.type}: {err}"
         server_id = f"action_goal:{name}:{next(self._counter)}"
         goal = Goal(
             server_id,
             action,
             peer,
-            op.id,
-            op.action,
-            op.feedback,
+            op_id,
+            written,
+            feedback,
             message,
-            uuid.uuid4().bytes,
+            goal_uuid or uuid.uuid4().bytes,
             self.graph.stamp(),
             self,
         )
         self.goals[server_id] = goal
         if action.server is not None:
             action.server.goal(goal)
-            return
+            return goal
         assert action.provider is not None
         action.provider.send(
             json_frame(
@@ -326,6 +357,7 @@ class ActionTable:
                 }
             )
         )
+        return goal
 
     def _find_own(self, peer: Peer, op_id: OpId | None, name: str) -> Goal | None:
         for goal in self.goals.values():

@@ -363,6 +363,41 @@ class TypeRegistry:
         self._actions[canonical] = names
         return canonical
 
+    def action_wire(self, name: str) -> tuple[str, str, str]:
+        """Return the ROS 2 wire types of an action: (send_goal, get_result, feedback message).
+
+        rcl_action carries an action ``pkg/action/Foo`` as the services ``Foo_SendGoal``
+        (``goal_id`` and ``goal`` in; ``accepted`` and ``stamp`` out) and ``Foo_GetResult``
+        (``goal_id`` in; ``status`` and ``result`` out), the topic type ``Foo_FeedbackMessage``
+        (``goal_id`` and ``feedback``), and the fixed ``action_msgs/srv/CancelGoal`` and
+        ``action_msgs/msg/GoalStatusArray``. The generated types are registered on first use.
+
+        Raises:
+            TypeNotFoundError: the action type is unknown.
+        """
+        canonical = normalize_type(name, "action")
+        goal, result, feedback = self.action(canonical)
+        send_goal, get_result = f"{canonical}_SendGoal", f"{canonical}_GetResult"
+        message = f"{canonical}_FeedbackMessage"
+        if message not in self._store.fielddefs:
+            uuid = "unique_identifier_msgs/UUID goal_id"
+            self.register_many(
+                [
+                    ("msg", f"{send_goal}_Request", f"{uuid}\n{goal} goal"),
+                    (
+                        "msg",
+                        f"{send_goal}_Response",
+                        "bool accepted\nbuiltin_interfaces/Time stamp",
+                    ),
+                    ("msg", f"{get_result}_Request", uuid),
+                    ("msg", f"{get_result}_Response", f"int8 status\n{result} result"),
+                    ("msg", message, f"{uuid}\n{feedback} feedback"),
+                ]
+            )
+            for service in (send_goal, get_result):
+                self._services[service] = (f"{service}_Request", f"{service}_Response")
+        return send_goal, get_result, message
+
 
 _INTERFACES: Any = None
 _ACTIONLIB: Any = None

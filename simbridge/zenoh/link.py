@@ -43,6 +43,7 @@ from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.protocol import Frame, Outgoing, Session
 from simbridge.protocol.ops import CallService, ServiceResponse
+from simbridge.zenoh.actions import ActionBridge, split_action
 from simbridge.zenoh.attachment import Attachment
 from simbridge.zenoh.config import ZenohOptions, session_config
 from simbridge.zenoh.names import (
@@ -134,7 +135,11 @@ class _Caller:
         self.session = session
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        self.link._service_answer(frame)
+        body = orjson.loads(frame.data)
+        if body.get("op") in ("action_feedback", "action_result"):
+            self.link.actions.goal_event(body)  # a ROS 2 client's goal
+        else:
+            self.link._service_answer(body)
 
 
 class _Provider:
@@ -204,6 +209,8 @@ class ZenohLink:
         #: Counters for /healthz.
         self.stats: Counter[str] = Counter()
         self._liveliness_sub: Any = None
+        #: Actions both ways (rcl_action's services and topics).
+        self.actions = ActionBridge(self)
         graph.topics.taps.append(self._on_deliver)
         self._guard_spawn()
         self._extend_access()
@@ -241,6 +248,7 @@ class ZenohLink:
             return
         self.state = "closed"
         self._loop = None  # Zenoh's threads hand nothing more to the event loop
+        self.actions.close()
         for entry in list(self._declared.values()):
             self._undeclare(entry)
         self._declared.clear()
@@ -319,6 +327,7 @@ class ZenohLink:
         self._export_local()
         self._update_subscribers()
         self._update_state()
+        self.actions.tick()
 
     # -- outward ----------------------------------------------------------------------------
 
@@ -356,8 +365,11 @@ class ZenohLink:
                 continue
             if service.type not in self.graph.registry.services:
                 continue
+            if not self.actions.exports_service(service.name):
+                continue  # the cancel service of another process's action
             node = service.node if service.handler is not None else BRIDGE_NODE
             want[("SS", node, service.name)] = ("SS", service.type, DEFAULT_QOS)
+        want.update(self.actions.wanted())
         for key in list(want):
             if key[0] != "NN":
                 want.setdefault(("NN", key[1], ""), ("NN", "", DEFAULT_QOS))
@@ -476,6 +488,10 @@ class ZenohLink:
         except Exception as err:  # a message the CDR writer cannot encode: skip, say so once
             self._log(f"cdr {entry.entity.name}", f"Zenoh: {entry.entity.name} not sent: {err}")
             return
+        self._put_bytes(entry, payload)
+
+    def _put_bytes(self, entry: _Declared, payload: bytes) -> None:
+        """Publish CDR bytes on a declared publisher, with rmw_zenoh's attachment."""
         attachment = Attachment(next(entry.sequence), time.time_ns(), entry.gid).pack()
         try:
             entry.handle.put(payload, attachment=attachment)
@@ -504,6 +520,9 @@ class ZenohLink:
         if name in self.graph.admin_services and self.graph.settings.admin_token is not None:
             self._fail_query(query, f"service {name} needs admin rights; call it from /admin")
             return
+        if self.actions.handles(name):
+            self.actions.on_query(name, type_name, query, attachment)
+            return
         try:
             request_type, _ = self.graph.registry.service(type_name)
             payload = bytes(query.payload.to_bytes()) if query.payload is not None else b""
@@ -517,28 +536,38 @@ class ZenohLink:
         op = CallService(service=name, args=args, id=op_id, timeout=SERVICE_TIMEOUT)
         self.graph.services.call(self._caller, op, name, asyncio.get_running_loop().time())
 
-    def _service_answer(self, frame: Frame) -> None:
+    def _service_answer(self, body: dict[str, Any]) -> None:
         """The graph answered a call from ROS 2: reply to the query."""
-        body = orjson.loads(frame.data)
         pending = self._queries.pop(str(body.get("id")), None)
         if pending is None:
             return
         query, type_name, attachment = pending
+        service = str(body.get("service"))
         if not body.get("result"):
             self._fail_query(query, str(body.get("values")))
-            return
+        else:
+            try:
+                _, response_type = self.graph.registry.service(type_name)
+                msg = self.graph.converter.from_json(response_type, body.get("values") or {})
+            except SimbridgeError as err:
+                self._fail_query(query, f"response does not fit {type_name}: {err}")
+                return
+            self._reply(query, response_type, msg, attachment)
+        if split_action(service) is not None:
+            self.actions.cancelled(service)
+
+    def _reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None:
+        """Reply to a query from ROS 2 with a response message (echoing sequence and GID)."""
         try:
-            _, response_type = self.graph.registry.service(type_name)
-            msg = self.graph.converter.from_json(response_type, body.get("values") or {})
             payload = self.cdr.serialize(response_type, msg)
         except SimbridgeError as err:
-            self._fail_query(query, f"response does not fit {type_name}: {err}")
+            self._fail_query(query, f"response does not fit {response_type}: {err}")
             return
         reply = Attachment(attachment.sequence, time.time_ns(), attachment.gid).pack()
         try:
             query.reply(query.key_expr, payload, attachment=reply)
         except Exception as err:
-            self._log("reply", f"Zenoh: reply to {body.get('service')}: {err}")
+            self._log("reply", f"Zenoh: reply on {query.key_expr}: {err}")
         finally:
             _quietly(query.drop)
 
@@ -590,14 +619,18 @@ class ZenohLink:
         pubs: dict[tuple[str, RemoteNode], tuple[str, bool]] = {}
         subs: dict[tuple[str, RemoteNode], str] = {}
         services: dict[str, Entity] = {}
+        action_parts: list[Entity] = []
         for entity in self._remote.values():
-            if entity.kind == "MP":
+            if entity.kind != "NN" and split_action(entity.name) is not None:
+                action_parts.append(entity)  # an action's service or topic: see ActionBridge
+            elif entity.kind == "MP":
                 owner = RemoteNode(entity.node_fqn, entity.zid)
                 pubs[(entity.name, owner)] = (entity.type, entity.qos.transient_local)
             elif entity.kind == "MS":
                 subs[(entity.name, RemoteNode(entity.node_fqn, entity.zid))] = entity.type
             elif entity.kind == "SS":
                 services.setdefault(entity.name, entity)
+        self.actions.import_remote(action_parts)
         self._import_subscriptions(subs)
         self._import_nodes({e.node_fqn for e in self._remote.values() if e.kind == "NN"})
         for name, owner in list(self._imported_pubs):

@@ -34,6 +34,7 @@ MESSAGES = [
     "geometry_msgs/msg/Twist",
     "std_msgs/msg/String",
     "visualization_msgs/msg/Marker",
+    "action_msgs/msg/GoalStatusArray",
 ]
 SERVICES = [
     "std_srvs/srv/Empty",
@@ -41,7 +42,10 @@ SERVICES = [
     "std_srvs/srv/Trigger",
     "rcl_interfaces/srv/GetParameters",
     "rcl_interfaces/srv/SetParameters",
+    "action_msgs/srv/CancelGoal",
 ]
+#: Actions whose rcl_action wire types (``Foo_SendGoal``, ...) are written for the SDK.
+ACTIONS = ["example_interfaces/action/Fibonacci"]
 
 
 def free_port() -> int:
@@ -69,13 +73,19 @@ def write_definitions(root: Path) -> None:
 
     for name in MESSAGES:
         add(name)
-    for name in SERVICES:
+    wire = [registry.action_wire(name) for name in ACTIONS]
+    for _, _, feedback in wire:
+        add(feedback)
+    for name in SERVICES + [s for w in wire for s in w[:2]]:
         request, response = registry.service(name)
-        pkg, _, short = name.split("/")
-        folder = root / pkg / "srv"
+        pkg, kind, short = name.split("/")
+        folder = root / pkg / kind
         folder.mkdir(parents=True, exist_ok=True)
         text = _qualified(registry, request) + "\n---\n" + _qualified(registry, response)
         (folder / f"{short}.srv").write_text(text)
+        if kind == "action":  # the SDK reads every service type from <pkg>/srv/
+            (root / pkg / "srv").mkdir(parents=True, exist_ok=True)
+            (root / pkg / "srv" / f"{short}.srv").write_text(text)
         for part in (request, response):
             for field in registry.spec(part).fields:
                 if field.nested:
