@@ -26,7 +26,7 @@ from simbridge.errors import ConfigError, SimbridgeError
 
 
 if TYPE_CHECKING:
-    from simbridge.config import ServerSettings
+    from simbridge.config import Environment, ServerSettings
 
 # simbridge.config (pydantic, PyYAML) is imported where it is used: `simbridge healthcheck`, a
 # container's HEALTHCHECK every few seconds, then costs a bare interpreter (it matters on a Pi).
@@ -48,59 +48,59 @@ def _env(name: str, default: str | None) -> str | None:
     return os.environ.get(f"SIMBRIDGE_{name}", default)
 
 
-def _port(text: str) -> int:
-    try:
-        value = int(text)
-    except ValueError:
-        msg = f"'{text}' is not a port number"
-        raise argparse.ArgumentTypeError(msg) from None
-    if not 0 <= value <= 65535:
-        msg = f"port {value} is out of range 0-65535 (0 picks a free port)"
-        raise argparse.ArgumentTypeError(msg)
-    return value
+def _typed(kind: Any) -> Callable[[str], Any]:
+    """An argparse ``type`` checking a value as the settings do (:func:`config.parse_value`)."""
+    from simbridge.config import parse_value
+
+    def parse(text: str) -> Any:
+        try:
+            return parse_value(kind, text)
+        except ValueError as err:
+            raise argparse.ArgumentTypeError(str(err)) from None
+
+    return parse
 
 
-def _add_config_options(parser: argparse.ArgumentParser) -> None:
+def _environment() -> Environment:
+    """Return the validated ``SIMBRIDGE_*`` variables.
+
+    Raises:
+        ConfigError: one is invalid (the text names it).
+    """
+    from simbridge.config import Environment
+
+    return Environment.read(os.environ)
+
+
+def _add_config_options(parser: argparse.ArgumentParser, env: Environment) -> None:
     from simbridge.config import default_params_path, default_world_path
 
     parser.add_argument(
         "--world",
         metavar="FILE",
-        default=_env("WORLD", None),
+        default=env.world,
         help=f"world file (YAML: walls, obstacles, robot start pose); "
         f"default: the bundled {default_world_path().name} [SIMBRIDGE_WORLD]",
     )
     parser.add_argument(
         "--params",
         metavar="FILE",
-        default=_env("PARAMS", None),
+        default=env.params,
         help=f"robot and LiDAR parameter file (YAML); default: the bundled "
         f"{default_params_path().name}, the course's Raspberry Pi 4B platform [SIMBRIDGE_PARAMS]",
     )
 
 
-def _positive(kind: type[int] | type[float]) -> Callable[[str], float]:
-    def parse(text: str) -> float:
-        try:
-            value = kind(text)
-        except ValueError:
-            msg = f"'{text}' is not a number"
-            raise argparse.ArgumentTypeError(msg) from None
-        if not value > 0:
-            msg = f"{value} must be greater than 0"
-            raise argparse.ArgumentTypeError(msg)
-        return value
-
-    return parse
-
-
-def _add_security_options(parser: argparse.ArgumentParser) -> None:
+def _add_security_options(parser: argparse.ArgumentParser, env: Environment) -> None:
     """Options of docs/security.md: tokens, TLS, origins and limits."""
+    from simbridge.config import Count, Seconds, ServerSettings
+
+    defaults = ServerSettings()
     group = parser.add_argument_group("security and limits (see docs/security.md)")
     group.add_argument(
         "--client-tokens",
         metavar="FILE",
-        default=_env("CLIENT_TOKENS", None),
+        default=env.client_tokens,
         help="YAML file 'tokens: {TOKEN: ROBOT}': clients must connect with ?token=TOKEN and "
         "may command only their robot (see config/classroom_tokens.example.yaml) "
         "[SIMBRIDGE_CLIENT_TOKENS]",
@@ -108,58 +108,58 @@ def _add_security_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--auth-secret-file",
         metavar="FILE",
-        default=_env("AUTH_SECRET_FILE", None),
+        default=env.auth_secret_file,
         help="file holding a rosauth secret (one line): clients may authenticate with the "
         "rosbridge 'auth' op [SIMBRIDGE_AUTH_SECRET_FILE]",
     )
     group.add_argument(
         "--allowed-origins",
         metavar="LIST",
-        default=_env("ALLOWED_ORIGINS", None),
+        default=env.allowed_origins,
         help="comma-separated Origins whose pages may connect, e.g. https://pi.local:8080 "
         "(default: any) [SIMBRIDGE_ALLOWED_ORIGINS]",
     )
     group.add_argument(
         "--certfile",
         metavar="PEM",
-        default=_env("CERTFILE", None),
+        default=env.certfile,
         help="TLS certificate chain: serve wss:// and https:// [SIMBRIDGE_CERTFILE]",
     )
     group.add_argument(
         "--keyfile",
         metavar="PEM",
-        default=_env("KEYFILE", None),
+        default=env.keyfile,
         help="TLS private key (default: in the certfile) [SIMBRIDGE_KEYFILE]",
     )
     group.add_argument(
         "--max-clients",
-        type=_positive(int),
-        default=int(_env("MAX_CLIENTS", "200") or 200),
+        type=_typed(Count),
+        default=env.max_clients or defaults.max_clients,
         help="WebSocket clients at most (default: 200) [SIMBRIDGE_MAX_CLIENTS]",
     )
     group.add_argument(
         "--max-message-size",
-        type=_positive(int),
-        default=int(_env("MAX_MESSAGE_SIZE", "10000000") or 10_000_000),
+        type=_typed(Count),
+        default=env.max_message_size or defaults.max_message_size,
         help="largest incoming message, bytes (default: 10000000) [SIMBRIDGE_MAX_MESSAGE_SIZE]",
     )
     group.add_argument(
         "--stall-timeout",
-        type=_positive(float),
-        default=float(_env("STALL_TIMEOUT", "30") or 30),
+        type=_typed(Seconds),
+        default=env.stall_timeout or defaults.stall_timeout,
         help="disconnect a client that reads nothing for this many seconds while messages "
         "wait for it (default: 30) [SIMBRIDGE_STALL_TIMEOUT]",
     )
     group.add_argument(
         "--ping-interval",
-        type=_positive(float),
-        default=float(_env("PING_INTERVAL", "20") or 20),
+        type=_typed(Seconds),
+        default=env.ping_interval or defaults.ping_interval,
         help="keepalive ping every this many seconds; a peer that does not answer within "
         "as long is dropped (default: 20) [SIMBRIDGE_PING_INTERVAL]",
     )
 
 
-def _add_zenoh_options(parser: argparse.ArgumentParser) -> None:
+def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> None:
     """Options of ROS 2 over Zenoh (the ``[zenoh]`` extra; see the README)."""
     group = parser.add_argument_group(
         'ROS 2 through Zenoh, as rmw_zenoh (needs: pip install "simbridge[zenoh]")'
@@ -167,7 +167,7 @@ def _add_zenoh_options(parser: argparse.ArgumentParser) -> None:
     group.add_argument(
         "--zenoh",
         action="store_true",
-        default=(_env("ZENOH", "") or "").lower() in ("1", "true", "yes"),
+        default=bool(env.zenoh),
         help="join the ROS 2 graph as an rmw_zenoh node does: peer, router tcp/localhost:7447, "
         "domain ROS_DOMAIN_ID (default 0); ZENOH_SESSION_CONFIG_URI and ZENOH_CONFIG_OVERRIDE "
         "apply as for rmw_zenoh [SIMBRIDGE_ZENOH]",
@@ -262,7 +262,10 @@ def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
     return out
 
 
-def _run_parser() -> argparse.ArgumentParser:
+def _run_parser(env: Environment) -> argparse.ArgumentParser:
+    from simbridge.config import Port, ServerSettings
+
+    defaults = ServerSettings()
     commands = "\n".join(f"  {name:<14} {text}" for name, (text, _) in COMMANDS.items())
     parser = argparse.ArgumentParser(
         prog="simbridge",
@@ -277,21 +280,21 @@ def _run_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"simbridge {__version__}")
     parser.add_argument(
         "--host",
-        default=_env("HOST", "0.0.0.0"),
+        default=env.host or defaults.host,
         help="address to listen on; 127.0.0.1 keeps it on this machine "
         "(default: 0.0.0.0, every interface) [SIMBRIDGE_HOST]",
     )
     parser.add_argument(
         "--port",
-        type=_port,
-        default=_port(_env("PORT", "9090") or "9090"),
+        type=_typed(Port),
+        default=defaults.port if env.port is None else env.port,
         help="rosbridge WebSocket port, ws://HOST:PORT/ (default: 9090; 0 picks a free port) "
         "[SIMBRIDGE_PORT]",
     )
     parser.add_argument(
         "--http-port",
-        type=_port,
-        default=_port(_env("HTTP_PORT", "8080") or "8080"),
+        type=_typed(Port),
+        default=defaults.http_port if env.http_port is None else env.http_port,
         help="HTTP port of the browser page and /healthz (default: 8080) [SIMBRIDGE_HTTP_PORT]",
     )
     parser.add_argument(
@@ -300,34 +303,34 @@ def _run_parser() -> argparse.ArgumentParser:
         help="do not serve HTTP on a port of its own (the WebSocket port still answers "
         "/healthz and the page)",
     )
-    _add_config_options(parser)
-    _add_security_options(parser)
-    _add_zenoh_options(parser)
+    _add_config_options(parser, env)
+    _add_security_options(parser, env)
+    _add_zenoh_options(parser, env)
     parser.add_argument(
         "--admin-token",
         metavar="TOKEN",
-        default=_env("ADMIN_TOKEN", None),
+        default=env.admin_token,
         help="token the instructor's page http://HOST:HTTP-PORT/admin needs for every change "
         "(default: none, every admin change is refused) [SIMBRIDGE_ADMIN_TOKEN]",
     )
     parser.add_argument(
         "--no-sim",
         action="store_true",
-        default=(_env("NO_SIM", "") or "").lower() in ("1", "true", "yes"),
+        default=bool(env.no_sim),
         help="run the bridge alone, without the simulated world and robot (with --zenoh: a "
         "rosbridge in front of ROS 2 nodes, or a classroom front-end) [SIMBRIDGE_NO_SIM]",
     )
     parser.add_argument(
         "--use-sim-time",
         action="store_true",
-        default=(_env("USE_SIM_TIME", "") or "").lower() in ("1", "true", "yes"),
+        default=bool(env.use_sim_time),
         help="stamp headers with the simulated time published on /clock instead of the wall "
         "clock (as ROS nodes with use_sim_time:=true expect) [SIMBRIDGE_USE_SIM_TIME]",
     )
     parser.add_argument(
         "--demo-nodes",
         action="store_true",
-        default=(_env("DEMO_NODES", "") or "").lower() in ("1", "true", "yes"),
+        default=bool(env.demo_nodes),
         help="also run the ROS tutorial nodes: talker/listener on /chatter, /add_two_ints, "
         "the /fibonacci action (ROS 2 and ROS 1 actionlib); or demo_nodes: true in the world "
         "file [SIMBRIDGE_DEMO_NODES]",
@@ -335,7 +338,7 @@ def _run_parser() -> argparse.ArgumentParser:
     parser.add_argument(
         "--record",
         metavar="DIR",
-        default=_env("RECORD", None),
+        default=env.record,
         help="record topics into the rosbag2 MCAP bag DIR while serving (finished on stop) "
         "[SIMBRIDGE_RECORD]",
     )
@@ -348,7 +351,7 @@ def _run_parser() -> argparse.ArgumentParser:
     )
     parser.add_argument(
         "--log-level",
-        default=_env("LOG_LEVEL", "info"),
+        default=env.log_level or "info",
         choices=["debug", "info", "warning", "error"],
         help="log verbosity (default: info) [SIMBRIDGE_LOG_LEVEL]",
     )
@@ -429,12 +432,17 @@ def _release_startup_memory() -> None:
 
 
 def _cmd_run(argv: Sequence[str]) -> int:
-    from simbridge.config import ServerSettings, load_params, load_world
+    from simbridge.config import load_params, load_world, server_settings
 
-    args = _run_parser().parse_args(argv)
+    try:
+        env = _environment()
+    except ConfigError as err:
+        print(f"simbridge: {err}", file=sys.stderr)
+        return 2
+    args = _run_parser(env).parse_args(argv)
     setup_logging(args.log_level)
     try:
-        settings = ServerSettings(
+        settings = server_settings(
             host=args.host,
             port=args.port,
             http_port=None if args.no_http else args.http_port,
@@ -462,7 +470,12 @@ def _cmd_check_config(argv: Sequence[str]) -> int:
         prog="simbridge check-config",
         description="Validate a world and a parameter file, as the server does at startup.",
     )
-    _add_config_options(parser)
+    try:
+        env = _environment()
+    except ConfigError as err:
+        print(f"simbridge: {err}", file=sys.stderr)
+        return 2
+    _add_config_options(parser, env)
     args = parser.parse_args(argv)
     try:
         world = load_world(args.world)

@@ -11,25 +11,36 @@ from __future__ import annotations
 
 import math
 import re
-from collections.abc import Sequence
-from dataclasses import dataclass, field
+from collections.abc import Callable, Mapping, Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any, Literal
 
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator
+from pydantic import (
+    BaseModel,
+    ConfigDict,
+    Field,
+    TypeAdapter,
+    ValidationError,
+    field_validator,
+)
 
 from simbridge.errors import ConfigError
 
 
 __all__ = [
+    "Count",
+    "Environment",
     "LidarParams",
     "NamedRobotSpec",
     "Params",
+    "Port",
+    "Rate",
     "RobotParams",
     "RobotSpec",
     "SafetyParams",
+    "Seconds",
     "ServerSettings",
     "SimParams",
     "WorldSpec",
@@ -38,7 +49,9 @@ __all__ = [
     "load_client_tokens",
     "load_params",
     "load_world",
+    "parse_value",
     "resource_dir",
+    "server_settings",
 ]
 
 
@@ -416,91 +429,105 @@ def _ring(points: list[tuple[float, float]]) -> list[tuple[float, float, float, 
     return [(*points[k], *points[(k + 1) % len(points)]) for k in range(len(points))]
 
 
-@dataclass(frozen=True, kw_only=True)
-class ServerSettings:
-    """Network and limit settings of one simbridge process (command-line options)."""
+#: Value types of the server settings. Each bound is written once, here, and holds alike for
+#: ``ServerSettings(...)``, the command line and the ``SIMBRIDGE_*`` environment variables.
+Port = Annotated[int, Field(ge=0, le=65535, description="TCP port; 0 picks a free one")]
+Count = Annotated[int, Field(gt=0)]
+Seconds = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+Rate = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+LogLevel = Literal["debug", "info", "warning", "error"]
+
+
+class ServerSettings(BaseModel):
+    """Network and limit settings of one simbridge process (command-line options).
+
+    Validated like the files: ``ServerSettings(stall_timeout=-5)`` raises a pydantic
+    ``ValidationError`` naming the field; :func:`server_settings` turns it into a
+    :class:`~simbridge.errors.ConfigError`.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
 
     host: str = "0.0.0.0"
-    port: int = 9090
-    http_port: int | None = 8080
+    port: Port = 9090
+    http_port: Port | None = 8080
     #: Largest incoming WebSocket message, bytes (rosbridge's max_message_size is 10 MB).
-    max_message_size: int = 10_000_000
+    max_message_size: Count = 10_000_000
     #: Pending outgoing bytes per client before the oldest queued messages are dropped.
-    max_queue_bytes: int = 8_000_000
+    max_queue_bytes: Count = 8_000_000
     #: Pending messages per subscription when the client asked for queue_length 0.
-    default_queue_length: int = 100
+    default_queue_length: Count = 100
     #: Seconds a service call may wait for a client provider when the call gives no timeout.
-    service_timeout: float = 5.0
+    service_timeout: Seconds = 5.0
     #: WebSocket keepalive ping interval and timeout, seconds (None disables).
-    ping_interval: float | None = 20.0
-    ping_timeout: float | None = 20.0
+    ping_interval: Seconds | None = 20.0
+    ping_timeout: Seconds | None = 20.0
     #: Token the instructor's /admin needs for every change (None: every change is refused).
     admin_token: str | None = None
     #: Stamp headers with simulated time (``/clock``) instead of the wall clock.
     use_sim_time: bool = False
     #: Start the ROS tutorial nodes (also ``demo_nodes: true`` in the world file).
     demo_nodes: bool = False
-    extra: dict[str, Any] = field(default_factory=dict)
     # -- reliability and security (docs/security.md); admin_token above also guards the
     # administrative ROS services (when it is None they are open: a laptop on its own) --
     #: Connected WebSocket clients at most; one more is refused with HTTP 503.
-    max_clients: int = 200
+    max_clients: Count = 200
     #: Subscribed topic spellings per client at most.
-    max_subscriptions: int = 200
+    max_subscriptions: Count = 200
     #: Advertised topics, services and actions per client at most.
-    max_advertisements: int = 100
+    max_advertisements: Count = 100
     #: Budgets of what one client may make the server hold (docs/security.md), and what all
     #: clients together may (``global_*``). Subscribe ids over every topic, and on one topic:
-    max_subscribe_ids: int = 1_000
-    max_ids_per_subscription: int = 100
-    global_subscribe_ids: int = 20_000
+    max_subscribe_ids: Count = 1_000
+    max_ids_per_subscription: Count = 100
+    global_subscribe_ids: Count = 20_000
     #: Advertise ids over every topic.
-    max_advertise_ids: int = 1_000
-    global_advertise_ids: int = 20_000
+    max_advertise_ids: Count = 1_000
+    global_advertise_ids: Count = 20_000
     #: Calls waiting for a client provider, and the longest wait (seconds; ``timeout: 0`` too).
-    max_pending_calls: int = 100
-    global_pending_calls: int = 2_000
-    max_call_timeout: float = 60.0
+    max_pending_calls: Count = 100
+    global_pending_calls: Count = 2_000
+    max_call_timeout: Seconds = 60.0
     #: Incomplete fragmented messages per client; their bytes (UTF-8) are bounded per client
     #: by max_message_size and for all clients by global_fragment_bytes.
-    max_fragment_sets: int = 16
-    global_fragment_bytes: int = 40_000_000
+    max_fragment_sets: Count = 16
+    global_fragment_bytes: Count = 40_000_000
     #: Bytes of latched messages (JSON) a client's publishes leave on the server.
-    max_latched_bytes: int = 16_000_000
-    global_latched_bytes: int = 64_000_000
+    max_latched_bytes: Count = 16_000_000
+    global_latched_bytes: Count = 64_000_000
     #: ``status`` refusals per client per second (one per cause per second); the rest counted.
-    statuses_per_second: int = 10
+    statuses_per_second: Count = 10
     #: Share of the loop's time one client's incoming frames may take (0.25: a quarter).
-    client_work_share: float = 0.25
+    client_work_share: Annotated[float, Field(gt=0, le=1)] = 0.25
     #: Sustained ``publish`` ops per second per client, and the burst allowed above it.
-    publish_rate: float = 200.0
-    publish_burst: int = 400
+    publish_rate: Rate = 200.0
+    publish_burst: Count = 400
     #: Sustained incoming WebSocket messages per second per client, and the burst.
-    message_rate: float = 1000.0
-    message_burst: int = 2000
+    message_rate: Rate = 1000.0
+    message_burst: Count = 2000
     #: Seconds a client may go without reading while messages wait for it; then it is
     #: disconnected (None: never).
-    stall_timeout: float | None = 30.0
+    stall_timeout: Seconds | None = 30.0
     #: Seconds a connection that owes a token (no ``?token=`` on a server that requires one)
     #: has to authenticate with the ``auth`` op; then it is closed.
-    auth_timeout: float = 5.0
+    auth_timeout: Seconds = 5.0
     #: Connections that owe a token, at most at once (their own pool: they never take the
     #: slots of ``max_clients`` that authenticated students need).
-    max_unauthenticated: int = 20
+    max_unauthenticated: Count = 20
     #: TF requests (``/republish_tfs`` topics and ``/tf2_web_republisher`` goals) per client.
-    tf_requests_per_client: int = 10
+    tf_requests_per_client: Count = 10
     #: Transforms a second (frames x rate) one client's TF requests may send, and all clients'.
-    tf_transforms_per_client: float = 1000.0
-    tf_transforms_total: float = 10000.0
+    tf_transforms_per_client: Rate = 1000.0
+    tf_transforms_total: Rate = 10000.0
     #: Longest ``timeout`` of a ``/republish_tfs`` topic without subscribers, seconds.
-    tf_max_timeout: float = 60.0
+    tf_max_timeout: Seconds = 60.0
     #: Client tokens (query parameter ``?token=``): token -> scope. A scope is ``"*"`` (any
     #: topic) or a robot name (publish only under ``/<name>/``). Empty: no client tokens.
-    client_tokens: dict[str, str] = field(default_factory=dict)
+    client_tokens: dict[str, str] = Field(default_factory=dict)
     #: rosauth shared secret for the ``auth`` op (None: the op is refused).
     auth_secret: str | None = None
     #: Seconds of clock difference an ``auth`` op's ``t`` may have (rosauth's allowed_time_delta).
-    auth_time_delta: float = 5.0
+    auth_time_delta: Seconds = 5.0
     #: Allowed ``Origin`` headers of WebSocket upgrades (None: any; browsers only send one).
     allowed_origins: tuple[str, ...] | None = None
     #: TLS certificate chain and private key (PEM): serve wss:// and https://.
@@ -513,10 +540,92 @@ class ServerSettings:
         return bool(self.client_tokens) or self.auth_secret is not None
 
 
-def _format_errors(err: ValidationError) -> str:
+def server_settings(**values: Any) -> ServerSettings:
+    """Return validated :class:`ServerSettings`.
+
+    Raises:
+        ConfigError: a value is out of its bounds or of the wrong type, or a name is unknown;
+            the text names each (``settings: stall_timeout: Input should be greater than 0``).
+    """
+    try:
+        return ServerSettings(**values)
+    except ValidationError as err:
+        raise ConfigError(f"settings: {_format_errors(err)}") from None
+
+
+def parse_value(kind: Any, text: str) -> Any:
+    """Return ``text`` as a value of ``kind`` (:data:`Port`, :data:`Count`, :data:`Seconds`...).
+
+    Raises:
+        ValueError: the text is not such a value; the message says why, in the words of the
+            settings' own errors (``Input should be greater than 0 (got '-5')``).
+    """
+    try:
+        return TypeAdapter(kind).validate_python(text)
+    except ValidationError as err:
+        raise ValueError(
+            _format_errors(err, lambda loc: loc).removeprefix("(top level): ")
+        ) from None
+
+
+class Environment(BaseModel):
+    """The ``SIMBRIDGE_*`` environment variables of the ``simbridge`` command, validated.
+
+    Each field is the variable without its prefix, lower-cased (``SIMBRIDGE_MAX_CLIENTS`` ->
+    ``max_clients``); unset or empty variables are None (the option's default applies). The
+    command line wins over the environment.
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+    host: str | None = None
+    port: Port | None = None
+    http_port: Port | None = None
+    world: str | None = None
+    params: str | None = None
+    client_tokens: str | None = None
+    auth_secret_file: str | None = None
+    allowed_origins: str | None = None
+    certfile: str | None = None
+    keyfile: str | None = None
+    max_clients: Count | None = None
+    max_message_size: Count | None = None
+    stall_timeout: Seconds | None = None
+    ping_interval: Seconds | None = None
+    admin_token: str | None = None
+    use_sim_time: bool | None = None
+    demo_nodes: bool | None = None
+    no_sim: bool | None = None
+    zenoh: bool | None = None
+    record: str | None = None
+    log_level: LogLevel | None = None
+
+    @classmethod
+    def read(cls, environ: Mapping[str, str]) -> Environment:
+        """Validate the variables of ``environ`` (e.g. ``os.environ``) that this command reads.
+
+        Raises:
+            ConfigError: a variable's value is invalid; the text names the variable, the value
+                and the bound, e.g. ``environment variable SIMBRIDGE_STALL_TIMEOUT: Input
+                should be greater than 0 (got '-5')``.
+        """
+        values = {
+            name: environ[f"SIMBRIDGE_{name.upper()}"]
+            for name in cls.model_fields
+            if environ.get(f"SIMBRIDGE_{name.upper()}", "").strip()
+        }
+        try:
+            return cls(**values)
+        except ValidationError as err:
+            text = _format_errors(err, lambda loc: f"environment variable SIMBRIDGE_{loc.upper()}")
+            raise ConfigError(text) from None
+
+
+def _format_errors(err: ValidationError, name: Callable[[str], str] = str) -> str:
     parts = []
     for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"]) or "(top level)"
+        loc = ".".join(str(p) for p in e["loc"])
+        loc = name(loc) if loc else "(top level)"
         text = e["msg"]
         if e["type"] == "extra_forbidden":
             text = "unknown key (check its spelling and nesting)"

@@ -183,3 +183,65 @@ async def test_use_sim_time_flag_stamps_headers_with_sim_time() -> None:
     finally:
         proc.terminate()
         await proc.wait()
+
+
+@pytest.mark.parametrize(
+    ("variable", "value", "why"),
+    [
+        ("SIMBRIDGE_STALL_TIMEOUT", "-5", "greater than 0 (got '-5')"),
+        ("SIMBRIDGE_MAX_CLIENTS", "abc", "valid integer"),
+        ("SIMBRIDGE_PORT", "70000", "less than or equal to 65535"),
+        ("SIMBRIDGE_PING_INTERVAL", "nan", "finite number"),
+        ("SIMBRIDGE_USE_SIM_TIME", "maybe", "valid boolean"),
+        ("SIMBRIDGE_LOG_LEVEL", "loud", "'debug', 'info', 'warning' or 'error'"),
+    ],
+)
+@pytest.mark.parametrize("command", [[], ["check-config"]])
+def test_bad_environment_variable_is_refused_naming_it(
+    variable: str,
+    value: str,
+    why: str,
+    command: list[str],
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A bad SIMBRIDGE_* value stops the command with exit 2 and names the variable (no trace)."""
+    from simbridge.cli import main
+
+    monkeypatch.setenv(variable, value)
+    assert main(command) == 2
+    err = capsys.readouterr().err
+    assert err.startswith(f"simbridge: environment variable {variable}: "), err
+    assert why in err
+    assert "Traceback" not in err
+
+
+@pytest.mark.parametrize(
+    ("option", "value", "why"),
+    [
+        ("--stall-timeout", "-5", "greater than 0 (got '-5')"),
+        ("--max-clients", "abc", "valid integer"),
+        ("--port", "70000", "less than or equal to 65535"),
+    ],
+)
+def test_bad_option_is_refused_like_the_environment(
+    option: str, value: str, why: str, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The same bounds on the command line: argparse's exit 2 and the same words."""
+    from simbridge.cli import main
+
+    with pytest.raises(SystemExit) as exc:
+        main([option, value])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert f"argument {option}: Input should be" in err
+    assert why in err
+
+
+def test_empty_environment_variable_means_the_default(monkeypatch: pytest.MonkeyPatch) -> None:
+    """SIMBRIDGE_PORT= (set but empty, as compose's ${VAR:-} gives) is the option's default."""
+    from simbridge.config import Environment
+
+    env = Environment.read({"SIMBRIDGE_PORT": "", "SIMBRIDGE_MAX_CLIENTS": "  "})
+    assert env.port is None and env.max_clients is None
+    assert Environment.read({"SIMBRIDGE_MAX_CLIENTS": "7"}).max_clients == 7

@@ -3,12 +3,15 @@ from __future__ import annotations
 from pathlib import Path
 
 import pytest
+from pydantic import ValidationError
 
 from simbridge.config import (
     Params,
+    ServerSettings,
     load_params,
     load_world,
     resource_dir,
+    server_settings,
 )
 from simbridge.errors import ConfigError
 
@@ -196,3 +199,22 @@ def test_a_world_lists_static_frames_and_turns_on_the_tutorial_nodes(tmp_path: P
 def test_bad_frames_fail_naming_the_entry(tmp_path: Path, text: str, error: str) -> None:
     with pytest.raises(ConfigError, match=error.replace("[", r"\[")):
         load_world(write(tmp_path, "bad.yaml", text))
+
+
+def test_server_settings_are_validated_naming_the_field() -> None:
+    """ServerSettings holds the same bounds as the options: -5 s and unknown names refused."""
+    with pytest.raises(ConfigError, match=r"^settings: stall_timeout: .*greater than 0 \(got -5\)"):
+        server_settings(stall_timeout=-5)
+    with pytest.raises(ConfigError, match=r"max_clinets: unknown key"):
+        server_settings(max_clinets=3)
+    with pytest.raises(ConfigError, match=r"port: .*65535"):
+        server_settings(port=70000)
+    assert server_settings(stall_timeout=None).stall_timeout is None
+    assert ServerSettings().max_clients == 200
+
+
+def test_server_settings_cannot_be_changed_after_validation() -> None:
+    """Settings are validated once: a later assignment is refused, not slipped in."""
+    settings = ServerSettings()
+    with pytest.raises(ValidationError):
+        settings.max_clients = -1  # type: ignore[misc]
