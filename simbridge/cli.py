@@ -2,8 +2,11 @@
 
 ``simbridge [options]`` runs the server; ``simbridge COMMAND ...`` runs a sub-command
 (``check-config``, ``healthcheck``; see ``simbridge --help``). Every option can also be set by
-an environment variable ``SIMBRIDGE_<OPTION>`` (e.g. ``SIMBRIDGE_PORT=9091``); the command line
-wins.
+an environment variable ``SIMBRIDGE_<OPTION>`` (e.g. ``SIMBRIDGE_PORT=9091``), validated with the
+option's own bounds (:class:`~simbridge.config.Environment`): a bad value is refused naming the
+variable, with exit code 2 as a bad option is. The command line wins. ``healthcheck`` reads
+``SIMBRIDGE_PORT`` without pydantic (it runs every few seconds in a container): a bad port is an
+unhealthy probe.
 """
 
 from __future__ import annotations
