@@ -40,7 +40,7 @@ from typing import Any, Protocol
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
 from simbridge.graph.services import ServiceTable, caller
 from simbridge.graph.topics import BRIDGE_NODE, Peer
-from simbridge.msgs import Converter, TypeRegistry, normalize_type
+from simbridge.msgs import Converter, TypeRegistry, normalize_type, positional_args
 from simbridge.protocol import OpId, json_frame, ops as o
 
 
@@ -295,7 +295,7 @@ class ActionTable:
             args = {}
         elif isinstance(args, list):
             names = [f.name for f in registry.spec(goal_type).fields]
-            args = dict(zip(names, args, strict=False))
+            args = positional_args(args, names, f"goal of {action.type}")
         return self.graph.converter.from_json(goal_type, args)
 
     def _send_goal(self, peer: Peer, op: o.SendActionGoal, now: float) -> None:

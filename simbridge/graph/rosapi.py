@@ -10,10 +10,10 @@ from __future__ import annotations
 import json
 from typing import TYPE_CHECKING, Any
 
-from simbridge.errors import ServiceError, TypeNotFoundError
+from simbridge.errors import ConversionError, ServiceError, TypeNotFoundError
 from simbridge.graph.paramservices import install_parameter_services
 from simbridge.graph.topics import BRIDGE_NODE
-from simbridge.msgs import normalize_type, typedefs
+from simbridge.msgs import normalize_type, positional_args, typedefs
 
 
 if TYPE_CHECKING:
@@ -37,15 +37,18 @@ def visible(name: str) -> bool:
 def request_fields(args: Any, fields: tuple[str, ...], service: str) -> dict[str, Any]:
     """Return the request of a call as a dict: ``args`` is an object, a list or absent.
 
-    A list is zipped onto ``fields`` in declaration order (rosbridge section 3.5).
+    A list is zipped onto ``fields`` in declaration order (:func:`~simbridge.msgs.positional_args`).
 
     Raises:
-        ServiceError: a key that is not a request field.
+        ServiceError: a key that is not a request field, or more values than fields.
     """
     if args is None:
         return {}
     if isinstance(args, list):
-        return dict(zip(fields, args, strict=False))
+        try:
+            return positional_args(args, fields, f"{service}: request")
+        except ConversionError as err:
+            raise ServiceError(str(err)) from None
     unknown = [k for k in args if k not in fields]
     if unknown:
         expected = ", ".join(fields) if fields else "no fields"

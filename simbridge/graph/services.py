@@ -32,7 +32,7 @@ from typing import Any
 
 from simbridge.errors import ConversionError, ServiceError, TypeNotFoundError
 from simbridge.graph.topics import BRIDGE_NODE, Peer
-from simbridge.msgs import Converter, TypeRegistry, short_type
+from simbridge.msgs import Converter, TypeRegistry, positional_args, short_type
 from simbridge.protocol import Frame, OpId, json_frame, split_frame
 from simbridge.protocol.ops import CallService, ServiceResponse
 
@@ -110,10 +110,10 @@ def typed_calls(registry: TypeRegistry, converter: Converter) -> tuple[Prepare, 
             args = {}
         elif isinstance(args, list):
             names = [f.name for f in registry.spec(request).fields]
-            if len(args) > len(names):
-                msg = f"request of {type_name} has {len(names)} fields, got {len(args)} args"
-                raise ServiceError(msg)
-            args = dict(zip(names, args, strict=False))
+            try:
+                args = positional_args(args, names, f"request of {type_name}")
+            except ConversionError as err:
+                raise ServiceError(str(err)) from None
         return convert(request, args, "request")
 
     def finish(type_name: str, values: Any) -> Any:

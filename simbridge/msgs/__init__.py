@@ -6,7 +6,7 @@ accepted as ``pkg/Type`` and ``pkg/msg/Type``.
 
 from __future__ import annotations
 
-from simbridge.msgs.convert import Converter, Stamp
+from simbridge.msgs.convert import Converter, Stamp, positional_args
 from simbridge.msgs.registry import (
     FieldSpec,
     MessageSpec,
@@ -24,6 +24,7 @@ __all__ = [
     "Stamp",
     "TypeRegistry",
     "normalize_type",
+    "positional_args",
     "short_type",
     "typedefs",
 ]

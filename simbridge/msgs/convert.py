@@ -31,7 +31,7 @@ import base64
 import binascii
 import math
 import sys
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from typing import Any
 
 import numpy as np
@@ -40,7 +40,7 @@ from simbridge.errors import ConversionError
 from simbridge.msgs.registry import FieldSpec, TypeRegistry
 
 
-__all__ = ["FLOAT32_MAX", "INT_RANGES", "NUMPY_DTYPES", "Converter", "Stamp"]
+__all__ = ["FLOAT32_MAX", "INT_RANGES", "NUMPY_DTYPES", "Converter", "Stamp", "positional_args"]
 
 #: A clock giving (sec, nanosec) of "now" for header stamps and ``"now"`` times.
 Stamp = Callable[[], tuple[int, int]]
@@ -82,6 +82,23 @@ _FLOATS = frozenset({"float32", "float64"})
 _FLOAT_MAX = sys.float_info.max
 _TIME_TYPES = frozenset({"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"})
 _HEADER = "std_msgs/msg/Header"
+
+
+def positional_args(args: list[Any], fields: Sequence[str], what: str) -> dict[str, Any]:
+    """Return list ``args`` of a call or goal as an object: zipped onto ``fields`` in order.
+
+    rosbridge protocol reference section 3.5 (``args: [a, b]`` maps positionally onto the request
+    fields). Fewer values leave the rest to their defaults; more values than fields is refused
+    (rosbridge drops them silently; a value sent to no field is a mistake worth telling).
+
+    Raises:
+        ConversionError: more values than fields; the text names ``what`` and the fields.
+    """
+    if len(args) > len(fields):
+        expected = ", ".join(fields) or "no fields"
+        msg = f"{what} has {len(fields)} fields ({expected}), got {len(args)} positional args"
+        raise ConversionError(msg)
+    return dict(zip(fields, args, strict=False))
 
 
 def _jtype(value: object) -> str:

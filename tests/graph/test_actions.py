@@ -164,3 +164,19 @@ def test_unknown_action_type_passes_goals_and_results_through(graph: Graph) -> N
         result=True,
     )
     assert caller.take()[0]["values"] == {"any": 1}
+
+
+def test_goal_list_args_follow_the_same_positional_rule_as_calls(graph: Graph) -> None:
+    """[5] is {order: 5}; [5, 6] has a value for no field: refused to the caller only."""
+    server, caller = served(graph)
+    send = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": "g"}
+    op(caller, graph, **send, args=[5])
+    (goal,) = server.take()
+    assert goal["args"] == {"order": 5}
+    op(caller, graph, **send, args=[5, 6])
+    assert server.take() == []
+    (refused,) = caller.take()
+    assert (
+        refused["result"] is False
+        and "1 fields (order), got 2 positional args" in refused["values"]
+    )

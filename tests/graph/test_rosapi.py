@@ -160,3 +160,13 @@ def test_details_services_and_versions(graph: Graph) -> None:
     assert call(graph, "/rosapi/get_ros_version")["values"] == {"version": 2, "distro": "jazzy"}
     stamp = call(graph, "/rosapi/get_time")["values"]["time"]
     assert stamp["sec"] == stamp["secs"] and stamp["nanosec"] == stamp["nsecs"]
+
+
+def test_in_process_services_refuse_more_list_args_than_fields() -> None:
+    """A direct call of an in-process handler follows the same rule as a client's call."""
+    from simbridge.errors import ServiceError
+    from simbridge.graph.rosapi import request_fields
+
+    assert request_fields(["/odom"], ("topic",), "/rosapi/topic_type") == {"topic": "/odom"}
+    with pytest.raises(ServiceError, match=r"/rosapi/topic_type: request has 1 fields \(topic\)"):
+        request_fields(["/odom", "extra"], ("topic",), "/rosapi/topic_type")

@@ -235,3 +235,22 @@ def test_responses_are_fragmented_for_clients_that_ask(graph: Graph) -> None:
     assert {p["total"] for p in pieces} == {len(pieces)}
     whole = json.loads("".join(p["data"] for p in sorted(pieces, key=lambda p: p["num"])))
     assert whole["op"] == "service_response" and whole["id"] == "x"
+
+
+def test_more_list_args_than_request_fields_is_refused_naming_the_fields(graph: Graph) -> None:
+    """AddTwoInts has (a, b): [1, 2, 3] is refused before the provider, result false."""
+    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
+    op(
+        provider,
+        graph,
+        op="advertise_service",
+        service="/add",
+        type="example_interfaces/AddTwoInts",
+    )
+    op(caller, graph, op="call_service", service="/add", args=[1, 2, 3], id=8)
+    assert provider.take() == []
+    (answer,) = caller.take()
+    assert answer["result"] is False
+    assert answer["values"] == (
+        "request of example_interfaces/AddTwoInts has 2 fields (a, b), got 3 positional args"
+    )
