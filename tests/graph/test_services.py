@@ -252,5 +252,5 @@ def test_more_list_args_than_request_fields_is_refused_naming_the_fields(graph: 
     (answer,) = caller.take()
     assert answer["result"] is False
     assert answer["values"] == (
-        "request of example_interfaces/AddTwoInts has 2 fields (a, b), got 3 positional args"
+        "request of example_interfaces/srv/AddTwoInts has 2 fields (a, b), got 3 positional args"
     )
