@@ -14,7 +14,7 @@ import re
 from collections.abc import Callable, Mapping, Sequence
 from importlib import resources
 from pathlib import Path
-from typing import Annotated, Any, Literal
+from typing import Annotated, Any, Literal, TypeGuard
 
 import yaml
 from pydantic import (
@@ -32,6 +32,7 @@ from simbridge.errors import ConfigError
 __all__ = [
     "Count",
     "Environment",
+    "FiniteFloat",
     "LidarParams",
     "NamedRobotSpec",
     "Params",
@@ -46,6 +47,7 @@ __all__ = [
     "WorldSpec",
     "default_params_path",
     "default_world_path",
+    "finite_number",
     "load_client_tokens",
     "load_params",
     "load_world",
@@ -75,6 +77,24 @@ def default_params_path() -> Path:
 def default_world_path() -> Path:
     """Return the path of the bundled default world."""
     return resource_dir("config") / "worlds" / "default.yaml"
+
+
+def finite_number(value: object) -> TypeGuard[int | float]:
+    """Whether ``value`` is a finite number: an int or a float (not a bool), not NaN or infinite.
+
+    The one check for numbers from files, parameters and service requests (JSON has no NaN,
+    but Python's parser and YAML's ``.nan`` do). An int too large for a float is not finite.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+#: A float that is neither NaN nor infinite (pydantic's own check).
+FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
 
 
 class _Strict(BaseModel):
@@ -124,20 +144,12 @@ class LidarParams(_Strict):
     range_min: float = Field(0.12, ge=0, description="minimum range, m")
     range_max: float = Field(3.5, gt=0, le=1000, description="maximum range, m")
     rate: float = Field(10.0, gt=0, le=100, description="scans per second, Hz")
-    mount: tuple[float, float, float] = Field(
+    mount: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
         (0.0, 0.0, 0.0), description="x, y, yaw of frame 'laser' in 'base_link'"
     )
     noise_stddev: float = Field(
         0.0, ge=0, le=1, description="Gaussian range noise, m (0 = exact ranges)"
     )
-
-    @field_validator("mount")
-    @classmethod
-    def _finite_mount(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
-        if not all(math.isfinite(x) for x in v):
-            msg = "must be three finite numbers [x, y, yaw]"
-            raise ValueError(msg)
-        return v
 
     def model_post_init(self, context: Any, /) -> None:
         """Check relations between fields."""
@@ -214,15 +226,7 @@ class Params(_Strict):
 class RobotSpec(_Strict):
     """A robot of a world file: its start pose (x, y, theta), used at start and by /reset."""
 
-    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
-
-    @field_validator("pose")
-    @classmethod
-    def _finite_pose(cls, v: tuple[float, float, float]) -> tuple[float, float, float]:
-        if not all(math.isfinite(x) for x in v):
-            msg = "must be three finite numbers [x, y, theta]"
-            raise ValueError(msg)
-        return v
+    pose: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = (0.0, 0.0, 0.0)
 
 
 #: A robot name usable as a ROS namespace: ``r1``, ``alice``, ``team_3``.
@@ -262,7 +266,7 @@ def _check_numbers(value: Any, count: int, what: str) -> list[float]:
         raise ValueError(msg)
     out = []
     for x in value:
-        if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+        if not finite_number(x):
             msg = f"{x!r} is not a finite number; expected {what}"
             raise ValueError(msg)
         out.append(float(x))

@@ -24,9 +24,9 @@ Contacts are published as ``simbridge_msgs/msg/Contact`` (:data:`CONTACT_DEFINIT
 
 from __future__ import annotations
 
-import math
 from typing import Any, Protocol
 
+from simbridge.config import finite_number
 from simbridge.errors import ServiceError
 from simbridge.graph.graph import Graph
 from simbridge.graph.rosapi import request_fields
@@ -84,7 +84,7 @@ class Fleet(Protocol):
 
 def _number(req: dict[str, Any], key: str, service: str) -> float:
     value = req.get(key, 0.0)
-    if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
+    if not finite_number(value):
         msg = f"{service}: field '{key}' must be a finite number, got {value!r}"
         raise ServiceError(msg)
     return float(value)

@@ -9,11 +9,11 @@ says why and changes nothing. Applied changes take effect at once (the next step
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from simbridge.config import finite_number
 from simbridge.errors import ServiceError
 
 
@@ -54,7 +54,7 @@ def _coerce(name: str, old: Any, new: Any) -> Any:
         if isinstance(new, bool) or not isinstance(new, int | float):
             msg = f"parameter {name} is a number; got {new!r}"
             raise ServiceError(msg)
-        if not math.isfinite(new):
+        if not finite_number(new):
             msg = f"parameter {name} must be finite; got {new!r}"
             raise ServiceError(msg)
         if kind == PARAMETER_INTEGER:
@@ -69,7 +69,7 @@ def _coerce(name: str, old: Any, new: Any) -> Any:
             raise ServiceError(msg)
         out = []
         for x in new:
-            if isinstance(x, bool) or not isinstance(x, int | float) or not math.isfinite(x):
+            if not finite_number(x):
                 msg = f"parameter {name} needs finite numbers; got {x!r}"
                 raise ServiceError(msg)
             out.append(float(x))

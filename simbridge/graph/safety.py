@@ -17,9 +17,9 @@ world are followed at the next tick.
 from __future__ import annotations
 
 import logging
-import math
 from typing import Any
 
+from simbridge.config import finite_number
 from simbridge.errors import ProtocolError
 from simbridge.graph.bridge import ROBOT_NODE
 from simbridge.graph.cmdvel import cmd_vel_type, twist_of
@@ -36,7 +36,7 @@ logger = logging.getLogger(__name__)
 def _finite_command(msg: Any) -> bool:
     try:
         twist = twist_of(msg)
-        return math.isfinite(twist["linear"]["x"]) and math.isfinite(twist["angular"]["z"])
+        return finite_number(twist["linear"]["x"]) and finite_number(twist["angular"]["z"])
     except (KeyError, TypeError):
         return False
 

@@ -20,10 +20,10 @@ Services (node ``/sim``; std_srvs types, plus one simbridge type where no standa
 
 from __future__ import annotations
 
-import math
 from collections.abc import Callable
 from typing import Any
 
+from simbridge.config import finite_number
 from simbridge.errors import ServiceError
 from simbridge.graph.graph import Graph
 from simbridge.graph.rosapi import request_fields
@@ -100,12 +100,7 @@ class SimClock:
         Raises:
             ServiceError: ``factor`` is not in ``(0, MAX_REAL_TIME_FACTOR]``.
         """
-        if not (
-            isinstance(factor, int | float)
-            and not isinstance(factor, bool)
-            and math.isfinite(factor)
-            and 0 < factor <= MAX_REAL_TIME_FACTOR
-        ):
+        if not (finite_number(factor) and 0 < factor <= MAX_REAL_TIME_FACTOR):
             top = f"{MAX_REAL_TIME_FACTOR:g}"
             msg = f"real-time factor must be a number in (0, {top}], got {factor!r}"
             raise ServiceError(msg)
