@@ -34,7 +34,7 @@ import itertools
 import logging
 import uuid
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import Any, Protocol
 
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
@@ -107,7 +107,6 @@ class Goal:
     table: ActionTable
     status: int = EXECUTING
     done: bool = False
-    extra: dict[str, Any] = field(default_factory=dict)
 
     def feedback(self, values: Any) -> None:
         """Send feedback to the goal's sender (if it asked for feedback)."""
