@@ -223,8 +223,17 @@ def test_server_settings_cannot_be_changed_after_validation() -> None:
 
 @pytest.mark.parametrize(
     ("value", "finite"),
-    [(1, True), (-2.5, True), (0.0, True), (True, False), (float("nan"), False)]
-    + [(float("inf"), False), (10**400, False), ("1", False), (None, False)],
+    [
+        (1, True),
+        (-2.5, True),
+        (0.0, True),
+        (True, False),
+        (float("nan"), False),
+        (float("inf"), False),
+        (10**400, False),
+        ("1", False),
+        (None, False),
+    ],
 )
 def test_finite_number_is_the_one_check(value: object, finite: bool) -> None:
     """Numbers only (a bool is not one), finite, and an int past float range is not finite."""

@@ -1,4 +1,4 @@
-"""ROS 2 CDR serialization of canonical messages, made by rosbags (for ``cbor-raw``).
+"""ROS 2 CDR serialization of canonical messages, made by rosbags (``cbor-raw``, bags).
 
 The bytes are what an rclpy raw subscription delivers: the 4-byte encapsulation header
 (``00 01 00 00``, little-endian CDR) followed by the CDR body. The canonical ``dict`` form
@@ -37,6 +37,10 @@ class CdrWriter:
         canonical = normalize_type(typename)
         obj = self._builder(canonical)(msg)
         return bytes(self.registry.store.serialize_cdr(obj, canonical, little_endian=True))
+
+    def message(self, typename: str, msg: Any) -> Any:
+        """Return the rosbags message object of a canonical message."""
+        return self._builder(normalize_type(typename))(msg)
 
     def factory(self, typename: str, msg: Any) -> Callable[[], bytes]:
         """Return a function computing the CDR bytes of ``msg`` when first needed (then kept).

@@ -33,11 +33,10 @@ from rosbags.typesys import Stores, get_typestore
 
 from simbridge.errors import SimbridgeError
 from simbridge.msgs import TypeRegistry
-from simbridge.msgs.cdr import to_dict
-from simbridge.msgs.convert import NUMPY_DTYPES
+from simbridge.msgs.cdr import CdrWriter, to_dict
 
 
-__all__ = ["BagError", "BagWriter", "read_messages", "to_dict", "to_ros"]
+__all__ = ["BagError", "BagWriter", "read_messages", "to_dict"]
 
 logger = logging.getLogger(__name__)
 
@@ -46,28 +45,6 @@ _META = "metadata.yaml"
 
 class BagError(SimbridgeError):
     """A bag cannot be written or read."""
-
-
-def to_ros(registry: TypeRegistry, type_name: str, msg: dict[str, Any]) -> Any:
-    """Return the rosbags message object of a canonical message (for CDR serialization)."""
-    spec = registry.spec(type_name)
-    cls = registry.store.types[spec.name]
-    values: dict[str, Any] = {}
-    for field in spec.fields:
-        value = msg[field.name]
-        if field.nested:
-            if field.arraylen == -1:
-                values[field.name] = to_ros(registry, field.base, value)
-            else:
-                values[field.name] = [to_ros(registry, field.base, v) for v in value]
-        elif field.arraylen == -1 or field.base in ("string", "wstring"):
-            values[field.name] = value
-        elif isinstance(value, bytes | bytearray):
-            values[field.name] = np.frombuffer(bytes(value), dtype=np.uint8)
-        else:
-            dtype = NUMPY_DTYPES.get(field.base, np.bool_)
-            values[field.name] = np.asarray(value, dtype=dtype)
-    return cls(**values)
 
 
 class BagWriter:
@@ -87,6 +64,7 @@ class BagWriter:
     ) -> None:
         self.path = Path(path)
         self.registry = registry
+        self._cdr = CdrWriter(registry)
         self.segment_seconds = segment_seconds
         if self.path.exists():
             msg = f"bag '{self.path}' exists already; choose another output name (-o)"
@@ -116,8 +94,7 @@ class BagWriter:
         if conn is None:
             conn = writer.add_connection(topic, type_name, typestore=self.registry.store)
             self._connections[topic] = conn
-        data = self.registry.store.serialize_cdr(to_ros(self.registry, type_name, msg), type_name)
-        writer.write(conn, stamp_ns, data)
+        writer.write(conn, stamp_ns, self._cdr.serialize(type_name, msg))
         self.count += 1
 
     def tick(self) -> None:

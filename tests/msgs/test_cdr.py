@@ -93,3 +93,12 @@ def test_reading_bytes_that_are_not_cdr_of_the_type_raises() -> None:
     with pytest.raises(Exception, match="Twist"):
         reader.read("geometry_msgs/msg/Twist", b"\x00\x01\x00\x00\x01")
     assert reader.read("std_srvs/srv/Empty_Request", b"\x00\x01\x00\x00") == {}
+
+
+def test_message_builds_the_rosbags_object_with_typed_arrays() -> None:
+    """The object bags write: float32 ranges as a numpy array, values kept."""
+    registry = TypeRegistry()
+    msg = Converter(registry, lambda: (1, 2)).from_json("sensor_msgs/LaserScan", {"ranges": [1, 2]})
+    obj = CdrWriter(registry).message("sensor_msgs/msg/LaserScan", msg)
+    assert obj.ranges.dtype == np.float32
+    assert obj.ranges.tolist() == [1.0, 2.0]

@@ -2,12 +2,11 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import numpy as np
 import pytest
 from rosbags.rosbag2 import Reader
 
 from simbridge.msgs import Converter, TypeRegistry
-from simbridge.tools.bag import BagError, BagWriter, read_messages, to_dict, to_ros
+from simbridge.tools.bag import BagError, BagWriter, read_messages
 
 
 @pytest.fixture(scope="module")
@@ -101,10 +100,3 @@ def test_an_empty_recording_is_still_a_bag(registry: TypeRegistry, tmp_path: Pat
 def test_unreadable_bag_is_a_clear_error(tmp_path: Path) -> None:
     with pytest.raises(BagError, match="cannot read bag"):
         list(read_messages(tmp_path / "nope"))
-
-
-def test_to_ros_and_back(registry: TypeRegistry) -> None:
-    msg = canonical(registry, "sensor_msgs/msg/LaserScan", {"ranges": [1.0, 2.0]})
-    obj = to_ros(registry, "sensor_msgs/msg/LaserScan", msg)
-    assert obj.ranges.dtype == np.float32
-    assert to_dict(obj)["ranges"] == [1.0, 2.0]
