@@ -57,3 +57,19 @@ def test_cbor_frames_are_binary_and_cbor_raw_needs_a_definition() -> None:
     )
     body = cbor2.loads(raw.frame("cbor-raw", "/x").data)["msg"]
     assert body == {"secs": 5, "nsecs": 6, "bytes": b"\x00\x01\x00\x00cdr"}
+
+
+def test_encoding_is_exact_floats_doubles_bignums_tagged_big_endian_arrays_little() -> None:
+    """The wire bytes clients decode: 0xfb doubles, tags 2/3 bignums, swapped >i4 arrays."""
+    assert encode_cbor(1.5) == bytes.fromhex("fb3ff8000000000000")
+    assert encode_cbor(2**64) == bytes.fromhex("c249010000000000000000")
+    assert encode_cbor(-(2**64) - 1) == bytes.fromhex("c349010000000000000000")
+    big_endian = np.array([1, 2], dtype=">i4")
+    assert encode_cbor(big_endian) == bytes.fromhex("d84e48") + np.array([1, 2], "<i4").tobytes()
+    assert encode_cbor(np.float32(0.5)) == bytes.fromhex("fb3fe0000000000000")
+    assert encode_cbor(np.zeros((2, 2))) == cbor2.dumps([[0.0, 0.0], [0.0, 0.0]])
+
+
+def test_a_value_cbor_cannot_carry_is_a_type_error() -> None:
+    with pytest.raises(TypeError, match="cannot encode a object as CBOR"):
+        encode_cbor({"x": object()})
