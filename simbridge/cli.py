@@ -141,6 +141,13 @@ def _add_security_options(parser: argparse.ArgumentParser, env: Environment) -> 
         help="WebSocket clients at most (default: 200) [SIMBRIDGE_MAX_CLIENTS]",
     )
     group.add_argument(
+        "--max-http-connections",
+        type=_typed(Count),
+        default=env.max_http_connections or defaults.max_http_connections,
+        help="open connections of the HTTP port at most (default: 256) "
+        "[SIMBRIDGE_MAX_HTTP_CONNECTIONS]",
+    )
+    group.add_argument(
         "--max-message-size",
         type=_typed(Count),
         default=env.max_message_size or defaults.max_message_size,
@@ -229,6 +236,7 @@ def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
     out: dict[str, Any] = {
         "admin_token": args.admin_token or None,
         "max_clients": args.max_clients,
+        "max_http_connections": args.max_http_connections,
         "max_message_size": args.max_message_size,
         "stall_timeout": args.stall_timeout,
         "ping_interval": args.ping_interval,

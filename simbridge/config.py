@@ -476,6 +476,9 @@ class ServerSettings(BaseModel):
     # administrative ROS services (when it is None they are open: a laptop on its own) --
     #: Connected WebSocket clients at most; one more is refused with HTTP 503.
     max_clients: Count = 200
+    #: Open connections of the HTTP port at most (page, /healthz, /admin); when all are busy
+    #: one more is refused with 503, else the longest-idle keep-alive one is closed for it.
+    max_http_connections: Count = 256
     #: Subscribed topic spellings per client at most.
     max_subscriptions: Count = 200
     #: Advertised topics, services and actions per client at most.
@@ -593,6 +596,7 @@ class Environment(BaseModel):
     certfile: str | None = None
     keyfile: str | None = None
     max_clients: Count | None = None
+    max_http_connections: Count | None = None
     max_message_size: Count | None = None
     stall_timeout: Seconds | None = None
     ping_interval: Seconds | None = None

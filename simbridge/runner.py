@@ -239,7 +239,9 @@ class App:
         s = self.settings
         if s.http_port is not None:
             tls = tls_context(s.certfile, s.keyfile) if s.certfile else None
-            self._http = await serve_http(self.web, s.host, s.http_port, ssl=tls)
+            self._http = await serve_http(
+                self.web, s.host, s.http_port, ssl=tls, max_connections=s.max_http_connections
+            )
         loop = asyncio.get_running_loop()
         if not self.no_sim:
             self.robot.publish_static(loop.time())

@@ -3,13 +3,17 @@ from __future__ import annotations
 import asyncio
 import json
 import socket
+import time
 import urllib.error
 import urllib.request
+from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
 
+from simbridge.config import resource_dir
 from simbridge.runner import App
+from simbridge.web import HttpResponse, WebApp, serve_http
 from tests.helpers import http_url
 
 
@@ -96,3 +100,134 @@ async def test_garbage_request_gets_400(app: App) -> None:
             return s.recv(1024)
 
     assert (await asyncio.to_thread(garbage)).startswith(b"HTTP/1.1 400")
+
+
+# -- bounds (issue 17): what one HTTP client can make the server hold -------------------------
+
+
+@pytest.fixture
+async def small_server() -> AsyncIterator[tuple[int, WebApp]]:
+    """A real HTTP server of the page: 2 connections at most, bodies due within 0.3 s."""
+    web = WebApp(resource_dir("static"), lambda: {"status": "ok"})
+    web.routes["/echo"] = lambda r: HttpResponse(200, r.body)
+    server = await serve_http(web, "127.0.0.1", 0, max_connections=2, body_timeout=0.3)
+    yield server.sockets[0].getsockname()[1], web
+    server.close()
+    await server.wait_closed()
+
+
+CLOSE_HEALTHZ = b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+LENGTH_2 = b"Content-Length: 2\r\n\r\nhi"
+
+
+async def exchange(port: int, data: bytes, timeout: float = 5.0) -> bytes:
+    """Send ``data`` on a new connection; return all it gets until the server closes."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    writer.write(data)
+    try:
+        return await asyncio.wait_for(reader.read(), timeout)
+    finally:
+        writer.close()
+
+
+async def head_sent(port: int, body_length: int) -> tuple[asyncio.StreamReader, Any]:
+    """Open a connection and send a POST head whose body does not follow (yet)."""
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    writer.write(
+        f"POST /echo HTTP/1.1\r\nHost: x\r\nContent-Length: {body_length}\r\n\r\n".encode()
+    )
+    await writer.drain()
+    return reader, writer
+
+
+async def test_a_body_that_never_arrives_times_out_with_408(
+    small_server: tuple[int, WebApp],
+) -> None:
+    """Head says 100 bytes, 10 come: 408 after the body timeout, connection closed."""
+    port, _ = small_server
+    start = time.monotonic()
+    head = b"POST /echo HTTP/1.1\r\nHost: x\r\nContent-Length: 100\r\n\r\n0123456789"
+    reply = await exchange(port, head)
+    assert reply.startswith(b"HTTP/1.1 408 Request Timeout\r\n"), reply
+    assert b"request body not received within 0.3 s" in reply
+    assert 0.25 < time.monotonic() - start < 3.0
+    ok = await exchange(port, b"POST /echo HTTP/1.1\r\nHost: x\r\nConnection: close\r\n" + LENGTH_2)
+    assert ok.startswith(b"HTTP/1.1 200 OK\r\n") and ok.endswith(b"\r\n\r\nhi")
+
+
+async def test_connections_are_capped_and_refused_by_name_when_all_are_busy(
+    small_server: tuple[int, WebApp],
+) -> None:
+    """Two requests waiting for their bodies fill the budget: a third gets 503 naming it."""
+    port, _ = small_server
+    busy = [await head_sent(port, 5), await head_sent(port, 5)]
+    await asyncio.sleep(0)  # nothing to wait for: the heads are in the server's socket buffer
+    reply = b""
+    for _ in range(50):  # until the server has read both heads (it marks them busy then)
+        reply = await exchange(port, CLOSE_HEALTHZ)
+        if reply.startswith(b"HTTP/1.1 503"):
+            break
+        await asyncio.sleep(0.01)
+    assert reply.startswith(b"HTTP/1.1 503 Service Unavailable\r\n"), reply
+    assert b"Retry-After: 1" in reply and b"(max_http_connections)" in reply
+    for reader, writer in busy:  # the bodies come: both are served, then the slots are free
+        writer.write(b"hello")
+        assert (await asyncio.wait_for(reader.readuntil(b"hello"), 5)).startswith(b"HTTP/1.1 200")
+        writer.close()
+    ok = await exchange(port, b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+    assert ok.startswith(b"HTTP/1.1 200 OK")
+
+
+async def test_an_idle_keep_alive_connection_makes_room_for_a_new_one(
+    small_server: tuple[int, WebApp],
+) -> None:
+    """At the budget with idle keep-alive connections, a newcomer is served, not refused."""
+    port, _ = small_server
+    idle = []
+    for _ in range(2):
+        reader, writer = await asyncio.open_connection("127.0.0.1", port)
+        writer.write(b"GET /healthz HTTP/1.1\r\nHost: x\r\n\r\n")
+        await reader.readuntil(b'{"status":"ok"}')
+        idle.append((reader, writer))
+    ok = await exchange(port, b"GET /healthz HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n")
+    assert ok.startswith(b"HTTP/1.1 200 OK")
+    closed = await asyncio.wait_for(idle[0][0].read(), 5)  # the longest idle one: closed
+    assert closed == b""
+    for _, writer in idle:
+        writer.close()
+
+
+@pytest.mark.parametrize(
+    "request_bytes",
+    [
+        b"GET /%00 HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        b"GET /index.html%00.js HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        b"GET /%0a HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n",
+        b"GET /\x00 HTTP/1.1\r\nHost: x\r\n\r\n",
+        b"GET / HTTP/1.1\r\nHost: x\r\nX-Bad: a\x00b\r\n\r\n",
+        b"GET / HTTP/1.1\r\nHost: x\r\nno colon here\r\n\r\n",
+        b"GET / HTTP/1.1\r\nHost: x\r\nContent-Length: -1\r\n\r\n",
+        b"GET / HTTP/9.9\r\n\r\n",
+    ],
+)
+async def test_nul_or_malformed_header_or_path_gets_400_never_500(
+    small_server: tuple[int, WebApp], request_bytes: bytes, caplog: pytest.LogCaptureFixture
+) -> None:
+    port, _ = small_server
+    reply = await exchange(port, request_bytes)
+    assert reply.startswith(b"HTTP/1.1 400 Bad Request\r\n"), reply
+    assert b"bad request" in reply
+    assert not [r for r in caplog.records if r.exc_info], "a traceback was logged"
+
+
+async def test_nul_path_on_the_websocket_port_gets_400_too(
+    app: App, caplog: pytest.LogCaptureFixture
+) -> None:
+    """The page is also served on the WebSocket port: /%00 is a 400 there as well."""
+    reply = await exchange(
+        app.ws_port, b"GET /%00 HTTP/1.1\r\nHost: x\r\nConnection: close\r\n\r\n"
+    )
+    assert reply.startswith(b"HTTP/1.1 400"), reply
+    assert not [r for r in caplog.records if r.exc_info], "a traceback was logged"
+    status, _, _ = await fetch(http_url(app) + "/%00")
+    assert status == 400
