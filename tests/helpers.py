@@ -110,6 +110,20 @@ async def wait_for(predicate: Callable[[], bool], timeout: float = 3.0, step: fl
         await asyncio.sleep(step)
 
 
+def op(peer: RecordingPeer, graph: Any, now: float = 0.0, **fields: Any) -> None:
+    """Deliver one op (its fields as keyword arguments) from ``peer`` to ``graph`` at ``now``."""
+    graph.receive(peer, json.dumps(fields), now)
+
+
+def clocked_graph() -> Any:
+    """A graph with rosapi and a fixed wall clock (stamps 1700000000.5 s)."""
+    from simbridge.graph import Graph, install_rosapi
+
+    graph = Graph(wall_clock_ns=lambda: 1_700_000_000_500_000_000)
+    install_rosapi(graph)
+    return graph
+
+
 class RecordingPeer:
     """A graph peer that records what it is sent (the seam where a socket would be)."""
 

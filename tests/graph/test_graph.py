@@ -1,23 +1,14 @@
 from __future__ import annotations
 
-import json
-from typing import Any
-
 import pytest
 
-from simbridge.graph import Graph, install_rosapi
-from tests.helpers import RecordingPeer
+from simbridge.graph import Graph
+from tests.helpers import RecordingPeer, clocked_graph, op
 
 
 @pytest.fixture
 def graph() -> Graph:
-    g = Graph(wall_clock_ns=lambda: 1_700_000_000_500_000_000)
-    install_rosapi(g)
-    return g
-
-
-def op(peer: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> None:
-    graph.receive(peer, json.dumps(fields), now)
+    return clocked_graph()
 
 
 def test_bad_frames_and_ops_get_status_errors_and_nothing_else(graph: Graph) -> None:
