@@ -7,9 +7,11 @@ so ``http://host:9090/`` shows the page too.
 Requests are parsed by httptools (llhttp, Node's parser; sans-I/O: bytes in, callbacks out):
 strict (a NUL or a malformed request line or header is a 400 naming the fault), and measured
 an order of magnitude cheaper per request than h11 (which would make an HTTP flood cost the
-20 Hz loop more than the hand-written parser it replaced did; ``python -m bench http``). What one client can make the server hold is bounded: a request's
-body must arrive within ``body_timeout`` (10 s, else 408) and be at most 1 MB (else 413); at
-most ``max_http_connections`` connections are open (when all are busy, 503 naming the budget;
+20 Hz loop more than the hand-written parser it replaced did; ``python -m bench http``).
+
+What one client can make the server hold is bounded: a request's body must arrive within
+``body_timeout`` (10 s, else 408) and be at most 1 MB (else 413); at most
+``max_http_connections`` connections are open (when all are busy, 503 naming the budget;
 otherwise the longest-idle keep-alive connection is closed to make room). A path holding a
 control character (``/%00``) is a 400 on both ports before it reaches a route or the disk.
 
