@@ -42,6 +42,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from simbridge.config import finite_number
 from simbridge.errors import ServiceError
 from simbridge.graph.actionlib import (
     ABORTED as AL_ABORTED,
@@ -267,10 +268,7 @@ class TfRepublisher:
         numbers = {}
         for key, default in (("angular_thres", 0.0), ("trans_thres", 0.0), ("rate", 10.0)):
             value = values.get(key, default)
-            if isinstance(value, bool) or not isinstance(value, int | float):
-                msg = f"{what}: {key} must be a number, got {value!r}"
-                raise ServiceError(msg)
-            if not math.isfinite(value) or value < 0:
+            if not finite_number(value) or value < 0:
                 msg = f"{what}: {key} must be a finite number >= 0, got {value!r}"
                 raise ServiceError(msg)
             numbers[key] = float(value)
