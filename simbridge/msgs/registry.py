@@ -282,6 +282,16 @@ class TypeRegistry:
             raise TypeNotFoundError(msg)
         return parts
 
+    def message_text(self, name: str) -> str:
+        """Return the .msg text of one message type (without its dependencies)."""
+        canonical = normalize_type(name)
+        self._need(canonical)
+        text = self.texts.get(canonical)
+        if text is not None:
+            return text
+        full = self.definition_text(canonical)
+        return full.split("\n" + "=" * 80 + "\n", 1)[0]
+
     # -- registration -------------------------------------------------------------------------
 
     def register_msg(self, name: str, text: str) -> str:
