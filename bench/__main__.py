@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import importlib
+import importlib.util
 import sys
 
 
@@ -53,14 +54,35 @@ ZENOH = {
 }
 
 
+def runs(argv: list[str]) -> list[tuple[str, list[str]]]:
+    """Split ``argv`` into benchmarks and their arguments.
+
+    A word that is not a module of ``bench/`` is an argument of the benchmark before it:
+    ``hostile state7 tf_goals stall`` runs ``hostile`` with ``[state7, tf_goals]``, then
+    ``stall``.
+
+    Raises:
+        SystemExit: the first word is not a benchmark.
+    """
+    out: list[tuple[str, list[str]]] = []
+    for word in argv:
+        if importlib.util.find_spec(f"bench.{word}") is not None:
+            out.append((word, []))
+        elif out:
+            out[-1][1].append(word)
+        else:
+            raise SystemExit(f"bench: no benchmark named {word!r} (see bench/__main__.py)")
+    return out
+
+
 def main(argv: list[str]) -> int:
     names = argv or [*QUICK, *SCALE]
     if names == ["quick"]:
         names = list(QUICK)
     failed = 0
-    for name in names:
+    for name, args in runs(names):
         module = importlib.import_module(f"bench.{name}")
-        failed += int(module.main() != 0)
+        failed += int((module.main(args) if args else module.main()) != 0)
         print()
     return 1 if failed else 0
 

@@ -306,7 +306,10 @@ class TopicTable:
             except ProtocolError as err:
                 refusal = err
         if refusal is not None:
-            raise refusal
+            try:
+                raise refusal
+            finally:
+                refusal = None  # no cycle through this frame: it holds the message
 
     def _deliver_many(
         self,

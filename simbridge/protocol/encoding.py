@@ -120,10 +120,11 @@ def _decode_lenient(text: str) -> list[Any]:
         out.append(value)
 
 
-def decode_frame(data: str | bytes) -> list[Any]:
+def decode_frame(data: str | bytes, kind: str | None = None) -> list[Any]:
     """Return the JSON values of one incoming WebSocket message.
 
-    Binary frames are read as UTF-8 JSON, as ROS 2 rosbridge does.
+    Binary frames are read as UTF-8 JSON, as ROS 2 rosbridge does. ``kind`` names the frame in
+    errors (default: ``text`` or ``binary`` by the type of ``data``).
 
     Raises:
         ProtocolError: the frame is not valid UTF-8 JSON.
@@ -136,7 +137,7 @@ def decode_frame(data: str | bytes) -> list[Any]:
         text = data if isinstance(data, str) else bytes(data).decode("utf-8")
         values = _decode_lenient(text)
     except (UnicodeDecodeError, ValueError, RecursionError) as err:
-        kind = "text" if isinstance(data, str) else "binary"
+        kind = kind or ("text" if isinstance(data, str) else "binary")
         reason = str(err).split(":")[0] if isinstance(err, ValueError) else type(err).__name__
         msg = f"could not decode the {kind} frame as JSON ({reason}); send one JSON object"
         raise ProtocolError(msg) from None
