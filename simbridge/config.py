@@ -499,6 +499,9 @@ class ServerSettings(BaseModel):
     #: by max_message_size and for all clients by global_fragment_bytes.
     max_fragment_sets: Count = 16
     global_fragment_bytes: Count = 40_000_000
+    #: JSON values in one frame (or reassembled fragmented message) of a client without the
+    #: admin token; more are refused before parsing (one frame is parsed in one go).
+    max_frame_values: Count = 50_000
     #: Bytes of latched messages (JSON) a client's publishes leave on the server.
     max_latched_bytes: Count = 16_000_000
     global_latched_bytes: Count = 64_000_000

@@ -59,6 +59,7 @@ def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
         call_timeout=s.max_call_timeout,
         fragment_sets=s.max_fragment_sets,
         fragment_bytes=s.max_message_size,
+        frame_values=s.max_frame_values,
         latched_bytes=s.max_latched_bytes,
         publish_rate=s.publish_rate,
         publish_burst=s.publish_burst,

@@ -49,6 +49,9 @@ class Limits:
     publish_burst: int = 400
     #: ``status`` refusals per second (and one per cause per second); the rest are counted.
     statuses_per_second: int = 10
+    #: JSON values (about: commas + 1) in one frame from a client without the admin token;
+    #: a bigger frame is refused before it is parsed, as parsing it would hold the loop.
+    frame_values: int = 50_000
     #: Largest frame read from a client that has not authenticated yet (only ``auth`` is).
     unauthenticated_frame_bytes: int = 16_384
     #: Seconds of the loop's time one client's frames may take per second (a share: 0.25 is a

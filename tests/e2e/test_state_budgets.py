@@ -371,6 +371,30 @@ async def test_row17_big_frames_wait_for_their_share_of_the_loop(make_app: AppFa
         await steady()
 
 
+async def test_row17_frames_of_too_many_values_are_refused_unparsed(make_app: AppFactory) -> None:
+    """9 MB frames of 700,000 floats (57 ms to parse here, 5x on a Pi): refused by name.
+
+    The values are counted (commas) before parsing; the admin's frames are not limited.
+    """
+    app = await student_app(make_app)
+    body = json.dumps(
+        {"op": "publish", "topic": "/r1/big", "type": "std_msgs/Float64MultiArray"}
+        | {"msg": {"data": [0.123456789] * 700_000}}
+    )
+    async with observed(app) as steady:
+        async with connect(f"{ws_url(app)}/?token={STUDENT}", max_size=None) as ws:
+            for _ in range(3):
+                await ws.send(body)
+            told = await statuses(ws, 1.0)
+            assert told and all("max_frame_values" in t for t in told), told
+            assert "700003 JSON values" in told[0]
+            assert "/r1/big" not in app.graph.topics.topics
+        await steady()
+    async with connect(f"{ws_url(app)}/?token=teacher-token-xyz", max_size=None) as admin:
+        await admin.send(body.replace("/r1/big", "/big"))
+        await wait_for(lambda: "/big" in app.graph.topics.topics, 10)
+
+
 async def test_row18_float32_out_of_range_is_refused_at_publish(make_app: AppFactory) -> None:
     """float32 1e308 to a topic a cbor-raw client subscribes: refused with the range."""
     app = await student_app(make_app)

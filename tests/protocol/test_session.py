@@ -92,6 +92,35 @@ def test_refused_frames_are_freed_at_once_not_by_the_garbage_collector() -> None
         gc.enable()
 
 
+def test_frames_of_more_json_values_than_the_budget_are_refused_unparsed() -> None:
+    """frame_values counts a big frame's values before parsing; admins are not limited."""
+    session = Session(ClientId(1), limits=Limits(frame_values=1_000))
+    many = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": [1] * 1_000}})
+    (refused,) = session.parse(many, 0.0)
+    assert isinstance(refused, Refusal) and refused.cause == "max_frame_values"
+    assert "about 1002 JSON values" in str(refused) and "max_frame_values" in str(refused)
+    (refused,) = session.parse(many.encode(), 0.0)  # binary frames too
+    assert isinstance(refused, Refusal)
+    fits = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": [1] * 990}})
+    assert isinstance(session.parse(fits, 0.0)[0], o.Publish)
+    text = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": "x" * 100_000}})
+    assert isinstance(session.parse(text, 0.0)[0], o.Publish)  # big, but few values
+    session.admit("*", admin=True)
+    assert isinstance(session.parse(many, 0.0)[0], o.Publish)
+
+
+def test_a_reassembled_message_of_too_many_values_is_refused() -> None:
+    """Fragments are no way around frame_values: the reassembled text is counted too."""
+    session = Session(ClientId(1), limits=Limits(frame_values=1_000))
+    text = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": [1] * 2_000}})
+    half = len(text) // 2
+    for n, piece in enumerate((text[:half], text[half:])):
+        frame = {"op": "fragment", "id": "m", "data": piece, "num": n, "total": 2}
+        items = session.parse(json.dumps(frame), 0.0)
+    (refused,) = items
+    assert isinstance(refused, Refusal) and refused.cause == "max_frame_values"
+
+
 def test_status_level_filters_what_is_sent() -> None:
     """Default level error: warnings are not sent; set_level none silences everything."""
     session = Session(ClientId(1))
