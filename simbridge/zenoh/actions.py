@@ -12,7 +12,7 @@ any service or topic (``docs/design.md``, "Actions"):
 * ``/NAME/_action/feedback`` (``pkg/action/Foo_FeedbackMessage``: ``goal_id`` and ``feedback``);
 * ``/NAME/_action/status`` (``action_msgs/msg/GoalStatusArray``, transient local, depth 1).
 
-**Outward** (:class:`ActionBridge` beside :class:`~simbridge.zenoh.link.ZenohLink`): every
+**Outward** (:class:`ActionBridge`, owned by :class:`simbridge.zenoh.link.ZenohLink`): every
 action of simbridge's graph (in-process servers such as ``/fibonacci`` and
 ``/tf2_web_republisher``, and actions rosbridge clients advertise) is declared so; a ROS 2
 client's goal becomes a goal of the graph's action table under the client's own goal id, its
@@ -35,7 +35,7 @@ import math
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Protocol
 
 import orjson
 
@@ -47,7 +47,38 @@ from simbridge.zenoh.names import DEFAULT_QOS, LATCHED_QOS, Entity, Qos, dds_typ
 
 
 if TYPE_CHECKING:
-    from simbridge.zenoh.link import ZenohLink
+    import asyncio
+    from collections import Counter
+
+    from simbridge.graph import Graph
+    from simbridge.msgs.cdr import CdrWriter
+    from simbridge.zenoh.config import ZenohOptions
+
+
+class ZenohLink(Protocol):
+    """What the bridge uses of :class:`simbridge.zenoh.link.ZenohLink`, which owns the bridge.
+
+    Named here as a protocol so that the two modules do not import each other.
+    """
+
+    graph: Graph
+    options: ZenohOptions
+    cdr: CdrWriter
+    stats: Counter[str]
+    session: Any
+    zenoh: Any
+    zid: str
+    _loop: asyncio.AbstractEventLoop | None
+    _declared: dict[tuple[str, str, str], Any]
+    _caller: Any
+
+    def _decode(self, type_name: str, payload: bytes) -> Any: ...
+    def _reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None: ...
+    def _fail_query(self, query: Any, text: str) -> None: ...
+    def _put_bytes(self, entry: Any, payload: bytes) -> None: ...
+    def _log(self, key: str, text: str) -> None: ...
+    def _note(self, key: str, text: str) -> None: ...
+
 
 __all__ = [
     "CANCEL_TYPE",
