@@ -23,10 +23,9 @@ import asyncio
 import contextlib
 import http
 import logging
-import ssl
 import weakref
 from collections.abc import Hashable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
@@ -41,6 +40,10 @@ from simbridge.graph.guard import token_access
 from simbridge.graph.topics import SendEntries
 from simbridge.protocol import Frame, SendQueue, Session, TokenBucket, status_frame
 from simbridge.web import HttpRequest, WebApp, parse_target
+
+
+if TYPE_CHECKING:
+    import ssl
 
 
 __all__ = ["BridgeServer", "Client"]
@@ -66,6 +69,8 @@ MAX_QUEUE = 4
 
 def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
     """Return a server TLS context for a PEM certificate chain and key (wss://, https://)."""
+    import ssl  # only a TLS run loads it (see simbridge.cli._import_asyncio)
+
     context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
     context.load_cert_chain(certfile, keyfile)
     return context

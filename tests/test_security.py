@@ -6,7 +6,9 @@ import asyncio
 import datetime
 import ipaddress
 import json
+import re
 import ssl
+import sys
 import time
 import urllib.error
 import urllib.request
@@ -23,7 +25,7 @@ from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidSta
 
 from simbridge.graph.guard import rosauth_mac
 from tests.conftest import AppFactory, ClientRunner
-from tests.helpers import recv_until, send_json, ws_url
+from tests.helpers import TIMEOUT_FACTOR, recv_until, send_json, ws_url
 
 
 ADMIN = "admin-token-for-tests"
@@ -197,6 +199,40 @@ async def test_tls_serves_wss_and_https_with_the_given_certificate(
     with pytest.raises((ConnectionClosed, OSError, InvalidHandshake)):
         async with connect(f"ws://127.0.0.1:{app.ws_port}", open_timeout=3) as ws:
             await ws.recv()
+
+
+async def test_the_command_serves_wss_and_https_with_certfile(
+    certificate: tuple[Path, Path],
+) -> None:
+    """`simbridge --certfile --keyfile` (its own process: asyncio imported with ssl) serves TLS.
+
+    Without --certfile the command keeps ssl out of asyncio's import (tests/test_footprint.py);
+    with it, both ports speak TLS.
+    """
+    certfile, keyfile = certificate
+    proc = await asyncio.create_subprocess_exec(
+        *(sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0"),
+        *("--http-port", "0", "--certfile", str(certfile), "--keyfile", str(keyfile)),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd="/tmp",
+    )
+    try:
+        assert proc.stdout is not None
+        line = (await asyncio.wait_for(proc.stdout.readline(), 30 * TIMEOUT_FACTOR)).decode()
+        ports = re.search(r"ws://127\.0\.0\.1:(\d+)/\s+page http://127\.0\.0\.1:(\d+)/", line)
+        assert ports, line
+        trust = ssl.create_default_context(cafile=str(certfile))
+        async with connect(f"wss://127.0.0.1:{ports.group(1)}", ssl=trust) as ws:
+            assert (await call(ws, "/rosapi/topics"))["result"] is True
+        status, body = await asyncio.to_thread(
+            fetch, f"https://127.0.0.1:{ports.group(2)}/healthz", trust
+        )
+        assert status == 200 and json.loads(body)["status"] == "ok"
+    finally:
+        proc.terminate()
+        _, err = await asyncio.wait_for(proc.communicate(), 20 * TIMEOUT_FACTOR)
+    assert proc.returncode == 0 and b"Traceback" not in err
 
 
 async def test_roslibjs_connects_over_wss(

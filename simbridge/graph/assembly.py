@@ -18,6 +18,7 @@ import logging
 import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 from simbridge.config import ServerSettings
 from simbridge.graph.bridge import RobotBridge
@@ -28,9 +29,12 @@ from simbridge.graph.rosapi import install_rosapi
 from simbridge.graph.safety import Safety
 from simbridge.graph.simclock import SimClock
 from simbridge.graph.tfrepublisher import TfRepublisher, install_tf_republisher
-from simbridge.graph.tutorials import TutorialNodes, install_tutorials
 from simbridge.graph.walls import WallsPublisher
 from simbridge.sim import World
+
+
+if TYPE_CHECKING:
+    from simbridge.graph.tutorials import TutorialNodes
 
 
 __all__ = ["RobotGraph", "build_robot_graph"]
@@ -144,6 +148,9 @@ def build_robot_graph(
     hooks: list[Callable[[float], None]] = [tf_republisher.tick, safety.tick]
     tutorials = None
     if world.spec.demo_nodes or (settings is not None and settings.demo_nodes):
+        # imported only when asked for (off by default): an idle server need not hold them
+        from simbridge.graph.tutorials import install_tutorials
+
         tutorials = install_tutorials(graph)
         hooks.append(tutorials.tick)
     return RobotGraph(

@@ -145,9 +145,8 @@ class World:
         self.estopped = False
         #: Robots held still by an emergency stop of their own (see :meth:`hold`).
         self.held: frozenset[str] = frozenset()
-        #: Seeded noise source (LiDAR noise); reseeded by reset for repeatable runs.
         self._seed = seed
-        self.rng = np.random.default_rng(seed)
+        self._rng: np.random.Generator | None = None
         self._angles_key: tuple[int, float] | None = None
         self._angles: FloatArray = np.zeros(0)
         #: The last batch of noiseless ranges and what it depends on (see :meth:`scans`).
@@ -155,6 +154,15 @@ class World:
         self._scan_ranges: FloatArray = np.zeros((0, 0))
         for robot in self.robots.values():
             robot.place(robot.start)
+
+    @property
+    def rng(self) -> np.random.Generator:
+        """Seeded noise source (LiDAR noise); reseeded by :meth:`reset` for repeatable runs."""
+        # made on first use: numpy.random costs an idle server about 2.3 MB (issue 16), and a run
+        # without noise (the default parameters) never draws from it; the draws are the same
+        if self._rng is None:
+            self._rng = np.random.default_rng(self._seed)
+        return self._rng
 
     @property
     def dt(self) -> float:
@@ -463,4 +471,4 @@ class World:
         self.touching = set()
         self.time = 0.0
         self.steps = 0
-        self.rng = np.random.default_rng(self._seed)
+        self._rng = None

@@ -34,13 +34,15 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from http import HTTPStatus
 from pathlib import Path
-from ssl import SSLContext
-from typing import Any
+from typing import TYPE_CHECKING, Any
 from urllib.parse import parse_qs, unquote, urlsplit
 
 import httptools
 import orjson
 
+
+if TYPE_CHECKING:
+    from ssl import SSLContext
 
 __all__ = [
     "BODY_TIMEOUT",
