@@ -1,0 +1,204 @@
+"""Where an idle default server's memory goes: each import group's share, and what was cut.
+
+``python -m bench memory`` (about 20 s): three kinds of rows, each from fresh child processes.
+
+1. **Import groups**, in the order ``simbridge`` imports them, in one child: VmRSS and its two
+   parts after each group (RssAnon: the process's own memory; RssFile: the mapped pages of
+   shared libraries), as the increase over the group before. The child imports asyncio the way
+   the command does (without ssl when no TLS is served).
+2. **Cut from the default path** (issue 16): what each module the default run no longer imports
+   would add on top of the whole default path (same child, after the groups).
+3. **The idle server**: ``simbridge`` with the default world and both ports, no client, settled
+   (VmRSS readings 0.5 s apart within 0.1 MB), as tests/test_footprint.py measures it; beside the
+   same server with the cut modules imported first (the default path as it was before the cuts),
+   with the ratio. MB here are MiB (VmRSS / 1024), as in the test.
+
+RssFile depends on the page cache: a library pip has just written is cached in large folios
+(Linux 6.16+ ext4), and a fault maps a whole folio, so a fresh venv shows several MB more RssFile
+than one whose libraries were read back from disk (see tests/test_footprint.py). RssAnon does not.
+"""
+
+from __future__ import annotations
+
+import json
+import socket
+import subprocess
+import sys
+from pathlib import Path
+
+
+ROOT = Path(__file__).resolve().parent.parent
+
+#: The default path's import groups, in the order ``simbridge`` imports them.
+GROUPS: list[tuple[str, list[str]]] = [
+    ("simbridge.cli (argparse, logging)", ["simbridge.cli"]),
+    ("pydantic, PyYAML", ["pydantic", "yaml"]),
+    ("importlib.metadata (pydantic plugins)", ["importlib.metadata"]),
+    ("hashlib, secrets (OpenSSL libcrypto)", ["hashlib", "secrets"]),
+    ("pydantic's schema builder", ["pydantic._internal._generate_schema"]),
+    ("simbridge.config (the settings models)", ["simbridge.config"]),
+    ("asyncio (no ssl)", ["@asyncio"]),
+    ("numpy", ["numpy"]),
+    ("rosbags type store + simbridge.msgs", ["simbridge.msgs"]),
+    ("simbridge.protocol (orjson)", ["simbridge.protocol"]),
+    ("simbridge.sim", ["simbridge.sim"]),
+    ("simbridge.graph", ["simbridge.graph", "simbridge.graph.assembly"]),
+    ("websockets", ["websockets.asyncio.server"]),
+    ("server, web (httptools), runner", ["simbridge.server", "simbridge.runner"]),
+]
+
+#: Modules issue 16 took off the default path, and when a run still imports them.
+CUT: list[tuple[str, str]] = [
+    ("ssl", "--certfile (asyncio's TLS)"),
+    ("numpy.random", "LiDAR noise > 0"),
+    ("cbor2", "a cbor / cbor-raw subscription"),
+    ("simbridge.graph.tutorials", "--demo-nodes"),
+]
+
+_GROUPS_CHILD = r"""
+import importlib, json, sys
+
+def status():
+    with open("/proc/self/status") as f:
+        kb = {k: int(v.split()[0]) for k, _, v in (ln.partition(":") for ln in f)
+              if k in ("VmRSS", "RssAnon", "RssFile")}
+    return kb["VmRSS"] / 1024, kb["RssAnon"] / 1024, kb["RssFile"] / 1024
+
+rows = [("interpreter (python -c)", status())]
+for label, modules in json.loads(sys.argv[1]):
+    for name in modules:
+        if name == "@asyncio":
+            from simbridge.cli import _import_asyncio
+            _import_asyncio(tls=False)
+        else:
+            importlib.import_module(name)
+    rows.append((label, status()))
+for name, _ in json.loads(sys.argv[2]):
+    before = status()
+    importlib.import_module(name)
+    after = status()
+    rows.append(("+" + name, tuple(a - b for a, b in zip(after, before))))
+print(json.dumps(rows))
+"""
+
+_SERVER_CHILD = r"""
+import importlib, json, os, signal, socket, sys, threading, time
+
+port, http_port, preload = int(sys.argv[1]), sys.argv[2], json.loads(sys.argv[3])
+for name in preload:  # the modules the default path no longer imports, as before the cuts
+    importlib.import_module(name)
+
+
+def status():
+    with open("/proc/self/status") as f:
+        kb = {k: int(v.split()[0]) for k, _, v in (ln.partition(":") for ln in f)
+              if k in ("VmRSS", "RssAnon", "RssFile")}
+    return kb["VmRSS"] / 1024, kb["RssAnon"] / 1024, kb["RssFile"] / 1024
+
+
+def watch():
+    deadline = time.monotonic() + 120
+    while time.monotonic() < deadline:
+        try:
+            socket.create_connection(("127.0.0.1", port), timeout=1).close()
+            break
+        except OSError:
+            time.sleep(0.05)
+    last = status()[0]
+    while time.monotonic() < deadline:
+        time.sleep(0.5)
+        now = status()[0]
+        if abs(now - last) < 0.1:
+            break
+        last = now
+    print("MEMORY " + json.dumps([status(), len(sys.modules)]), file=sys.stderr, flush=True)
+    os.kill(os.getpid(), signal.SIGINT)
+
+
+threading.Thread(target=watch, daemon=True).start()
+from simbridge.cli import main
+
+sys.exit(main(["--host", "127.0.0.1", "--port", str(port), "--http-port", http_port]))
+"""
+
+
+def _free_port() -> int:
+    with socket.socket() as sock:
+        sock.bind(("127.0.0.1", 0))
+        return int(sock.getsockname()[1])
+
+
+def groups() -> list[tuple[str, tuple[float, float, float]]]:
+    """Cumulative (RSS, anon, file) MB after each import group, then each cut module's delta."""
+    proc = subprocess.run(
+        [sys.executable, "-c", _GROUPS_CHILD, json.dumps(GROUPS), json.dumps(CUT)],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+        check=True,
+    )
+    return [(label, (r, a, f)) for label, (r, a, f) in json.loads(proc.stdout)]
+
+
+def idle_server(preload: list[str]) -> tuple[tuple[float, float, float], int]:
+    """(RSS, anon, file) MB and the module count of the idle default server."""
+    cmd = [sys.executable, "-c", _SERVER_CHILD, str(_free_port()), str(_free_port())]
+    proc = subprocess.run(
+        [*cmd, json.dumps(preload)], capture_output=True, text=True, cwd=ROOT, timeout=180
+    )
+    line = next((ln for ln in proc.stderr.splitlines() if ln.startswith("MEMORY ")), None)
+    if line is None:
+        raise RuntimeError(proc.stderr[-2000:])
+    (rss, anon, file), modules = json.loads(line[len("MEMORY ") :])
+    return (rss, anon, file), modules
+
+
+def _row(label: str, values: tuple[float, float, float], sign: str = "") -> str:
+    rss, anon, file = values
+    return f"{label:<40} {rss:{sign}8.1f} {anon:{sign}8.1f} {file:{sign}8.1f}"
+
+
+def main(argv: list[str] | None = None) -> int:
+    del argv
+    rows = groups()
+    print("idle default server: each import group's share (MB; one child, in import order)")
+    print(f"{'group':<40} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8}")
+    groups_rows = rows[: len(GROUPS) + 1]
+    previous = (0.0, 0.0, 0.0)
+    for label, values in groups_rows:
+        share = tuple(v - p for v, p in zip(values, previous, strict=True))
+        print(_row(label, share, "+") if previous[0] else _row(label, values))
+        previous = values
+    print(_row("= the default path's imports", previous))
+    print()
+    print("cut from the default path (issue 16): what each would add on top (MB)")
+    for (label, values), (_name, when) in zip(rows[len(GROUPS) + 1 :], CUT, strict=True):
+        print(_row(f"{label} (only with {when})", values, "+"))
+    print()
+    runs = {
+        name: [idle_server(preload) for _ in range(3)]
+        for name, preload in (
+            ("before the cuts (cut modules imported first)", [name for name, _ in CUT]),
+            ("now", []),
+        )
+    }
+    print("the idle server: simbridge, default world, both ports, no client (MB; median of 3)")
+    print(f"{'case':<40} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8} {'modules':>8}")
+    medians = {}
+    for name, results in runs.items():
+        ordered = sorted(results)
+        (values, modules) = ordered[len(ordered) // 2]
+        medians[name] = values
+        print(f"{_row(name, values)} {modules:>8}")
+    before, now = medians.values()
+    print(
+        f"{'ratio now / before':<40} {now[0] / before[0]:8.2f} {now[1] / before[1]:8.2f} "
+        f"{now[2] / before[2]:8.2f}"
+    )
+    print("target (issue 16): <= 40 MB RSS")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
