@@ -39,6 +39,13 @@ PI = {
     "limit; where the budget runs out; cold start; idle RSS",
 }
 
+#: Where an idle server's memory goes (issue 16; ``python -m bench memory``, about 20 s, not in
+#: the default run): each import group's share, the modules cut from the default path.
+MEMORY = {
+    "memory": "idle default server: RSS / RssAnon / RssFile per import group; before/after the "
+    "issue-16 cuts",
+}
+
 #: Reliability figures of issue 7, run by name (``python -m bench hostile stall churn soak``).
 RELIABILITY = {
     "hostile": "hostile frames against a real server: crashes, /odom rate quiet vs under attack",
