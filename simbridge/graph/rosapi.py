@@ -223,11 +223,7 @@ def install_rosapi(graph: Graph) -> None:
         ),
         "interfaces": (
             "Interfaces",
-            lambda r: {
-                "interfaces": sorted(
-                    [*graph.registry.types(), *graph.registry.services, *graph.registry.actions]
-                )
-            },
+            lambda r: {"interfaces": graph.registry.interface_names()},
         ),
         "get_time": ("GetTime", lambda r: get_time()),
         "get_ros_version": ("GetROSVersion", lambda r: {"version": 2, "distro": ROS_DISTRO}),

@@ -9,7 +9,9 @@ simbridge's own) are registered from ``.msg``/``.srv`` text with :meth:`TypeRegi
 from __future__ import annotations
 
 import functools
+import gc
 import re
+import threading
 from dataclasses import dataclass
 from typing import Any, Literal
 
@@ -25,6 +27,7 @@ __all__ = [
     "FieldSpec",
     "MessageSpec",
     "TypeRegistry",
+    "generate_interfaces_soon",
     "normalize_type",
     "short_type",
 ]
@@ -170,26 +173,7 @@ class TypeRegistry:
 
     def _add_interfaces(self) -> None:
         """Add simbridge's service/action interfaces (generated once per process, then copied)."""
-        global _INTERFACES
-        if _INTERFACES is None:
-            from simbridge.msgs.interfaces import ACTIONS, MESSAGES, SERVICES
-
-            fresh = TypeRegistry(interfaces=False)
-            before = set(fresh._store.fielddefs)
-            fresh.register_many(
-                [("msg", n, t) for n, t in MESSAGES.items()]
-                + [("srv", n, t) for n, t in SERVICES.items()]
-                + [("action", n, t) for n, t in ACTIONS.items()]
-            )
-            added = set(fresh._store.fielddefs) - before
-            _INTERFACES = (
-                {k: fresh._store.fielddefs[k] for k in added},
-                {k: fresh._store.types[k] for k in added},
-                fresh._services,
-                fresh._actions,
-                fresh.texts,
-            )
-        self._add_generated(_INTERFACES)
+        self._add_generated(_interfaces())
 
     def _add_generated(self, generated: Any) -> None:
         """Copy definitions generated once per process into this registry's store."""
@@ -240,6 +224,18 @@ class TypeRegistry:
         """Return every known message type name, sorted."""
         self._need()
         return sorted(self._store.fielddefs)
+
+    def interface_names(self) -> list[str]:
+        """Return every message, service and action type name, sorted (rosapi's interfaces).
+
+        The pending service/action interfaces are listed by name, not generated: generating
+        them takes 80 ms here (0.4 s on a Pi 4B) in one go, a gap in every client's /odom at
+        the first ``/rosapi/interfaces`` call.
+        """
+        names = self._store.fielddefs.keys() | self._services.keys() | self._actions.keys()
+        if self._interfaces_pending:
+            names |= _interface_names()
+        return sorted(names)
 
     def definition_text(self, name: str) -> str:
         """Return the full ``.msg`` text with each dependency in a ``MSG: pkg/Type`` section.
@@ -401,6 +397,72 @@ class TypeRegistry:
 
 _INTERFACES: Any = None
 _ACTIONLIB: Any = None
+#: Held while the interfaces are generated (by :func:`generate_interfaces_soon`'s thread or the
+#: first lookup that needs them): a lookup waits for a generation under way, never repeats it.
+_GENERATING = threading.Lock()
+_WARMUP: threading.Thread | None = None
+#: Definitions generated at once (one compiled module each).
+_BATCH = 16
+
+
+def generate_interfaces_soon() -> None:
+    """Generate simbridge's service/action interfaces in a background thread, once per process.
+
+    Generated on the loop by a client's first rosapi call (``/rosapi/topics`` is roslibjs's first
+    call), they took 80-300 ms in one go on a shared x86 core (a Pi 4B core is ~5x slower): a
+    gap in every client's /odom. The thread gives up the GIL every switch interval (5 ms), so
+    the loop keeps its ticks meanwhile. The server calls this when its first client connects:
+    an idle server keeps its footprint (``tests/test_footprint.py``).
+
+    The garbage collector is paused while they are made (else a full collection ran mid-way,
+    in the thread but holding the GIL: 40-70 ms), and what they are made of (47,000 objects
+    that live as long as the process) is frozen afterwards, as the startup objects are
+    (``simbridge.cli``), so that no full collection walks them again.
+    """
+    global _WARMUP
+    if _INTERFACES is None and _WARMUP is None:
+
+        def run() -> None:
+            was = gc.isenabled()
+            gc.disable()
+            try:
+                _interfaces()
+            finally:
+                gc.freeze()
+                if was:
+                    gc.enable()
+
+        _WARMUP = threading.Thread(target=run, name="simbridge-interfaces", daemon=True)
+        _WARMUP.start()
+
+
+def _interfaces() -> Any:
+    """Return simbridge's service/action interfaces, generating them on the first call."""
+    global _INTERFACES
+    with _GENERATING:
+        if _INTERFACES is None:
+            from simbridge.msgs.interfaces import ACTIONS, MESSAGES, SERVICES
+
+            fresh = TypeRegistry(interfaces=False)
+            before = set(fresh._store.fielddefs)
+            definitions = (
+                [("msg", n, t) for n, t in MESSAGES.items()]
+                + [("srv", n, t) for n, t in SERVICES.items()]
+                + [("action", n, t) for n, t in ACTIONS.items()]
+            )
+            # in a few batches (messages before the services that use them): each batch's
+            # generated code is compiled in one C call that holds the GIL
+            for i in range(0, len(definitions), _BATCH):
+                fresh.register_many(definitions[i : i + _BATCH])
+            added = set(fresh._store.fielddefs) - before
+            _INTERFACES = (
+                {k: fresh._store.fielddefs[k] for k in added},
+                {k: fresh._store.types[k] for k in added},
+                fresh._services,
+                fresh._actions,
+                fresh.texts,
+            )
+        return _INTERFACES
 
 
 def _actionlib() -> Any:

@@ -274,6 +274,42 @@ async def test_row6_a_non_reading_caller_is_held_to_the_send_budget(
         await steady()
 
 
+async def test_row6_a_flood_of_dropped_messages_takes_turns_with_the_loop(
+    make_app: AppFactory,
+) -> None:
+    """Messages dropped by message_rate count against the sender's share of the loop too.
+
+    One read of the socket (256 kB) queues thousands of small frames; dropping them one after
+    the other without a turn for anyone else held the loop 190 ms (bench ``state6``).
+    """
+    app = await student_app(make_app, message_rate=10.0, message_burst=10)
+    loop = asyncio.get_running_loop()
+    worst = 0.0
+    stop = False
+
+    async def lag() -> None:  # how late a 5 ms timer fires while the flood is handled
+        nonlocal worst
+        while not stop:
+            start = loop.time()
+            await asyncio.sleep(0.005)
+            worst = max(worst, loop.time() - start - 0.005)
+
+    call = {"op": "call_service", "service": "/rosapi/interfaces", "id": "i"}
+    sock = await stalled_client(app.ws_port, call, path=f"/?token={STUDENT}")
+    try:
+        client = server_side(app, 0)
+        await wait_for(lambda: client.queue.pending or client.frames_sent, 10)
+        probe = asyncio.create_task(lag())
+        flood = _masked(json.dumps(call).encode()) * 8_000  # 600 kB, sent at once
+        await loop.sock_sendall(sock, flood)
+        await wait_for(lambda: client.session.refusals_untold >= 7_900, 20)
+        stop = True
+        await probe
+    finally:
+        sock.close()
+    assert worst < 0.03 * TIMEOUT_FACTOR, worst
+
+
 def _masked(payload: bytes) -> bytes:
     mask = b"\x01\x02\x03\x04"
     body = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
