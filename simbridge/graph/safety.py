@@ -10,8 +10,10 @@ turns them on.
   (cleanly or not), that robot is stopped.
 
 Commands are observed as an in-process subscriber (of node ``/virtual_robot``) of each robot's
-``cmd_vel`` topic, resolved to the tick they arrive in; robots added to or removed from the
-world are followed at the next tick.
+``cmd_vel`` topic and timed from when they arrived (not from the next tick: that made the
+watchdog stop a robot up to a timeout and two ticks after its last command); robots added to
+or removed from the world are followed at the next tick. A robot is therefore stopped by the
+first tick more than the timeout after its last command: within the timeout and one tick.
 """
 
 from __future__ import annotations
@@ -55,7 +57,8 @@ class Safety:
         self.commander: dict[str, Peer] = {}
         #: Robots stopped by the watchdog or a disconnect so far.
         self.stops = 0
-        self._fresh: set[str] = set()
+        #: Commands since the last tick: robot -> when the latest arrived.
+        self._fresh: dict[str, float] = {}
         self._callbacks: dict[str, tuple[str, InternalCallback]] = {}
         self._unwatched: set[str] = set()
         self._follow_robots()
@@ -80,7 +83,7 @@ class Safety:
             def on_cmd_vel(msg: Any, source: Peer | None, name: str = name) -> None:
                 if not _finite_command(msg):
                     return  # refused by the robot; it does not count as a command
-                self._fresh.add(name)
+                self._fresh[name] = self.graph.topics.now
                 if source is not None:
                     self.commander[name] = source
 
@@ -102,8 +105,8 @@ class Safety:
         """Stamp this tick's commands and stop robots whose command is stale."""
         if self._callbacks.keys() != self.world.robots.keys():
             self._follow_robots()
-        for name in self._fresh:
-            self.last_command[name] = now
+        for name, arrived in self._fresh.items():
+            self.last_command[name] = arrived
         self._fresh.clear()
         timeout = self.world.params.safety.cmd_vel_timeout
         if timeout <= 0:

@@ -126,6 +126,9 @@ class TopicTable:
         #: Called with ``(topic, message, sending peer or None)`` before each delivery
         #: (extensions: the Zenoh link forwards messages to ROS 2 subscribers).
         self.taps: list[Callable[[Topic, Outgoing, Peer | None], None]] = []
+        #: When the message being delivered arrived (monotonic seconds): the in-process
+        #: subscribers that time commands read it (the ``/cmd_vel`` watchdog).
+        self.now = 0.0
 
     # -- declaration ----------------------------------------------------------------------------
 
@@ -283,6 +286,7 @@ class TopicTable:
             ProtocolError: an in-process subscriber refused the message (after every client
                 subscriber got it); the caller reports it to ``source``.
         """
+        self.now = now
         for tap in self.taps:
             tap(topic, out, source)
         if topic.latch:

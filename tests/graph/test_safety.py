@@ -93,3 +93,20 @@ def test_a_removed_robot_is_forgotten_and_its_topic_can_go() -> None:
     assert "/r2/cmd_vel" not in graph.topics.topics
     safety.tick(0.0)
     assert "/r2/cmd_vel" not in graph.topics.topics and "/r1/cmd_vel" in graph.topics.topics
+
+
+def test_watchdog_times_a_command_from_its_arrival_not_from_the_next_tick() -> None:
+    """A command that arrives between ticks is stale a timeout after it arrived.
+
+    Timed from the tick after it, the stop came up to a timeout and two ticks after the
+    command (bench hostile: 600 ms for a 0.5 s timeout under load).
+    """
+    graph, world, safety = make(cmd_vel_timeout=0.5)
+    peer = RecordingPeer(graph)
+    safety.tick(0.0)
+    drive(graph, peer, 0.3, 0.04)  # 10 ms before the tick at 0.05
+    for k in range(1, 11):  # ticks 0.05 .. 0.50: 0.46 s since the command at most
+        safety.tick(k * 0.05)
+    assert world.robots[""].cmd_v == 0.3
+    safety.tick(0.55)  # 0.51 s since the command (0.50 since the tick that saw it)
+    assert world.robots[""].cmd_v == 0.0 and safety.stops == 1
