@@ -216,24 +216,12 @@ class ActionTable:
         return action
 
     def _advertise(self, peer: Peer, op: o.AdvertiseAction, now: float) -> None:
-        name = op.name
-        existing = self.actions.get(name)
-        if existing is not None and existing.server is not None:
-            # what the server provides stays the server's: taking it over would break it for
-            # every client, and it would be gone for everyone when this client left
-            msg = (
-                f"advertise_action {name}: refused, the server provides this action itself; "
-                "choose another name"
-            )
-            raise ProtocolError(msg)
-        try:
-            canonical = normalize_type(op.type, "action")
-        except TypeNotFoundError as err:
-            raise ProtocolError(f"advertise_action: {err}") from None
+        # admitted (graph.admission): not an action the server provides, a well-formed type
+        canonical = normalize_type(op.type, "action")
         self._install(
-            Action(name, canonical, op.type, BRIDGE_NODE, provider=peer, written=op.action)
+            Action(op.name, canonical, op.type, BRIDGE_NODE, provider=peer, written=op.action)
         )
-        peer.session.own_action(name, canonical)
+        peer.session.own_action(op.name, canonical)
 
     def _unadvertise(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
         name = op.name

@@ -1,12 +1,31 @@
 """The ROS-graph facade: what clients see of simbridge, whatever simulates behind it.
 
 :class:`Graph` receives every client frame, turns it into ops (via the client's
-:class:`~simbridge.protocol.Session`) and carries them out on its topic and service tables. A
+:class:`~simbridge.protocol.Session`), lets its :class:`~simbridge.graph.admission.Admission`
+decide whether each is allowed, and carries them out on its topic, service and action tables. A
 bad op is answered with a ``status`` error to its sender only (when the sender's ``set_level``
 allows it) and logged at debug level; it never touches other clients or the simulation.
 
 The graph is sans-I/O: the server hands it frames and a monotonic ``now``; it hands frames
 back to peers through :meth:`Peer.send`. ``tick(now)`` expires what waits on time.
+
+A ``/cmd_vel`` from a page, in a straight line (each step once):
+
+1. **socket**: the server's connection handler reads the frame (message rate and work share
+   of :mod:`simbridge.server`) and calls :meth:`Graph.receive`;
+2. **session**: :meth:`Session.parse <simbridge.protocol.Session.parse>` decodes it into a
+   typed ``Publish`` op, its topic name resolved once (``cmd_vel`` -> ``/cmd_vel``);
+3. **admission**: :meth:`Admission.admit <simbridge.graph.admission.Admission.admit>` decides
+   once (authenticated, publish rate, scope, type, payload) and returns a
+   :class:`~simbridge.graph.admission.Publication`: the topic, its type and the validated
+   message;
+4. **graph**: :meth:`Graph._publish` registers the client as a publisher the first time (its
+   session counts it against its budgets) and :meth:`TopicTable.deliver
+   <simbridge.graph.topics.TopicTable.deliver>` hands the message, wrapped once, to the
+   subscribers: encoded frames to clients, the message to in-process nodes;
+5. **robot**: the robot's subscriber (:class:`~simbridge.graph.bridge.RobotBridge`) sets the
+   command of its robot in the world (``World.command``); a command it refuses (not finite,
+   absurd) comes back to the sender as a ``status`` error.
 """
 
 from __future__ import annotations
@@ -18,8 +37,9 @@ from collections.abc import Callable
 from typing import Any
 
 from simbridge.config import ServerSettings
-from simbridge.errors import ProtocolError, SimbridgeError, TypeNotFoundError
+from simbridge.errors import ProtocolError, SimbridgeError
 from simbridge.graph.actions import ActionTable
+from simbridge.graph.admission import Admission, Publication
 from simbridge.graph.params import ParameterStore
 from simbridge.graph.services import Handler, ServiceTable, service_response, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
@@ -131,13 +151,12 @@ class Graph:
         self.on_disconnect: list[Callable[[Peer], None]] = []
         #: Called with each peer that connects, before its first op (extensions).
         self.on_connect: list[Callable[[Peer], None]] = []
-        #: Checks run before every op: ``(peer, op, now) -> carry it out?``. A gate that says
-        #: no has answered the client itself; one that raises SimbridgeError is reported.
-        self.gates: list[Callable[[Peer, Op, float], bool]] = []
-        #: Services that need admin rights (see :mod:`simbridge.graph.guard`).
-        self.admin_services: set[str] = set()
         #: Actions (client-served and in-process) and the goals in flight.
         self.actions = ActionTable(self)
+        #: Decides whether each op of a client is carried out (the guard sets its access rules).
+        self.admission = Admission(self.topics, self.services, self.actions)
+        #: Services that need admin rights (see :mod:`simbridge.graph.guard`).
+        self.admin_services = self.admission.admin_services
         self.handlers.update(self.actions.handlers())
         self.on_disconnect.append(self.actions.drop_peer)
         self._ids = itertools.count(1)
@@ -174,9 +193,9 @@ class Graph:
     def receive(self, peer: Peer, data: str | bytes, now: float) -> None:
         """Handle one frame from ``peer``: every op in it, in order.
 
-        The straight line of every op: the client's session parses it (names resolved, strings
-        checked, nothing but ``auth`` before the client is admitted), the gates decide whether
-        it is allowed, its handler carries it out on the graph.
+        The straight line of every op: the client's session parses it (names resolved,
+        strings checked, nothing but ``auth`` before the client is admitted), the admission
+        decides whether it is allowed, its handler carries it out on the graph.
         """
         for item in peer.session.parse(data, now):
             if isinstance(item, ProtocolError):
@@ -185,17 +204,22 @@ class Graph:
                 self.dispatch(peer, item, now)
 
     def dispatch(self, peer: Peer, op: Op, now: float) -> None:
-        """Carry out one op; a :class:`SimbridgeError` becomes an answer to the sender."""
+        """Admit one op and carry it out; a :class:`SimbridgeError` becomes an answer to the sender.
+
+        The handler receives what :meth:`Admission.admit
+        <simbridge.graph.admission.Admission.admit>` returns: the op, or for a ``publish`` its
+        :class:`~simbridge.graph.admission.Publication`.
+        """
         handler = self.handlers.get(type(op))
         try:
-            for gate in self.gates:
-                if not gate(peer, op, now):
-                    return
+            admitted = self.admission.admit(peer, op, now)
+            if admitted is None:
+                return
             if handler is None:
                 name = type(op).__name__
                 msg = f"operation {name} is not supported by this server yet"
                 raise ProtocolError(msg)
-            handler(peer, op, now)
+            handler(peer, admitted, now)
         except Refusal as err:
             self.refuse(peer, err, now, op)
         except SimbridgeError as err:
@@ -311,31 +335,19 @@ class Graph:
         peer.session.unadvertise(op.name, one)
         self.topics.unadvertise(op.name, peer, one)
 
-    def _publish(self, peer: Peer, op: o.Publish, now: float) -> None:
+    def _publish(self, peer: Peer, admitted: Publication, now: float) -> None:
+        op, topic, session = admitted.op, admitted.topic, peer.session
         name = op.name
-        topic = self.topics.topics.get(name)
-        session = peer.session
-        if op.type is not None or topic is None or topic.type is None:
-            if op.type is None:
-                msg = (
-                    f"publish: cannot infer the type of topic {name}: it is not advertised; "
-                    "advertise it first or give a type"
-                )
-                raise ProtocolError(msg)
-            new = name not in session.advertisements
-            session.advertise(name, None, op.type)
-            try:
-                topic = self.topics.advertise(name, op.type, peer, None)
-            except ProtocolError:
-                if new:
-                    session.unadvertise(name, None)
-                raise
-        elif name not in session.advertisements:
+        if (
+            topic is None
+            or op.type is not None
+            or topic.type is None
+            or name not in session.advertisements
+        ):
             # rosbridge registers a publishing client as a publisher implicitly
-            session.advertise(name, None, topic.type)
-            self.topics.advertise(name, topic.type, peer, None)
-        msg = self.topics.convert(topic, op.msg)
-        out = self.topics.outgoing(topic, msg, self.stamp())
+            session.advertise(name, None, admitted.type)
+            topic = self.topics.advertise(name, admitted.type, peer, None)
+        out = self.topics.outgoing(topic, admitted.msg, self.stamp())
         if op.latch or topic.latch:
             session.latch(name, len(out.json_body()))  # what later subscribers will cost
             topic.latch = True
@@ -357,10 +369,7 @@ class Graph:
         self.services.call(peer, op, op.name, now)
 
     def _advertise_service(self, peer: Peer, op: o.AdvertiseService, now: float) -> None:
-        try:
-            type_name = normalize_type(op.type, "srv")
-        except TypeNotFoundError as err:
-            raise ProtocolError(f"advertise_service: {err}") from None
+        type_name = normalize_type(op.type, "srv")  # admitted: well formed
         self.services.advertise(peer, op.name, type_name, op.service)
 
     def _unadvertise_service(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:

@@ -1,19 +1,13 @@
-"""Who may do what on the bridge: authentication, scopes, per-client limits, admin services.
+"""Who a client is: authentication, and the access each connection gets.
 
-A :class:`Guard` sits in front of :meth:`Graph.dispatch <simbridge.graph.Graph.dispatch>` as a
-gate: every op of a client passes it before it is carried out. It refuses, with a ``status``
-error to that client only (a failed ``service_response`` for ``call_service``):
-
-* every op but ``auth`` from a client that has not authenticated, when authentication is on
-  (``client_tokens`` or ``auth_secret``; see ``docs/security.md``);
-* publishing, advertising (topics, services, actions) outside the client's scope: a client
-  whose token maps to robot ``r1`` may publish only under ``/r1/``, and may not call services
-  or send goals under another robot's namespace;
-* calls to administrative services (:attr:`Graph.admin_services`) unless the client presented
-  the admin token (when one is set);
-* advertising a service that the server itself provides (it would hijack it for everyone);
-* more subscriptions or advertisements than the per-client limits, and publishes above the
-  per-client rate (a token bucket). Rate refusals are told at most once a second.
+A :class:`Guard` authenticates the clients of a :class:`~simbridge.graph.Graph` and gives each
+session its access: a scope (``"*"``, every topic, or a robot's name, its namespace only) and
+admin rights. It turns on the graph's access rules, which
+:class:`~simbridge.graph.admission.Admission` applies to every op with the type and payload
+checks (the one place that decides; see there): nothing but ``auth`` before a client has
+authenticated (when ``client_tokens`` or ``auth_secret`` is set; see ``docs/security.md``),
+names within the client's scope, administrative services (:data:`DEFAULT_ADMIN_SERVICES`) for
+admin rights only, the per-client publish rate.
 
 Authentication, either way:
 
@@ -32,29 +26,18 @@ import hashlib
 import hmac
 import logging
 from collections.abc import Callable, Iterable
-from typing import Any
 
 from simbridge.config import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph.graph import Graph
 from simbridge.graph.topics import Peer
-from simbridge.protocol import (
-    ANY_SCOPE,
-    NOT_AUTHENTICATED,
-    Op,
-    Refusal,
-    Session,
-    TokenBucket,
-    ops as o,
-    status_frame,
-)
+from simbridge.protocol import ANY_SCOPE, TokenBucket, ops as o, status_frame
 
 
 __all__ = [
     "ADMIN_SCOPE",
     "ANY_SCOPE",
     "DEFAULT_ADMIN_SERVICES",
-    "MIN_FRAGMENT_SIZE",
     "Guard",
     "TokenBucket",
     "rosauth_mac",
@@ -65,8 +48,6 @@ logger = logging.getLogger(__name__)
 
 #: The rosauth ``level`` (and token scope) of an administrator.
 ADMIN_SCOPE = "admin"
-#: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
-MIN_FRAGMENT_SIZE = 256
 #: Services that change the world or the server for everyone.
 DEFAULT_ADMIN_SERVICES = frozenset(
     {
@@ -80,8 +61,6 @@ DEFAULT_ADMIN_SERVICES = frozenset(
         "/sim/set_real_time_factor",
     }
 )
-#: Name endings of administrative services of any node (ROS 2 parameter services).
-ADMIN_SUFFIXES = ("/set_parameters", "/set_parameters_atomically")
 
 
 def rosauth_mac(
@@ -108,13 +87,8 @@ def token_access(settings: ServerSettings, token: str | None) -> tuple[str, bool
     return None
 
 
-def in_namespace(scope: str, name: str) -> bool:
-    """Return whether the absolute name ``name`` lies in the scope's namespace."""
-    return scope == ANY_SCOPE or name == f"/{scope}" or name.startswith(f"/{scope}/")
-
-
 class Guard:
-    """The gate in front of the graph (install once per :class:`Graph`)."""
+    """Authentication and access of a graph's clients (install once per :class:`Graph`)."""
 
     def __init__(
         self,
@@ -131,8 +105,10 @@ class Guard:
         #: Names of the robots (their namespaces are off limits to other robots' clients).
         self.robots = robots
         self._wall_time = wall_time or (lambda: graph.wall_clock_ns() / 1e9)
-        graph.admin_services.update(DEFAULT_ADMIN_SERVICES)
-        graph.gates.append(self.gate)
+        admission = graph.admission
+        admission.guarded = True
+        admission.robots = robots
+        admission.admin_services.update(DEFAULT_ADMIN_SERVICES)
         graph.on_connect.append(self.connect)
         graph.handlers[o.Auth] = self._auth
 
@@ -154,135 +130,6 @@ class Guard:
         session.guarded = True
         if granted is None and s.auth_required:
             session.authenticated = False  # only auth is read until it succeeds
-
-    def access(self, peer: Peer) -> Session:
-        """Return the session of ``peer``: its access (scope, admin, rate) lives there."""
-        return peer.session
-
-    # -- the gate -------------------------------------------------------------------------
-
-    def gate(self, peer: Peer, op: Op, now: float) -> bool:
-        """Return whether ``op`` may be carried out; refuse it (and tell the client) if not.
-
-        Raises:
-            Refusal: the op is refused (the graph answers the client).
-        """
-        session = peer.session
-        if not session.authenticated and not isinstance(op, o.Auth):
-            raise Refusal(NOT_AUTHENTICATED, cause="unauthenticated")
-        size = getattr(op, "fragment_size", None)
-        if size is not None and size < MIN_FRAGMENT_SIZE:
-            msg = (
-                f"fragment_size {size} is too small: at least {MIN_FRAGMENT_SIZE} bytes "
-                "(tiny fragments multiply the server's work)"
-            )
-            raise Refusal(msg, cause="fragment_size")
-        check = self._checks.get(type(op))
-        return True if check is None else check(self, peer, session, op, now)
-
-    def _may_own(self, session: Session, what: str, name: str, new: bool) -> None:
-        if not in_namespace(session.scope, name):
-            msg = (
-                f"{what} {name}: not allowed; this connection may only use names under "
-                f"/{session.scope}/ (its robot)"
-            )
-            raise Refusal(msg, cause=f"scope {what}")
-        session.may_own(what, name, new)
-
-    def _may_reach(self, session: Session, name: str) -> bool:
-        """Whether a call or goal to ``name`` stays out of other robots' namespaces."""
-        if session.scope == ANY_SCOPE:
-            return True
-        return not any(
-            robot and robot != session.scope and in_namespace(robot, name)
-            for robot in self.robots()
-        )
-
-    def _publish(self, peer: Peer, session: Session, op: o.Publish, now: float) -> bool:
-        if not session.publishes.take(now):
-            s = self.settings
-            text = (
-                f"publish {op.name}: dropped, more than {s.publish_rate:g} publishes per second "
-                f"(the server's publish_rate, burst {s.publish_burst}); slow down"
-            )
-            if session.may_tell("publish_rate", now):
-                logger.info("%s: %s", peer.label, text)
-                if session.wants_status("error"):
-                    peer.send(status_frame("error", text))
-            return False
-        self._may_own(session, "publish", op.name, op.name not in session.advertisements)
-        return True
-
-    def _advertise(self, peer: Peer, session: Session, op: o.Advertise, now: float) -> bool:
-        self._may_own(session, "advertise", op.name, op.name not in session.advertisements)
-        return True
-
-    def _subscribe(self, peer: Peer, session: Session, op: o.Subscribe, now: float) -> bool:
-        if op.type and session.scope != ANY_SCOPE:
-            # a typed subscription fixes the type of a topic nobody publishes yet: outside its
-            # own namespace that would squat a name (a robot spawned later could not take it)
-            name = op.name
-            topic = self.graph.topics.topics.get(name)
-            if not in_namespace(session.scope, name) and (topic is None or topic.type is None):
-                msg = (
-                    f"subscribe {name}: refused with a type, the topic is outside "
-                    f"/{session.scope}/ and nothing publishes it yet (the type would claim the "
-                    "name); subscribe without a type and it waits for the topic"
-                )
-                raise Refusal(msg, cause="typed subscribe outside scope")
-        return True
-
-    def _advertise_service(
-        self, peer: Peer, session: Session, op: o.AdvertiseService, now: float
-    ) -> bool:
-        existing = self.graph.services.services.get(op.name)
-        if existing is not None and existing.handler is not None:
-            msg = (
-                f"advertise_service {op.name}: refused, the server provides this service "
-                "itself; choose another name"
-            )
-            raise Refusal(msg, cause="server service")
-        self._may_own(session, "advertise_service", op.name, op.name not in session.services)
-        return True
-
-    def _advertise_action(
-        self, peer: Peer, session: Session, op: o.AdvertiseAction, now: float
-    ) -> bool:
-        self._may_own(session, "advertise_action", op.name, op.name not in session.actions)
-        return True
-
-    def _call_service(self, peer: Peer, session: Session, op: o.CallService, now: float) -> bool:
-        name = op.name
-        admin_only = name in self.graph.admin_services or name.endswith(ADMIN_SUFFIXES)
-        if admin_only and not session.admin:
-            reason = (
-                f"service {name} is administrative: connect with the admin token "
-                "(?token=ADMIN_TOKEN) to call it"
-            )
-        elif not self._may_reach(session, name):
-            reason = f"service {name} belongs to another robot; this connection may not call it"
-        else:
-            return True
-        logger.info("%s: %s", peer.label, reason)
-        raise Refusal(reason, op="call_service", target=op.service, op_id=op.id)
-
-    def _send_action_goal(
-        self, peer: Peer, session: Session, op: o.SendActionGoal, now: float
-    ) -> bool:
-        if not self._may_reach(session, op.name):
-            msg = f"action {op.name} belongs to another robot; this connection may not use it"
-            raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
-        return True
-
-    _checks: dict[type, Callable[[Any, Peer, Session, Any, float], bool]] = {
-        o.Publish: _publish,
-        o.Advertise: _advertise,
-        o.Subscribe: _subscribe,
-        o.AdvertiseService: _advertise_service,
-        o.AdvertiseAction: _advertise_action,
-        o.CallService: _call_service,
-        o.SendActionGoal: _send_action_goal,
-    }
 
     # -- the auth op ---------------------------------------------------------------------
 

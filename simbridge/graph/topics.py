@@ -132,21 +132,22 @@ class TopicTable:
 
     # -- declaration ----------------------------------------------------------------------------
 
+    def check_type(self, name: str, type_name: str) -> str:
+        """Return the canonical spelling of ``type_name`` if topic ``name`` may have that type.
+
+        Raises:
+            ProtocolError: the type string is malformed, or the topic has another type
+                (rosbridge's TypeConflictException).
+        """
+        topic = self.topics.get(name)
+        return _canonical(type_name, None if topic is None else topic)
+
     def _typed(self, topic: Topic, type_name: str) -> None:
         """Fix or check the type of ``topic``."""
-        try:
-            canonical = normalize_type(type_name)
-        except TypeNotFoundError as err:
-            raise ProtocolError(str(err)) from None
+        canonical = _canonical(type_name, topic)
         if topic.type is None:
             topic.type = canonical
             topic.known = self.registry.known(canonical)
-        elif topic.type != canonical:
-            msg = (
-                f"Tried to register topic {topic.name} with type {canonical} "
-                f"but it is already established with type {topic.type}"
-            )
-            raise ProtocolError(msg)
 
     def advertise(
         self,
@@ -267,13 +268,22 @@ class TopicTable:
         return Outgoing(topic.name, topic.type if topic.known else None, msg, stamp, cdr)
 
     def convert(self, topic: Topic, payload: Any) -> Any:
-        """Validate a client payload for ``topic`` (pass it through when the type is unknown).
+        """Validate a payload for ``topic`` (see :meth:`validate`; the topic must be typed)."""
+        assert topic.type is not None
+        return self.validate(topic.type, topic.known, payload)
+
+    def validate(self, type_name: str, known: bool, payload: Any) -> Any:
+        """Return a client payload of canonical type ``type_name`` as a canonical message.
+
+        A ``known`` type is validated and completed with defaults; any other type passes
+        through, if it is a JSON object.
 
         Raises:
-            ConversionError: the payload does not fit the topic's type.
+            ConversionError: the payload does not fit the type.
+            ProtocolError: the payload of an unknown type is not a JSON object.
         """
-        if topic.known and topic.type is not None:
-            return self.converter.from_json(topic.type, payload)
+        if known:
+            return self.converter.from_json(type_name, payload)
         if not isinstance(payload, dict):
             msg = f"publish: msg must be a JSON object, got {type(payload).__name__}"
             raise ProtocolError(msg)
@@ -386,3 +396,24 @@ class TopicTable:
     def listed(self) -> list[Topic]:
         """Return the topics that exist in the graph (typed), sorted by name."""
         return sorted((t for t in self.topics.values() if t.type is not None), key=lambda t: t.name)
+
+
+def _canonical(type_name: str, topic: Topic | None) -> str:
+    """Return the canonical spelling of ``type_name``, which ``topic`` (if typed) must have.
+
+    Raises:
+        ProtocolError: the type string is malformed or conflicts with the topic's type.
+    """
+    if topic is not None and type_name == topic.type:
+        return type_name  # canonical already: what admitted ops and in-process users give
+    try:
+        canonical = normalize_type(type_name)
+    except TypeNotFoundError as err:
+        raise ProtocolError(str(err)) from None
+    if topic is not None and topic.type is not None and topic.type != canonical:
+        msg = (
+            f"Tried to register topic {topic.name} with type {canonical} "
+            f"but it is already established with type {topic.type}"
+        )
+        raise ProtocolError(msg)
+    return canonical

@@ -15,6 +15,12 @@ once, however many subscribe ids it holds on it; the ids' options merge as
 compression by precedence ``cbor-raw > cbor > png > none``. A throttled subscription drops
 messages that arrive less than ``throttle_rate`` ms after the last one sent (less a small
 jitter allowance).
+
+Where the session stands in the path of an op (step by step for a ``/cmd_vel`` in
+:mod:`simbridge.graph.graph`): the server's connection hands a frame to the graph,
+:meth:`Session.parse` makes typed ops of it, the graph's admission decides whether each is
+allowed, and the graph's handlers carry it out, taking what the client holds from the session's
+budgets.
 """
 
 from __future__ import annotations

@@ -1,0 +1,288 @@
+"""Admission: the one place that decides whether a client's op is carried out.
+
+Every op of a client passes :meth:`Admission.admit` between its session's parse (names resolved
+once, strings checked: :meth:`Session.parse <simbridge.protocol.Session.parse>`) and its
+handler on the graph, which then only carries it out. The checks, in this order:
+
+1. **authentication**: nothing but ``auth`` from a client that still owes a token;
+2. **fragment size**: a ``fragment_size`` below :data:`MIN_FRAGMENT_SIZE` bytes is refused;
+3. **rate**: ``publish`` ops above the client's ``publish_rate`` are dropped, told at most once
+   a second (the session's token bucket);
+4. **scope and rights**: a client scoped to robot ``r1`` may publish and advertise (topics,
+   services, actions) only under ``/r1/`` and may not call services or send goals under
+   another robot's namespace, nor fix the type of a topic outside its namespace with a typed
+   subscribe; administrative services (:attr:`Admission.admin_services`) need admin rights; a
+   service or action the server provides cannot be advertised by a client;
+5. **type**: the type of a ``publish``, ``advertise`` or typed ``subscribe`` is well formed and
+   is the topic's type (rosbridge's TypeConflictException); a ``publish`` without a type takes
+   the topic's; a service or action type is well formed;
+6. **payload**: a ``publish`` message is validated against its type and completed with
+   defaults (:class:`~simbridge.msgs.Converter`; an unknown type needs a JSON object).
+
+Checks 1-4 are access rules. They apply once a :class:`~simbridge.graph.guard.Guard` is
+installed (it authenticates clients and gives each session its scope and rights, and sets
+:attr:`Admission.guarded`); a graph without one trusts every client. What a client may *hold*
+(subscriptions, advertisements, pending calls, latched bytes) is not decided here but by its
+session's budgets, when the handler takes it; names it may own are counted here too, so that a
+scope refusal comes before a budget one.
+
+A refused op raises :class:`~simbridge.protocol.Refusal` or :class:`ProtocolError`, answered
+to its sender only by the graph; a dropped op (rate) makes :meth:`Admission.admit` return
+``None``. The payloads of service calls and action goals are checked by their tables
+(:mod:`~simbridge.graph.services`, :mod:`~simbridge.graph.actions`), whose answers they are.
+"""
+
+from __future__ import annotations
+
+import logging
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from typing import Any, Literal
+
+from simbridge.errors import ProtocolError, TypeNotFoundError
+from simbridge.graph.actions import ActionTable
+from simbridge.graph.services import ServiceTable
+from simbridge.graph.topics import Peer, Topic, TopicTable
+from simbridge.msgs import normalize_type
+from simbridge.protocol import (
+    ANY_SCOPE,
+    NOT_AUTHENTICATED,
+    Op,
+    Refusal,
+    Session,
+    ops as o,
+    status_frame,
+)
+
+
+__all__ = [
+    "ADMIN_SUFFIXES",
+    "MIN_FRAGMENT_SIZE",
+    "Admission",
+    "Publication",
+    "in_namespace",
+]
+
+logger = logging.getLogger(__name__)
+
+#: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
+MIN_FRAGMENT_SIZE = 256
+#: Name endings of administrative services of any node (ROS 2 parameter services).
+ADMIN_SUFFIXES = ("/set_parameters", "/set_parameters_atomically")
+
+
+def in_namespace(scope: str, name: str) -> bool:
+    """Return whether the absolute name ``name`` lies in the scope's namespace."""
+    return scope == ANY_SCOPE or name == f"/{scope}" or name.startswith(f"/{scope}/")
+
+
+@dataclass(frozen=True, slots=True)
+class Publication:
+    """An admitted ``publish``: what its handler carries out, decided once."""
+
+    op: o.Publish
+    #: The topic published on (``None``: not in the graph yet; the publish creates it).
+    topic: Topic | None
+    #: The topic's canonical type.
+    type: str
+    #: The message, validated and completed (canonical), or the client's object as it is
+    #: when simbridge does not know the type.
+    msg: Any
+
+
+class Admission:
+    """Decides, for every op of a client, whether the graph carries it out."""
+
+    def __init__(self, topics: TopicTable, services: ServiceTable, actions: ActionTable) -> None:
+        #: The graph's topics (types of existing topics; payload validation).
+        self.topics = topics
+        #: The graph's services and actions (a client may not advertise what the server
+        #: provides).
+        self.services = services
+        self.actions = actions
+        #: Access rules (checks 1-4) apply: a guard authenticates the clients.
+        self.guarded = False
+        #: Services that need admin rights (the guard adds the defaults).
+        self.admin_services: set[str] = set()
+        #: Names of the robots: their namespaces are off limits to other robots' clients.
+        self.robots: Callable[[], Iterable[str]] = lambda: ()
+
+    def admit(self, peer: Peer, op: Op, now: float) -> Any:
+        """Return what the op's handler carries out, or ``None`` if the op is dropped.
+
+        That is the op itself, or for a ``publish`` its :class:`Publication`.
+
+        Raises:
+            ProtocolError: the op is refused (a :class:`Refusal` says how to answer it).
+        """
+        session = peer.session
+        if self.guarded:
+            if not session.authenticated and not isinstance(op, o.Auth):
+                raise Refusal(NOT_AUTHENTICATED, cause="unauthenticated")
+            size = getattr(op, "fragment_size", None)
+            if size is not None and size < MIN_FRAGMENT_SIZE:
+                msg = (
+                    f"fragment_size {size} is too small: at least {MIN_FRAGMENT_SIZE} bytes "
+                    "(tiny fragments multiply the server's work)"
+                )
+                raise Refusal(msg, cause="fragment_size")
+        check = _CHECKS.get(type(op))
+        return op if check is None else check(self, peer, session, op, now)
+
+    # -- one check per kind of op -----------------------------------------------------------
+
+    def _publish(self, peer: Peer, session: Session, op: o.Publish, now: float) -> Any:
+        name = op.name
+        if self.guarded:
+            if not session.publishes.take(now):
+                self._too_fast(peer, session, op, now)
+                return None
+            self._may_own(session, "publish", name, name not in session.advertisements)
+        topic = self.topics.topics.get(name)
+        if op.type is not None:
+            canonical = self.topics.check_type(name, op.type)
+            if topic is not None and topic.type is not None:
+                known = topic.known
+            else:
+                known = self.topics.registry.known(canonical)
+        elif topic is None or topic.type is None:
+            msg = (
+                f"publish: cannot infer the type of topic {name}: it is not advertised; "
+                "advertise it first or give a type"
+            )
+            raise ProtocolError(msg)
+        else:
+            canonical, known = topic.type, topic.known
+        return Publication(op, topic, canonical, self.topics.validate(canonical, known, op.msg))
+
+    def _too_fast(self, peer: Peer, session: Session, op: o.Publish, now: float) -> None:
+        limits = session.limits
+        text = (
+            f"publish {op.name}: dropped, more than {limits.publish_rate:g} publishes per "
+            f"second (the server's publish_rate, burst {limits.publish_burst}); slow down"
+        )
+        if session.may_tell("publish_rate", now):
+            logger.info("%s: %s", peer.label, text)
+            if session.wants_status("error"):
+                peer.send(status_frame("error", text))
+
+    def _advertise(self, peer: Peer, session: Session, op: o.Advertise, now: float) -> Any:
+        if self.guarded:
+            self._may_own(session, "advertise", op.name, op.name not in session.advertisements)
+        self.topics.check_type(op.name, op.type)
+        return op
+
+    def _subscribe(self, peer: Peer, session: Session, op: o.Subscribe, now: float) -> Any:
+        if not op.type:
+            return op
+        if self.guarded and session.scope != ANY_SCOPE:
+            # a typed subscription fixes the type of a topic nobody publishes yet: outside its
+            # own namespace that would squat a name (a robot spawned later could not take it)
+            name = op.name
+            topic = self.topics.topics.get(name)
+            if not in_namespace(session.scope, name) and (topic is None or topic.type is None):
+                msg = (
+                    f"subscribe {name}: refused with a type, the topic is outside "
+                    f"/{session.scope}/ and nothing publishes it yet (the type would claim the "
+                    "name); subscribe without a type and it waits for the topic"
+                )
+                raise Refusal(msg, cause="typed subscribe outside scope")
+        self.topics.check_type(op.name, op.type)
+        return op
+
+    def _advertise_service(
+        self, peer: Peer, session: Session, op: o.AdvertiseService, now: float
+    ) -> Any:
+        if self.guarded:
+            existing = self.services.services.get(op.name)
+            if existing is not None and existing.handler is not None:
+                msg = (
+                    f"advertise_service {op.name}: refused, the server provides this service "
+                    "itself; choose another name"
+                )
+                raise Refusal(msg, cause="server service")
+            self._may_own(session, "advertise_service", op.name, op.name not in session.services)
+        _interface_type(op.type, "srv", "advertise_service")
+        return op
+
+    def _advertise_action(
+        self, peer: Peer, session: Session, op: o.AdvertiseAction, now: float
+    ) -> Any:
+        name = op.name
+        if self.guarded:
+            self._may_own(session, "advertise_action", name, name not in session.actions)
+        existing = self.actions.actions.get(name)
+        if existing is not None and existing.server is not None:
+            # what the server provides stays the server's: taking it over would break it for
+            # every client, and it would be gone for everyone when this client left
+            msg = (
+                f"advertise_action {name}: refused, the server provides this action itself; "
+                "choose another name"
+            )
+            raise ProtocolError(msg)
+        _interface_type(op.type, "action", "advertise_action")
+        return op
+
+    def _call_service(self, peer: Peer, session: Session, op: o.CallService, now: float) -> Any:
+        if not self.guarded:
+            return op
+        name = op.name
+        admin_only = name in self.admin_services or name.endswith(ADMIN_SUFFIXES)
+        if admin_only and not session.admin:
+            reason = (
+                f"service {name} is administrative: connect with the admin token "
+                "(?token=ADMIN_TOKEN) to call it"
+            )
+        elif not self._may_reach(session, name):
+            reason = f"service {name} belongs to another robot; this connection may not call it"
+        else:
+            return op
+        logger.info("%s: %s", peer.label, reason)
+        raise Refusal(reason, op="call_service", target=op.service, op_id=op.id)
+
+    def _send_action_goal(
+        self, peer: Peer, session: Session, op: o.SendActionGoal, now: float
+    ) -> Any:
+        if self.guarded and not self._may_reach(session, op.name):
+            msg = f"action {op.name} belongs to another robot; this connection may not use it"
+            raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
+        return op
+
+    # -- scope -----------------------------------------------------------------------------
+
+    def _may_own(self, session: Session, what: str, name: str, new: bool) -> None:
+        if not in_namespace(session.scope, name):
+            msg = (
+                f"{what} {name}: not allowed; this connection may only use names under "
+                f"/{session.scope}/ (its robot)"
+            )
+            raise Refusal(msg, cause=f"scope {what}")
+        session.may_own(what, name, new)
+
+    def _may_reach(self, session: Session, name: str) -> bool:
+        """Whether a call or goal to ``name`` stays out of other robots' namespaces."""
+        if session.scope == ANY_SCOPE:
+            return True
+        return not any(
+            robot and robot != session.scope and in_namespace(robot, name)
+            for robot in self.robots()
+        )
+
+
+def _interface_type(type_name: str, kind: Literal["srv", "action"], op: str) -> str:
+    """Return the canonical spelling of a service or action type, or refuse the op."""
+    try:
+        return normalize_type(type_name, kind)
+    except TypeNotFoundError as err:
+        raise ProtocolError(f"{op}: {err}") from None
+
+
+_CHECKS: dict[type, Callable[[Admission, Peer, Session, Any, float], Any]] = {
+    o.Publish: Admission._publish,
+    o.Advertise: Admission._advertise,
+    o.Subscribe: Admission._subscribe,
+    o.AdvertiseService: Admission._advertise_service,
+    o.AdvertiseAction: Admission._advertise_action,
+    o.CallService: Admission._call_service,
+    o.SendActionGoal: Admission._send_action_goal,
+}
