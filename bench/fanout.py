@@ -12,6 +12,10 @@ any client received must reach every client, and the server must drop nothing
 also reports, without a target, the 100-client ratio while one client drives the robot (the
 default rows keep it parked, as the floor has no robot to move).
 
+``python -m bench.fanout --baseline DIR [SECONDS [N ...]]`` adds simbridge as the checkout at
+``DIR`` has it (its code and ``.venv``; row ``before``) to the alternation, and prints for each
+N the medians of before and after (this checkout) with the ratios after / before.
+
 Targets (issue 6): 100 clients: p99 <= 20 ms, nothing lost, CPU <= 1.3x the broadcaster's;
 500 clients: nothing lost.
 """
@@ -23,9 +27,11 @@ import statistics
 import sys
 import time
 import urllib.request
+from pathlib import Path
 from typing import Any
 
 from bench.procs import (
+    ROOT,
     collect,
     cpu_seconds,
     load_average,
@@ -40,15 +46,22 @@ TOPICS = ["/odom", "/scan"]
 
 
 def phase(
-    kind: str, n: int, seconds: float, processes: int = 2, *, drive: bool = False
+    kind: str,
+    n: int,
+    seconds: float,
+    processes: int = 2,
+    *,
+    drive: bool = False,
+    checkout: Path | None = None,
 ) -> dict[str, Any]:
     """Run ``n`` clients against one server kind for ``seconds``; return the figures.
 
     With ``drive``, the first client also publishes /cmd_vel at 10 Hz (the broadcaster reads
     and ignores it), so that simbridge moves its robot, casts a new scan each time and resolves
-    contacts with the walls the robot slides along.
+    contacts with the walls the robot slides along. ``checkout``: simbridge as that checkout
+    has it (the row is then labelled ``before``).
     """
-    with server(kind) as (proc, port):
+    with server(kind, checkout=checkout) as (proc, port):
         clients: list[dict[str, Any]] = [{"subscribe": TOPICS} for _ in range(n)]
         if drive:
             clients[0]["drive"] = "/cmd_vel"
@@ -62,14 +75,14 @@ def phase(
         rss = proc.memory_info().rss
         load = load_average()
         dropped = None
-        if kind == "simbridge":
+        if kind == "simbridge":  # before and after
             with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=5) as r:
                 dropped = json.load(r).get("dropped_frames")
         results = collect(procs, timeout=seconds + 60)
     latencies = [x for r in results for x in r.get("latencies", [])]
     expected, missing, errors = losses(results, TOPICS)
     return {
-        "kind": kind + ("+drive" if drive else ""),
+        "kind": ("before" if checkout is not None else kind) + ("+drive" if drive else ""),
         "n": n,
         "cpu": (cpu1 - cpu0) / seconds,
         "p50": percentile(latencies, 0.5) * 1e3,
@@ -85,6 +98,12 @@ def phase(
     }
 
 
+HEADER = (
+    f"{'server':<17} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
+    f"{'received':>8} {'missing':>7} {'dropped':>7} {'errors':>6} {'RSS MB':>6}"
+)
+
+
 def row(r: dict[str, Any]) -> str:
     return (
         f"{r['kind']:<17} {r['n']:>4} {r['cpu'] * 100:>6.1f}% {r['p50']:>7.2f} {r['p99']:>7.2f} "
@@ -94,15 +113,53 @@ def row(r: dict[str, Any]) -> str:
     )
 
 
+def before_after(baseline: Path, seconds: float, counts: list[int]) -> int:
+    """Before (``baseline``), after (this checkout) and the floor, alternated; ratios."""
+    print(f"fanout before/after: before = {baseline}, after = {ROOT}; {seconds:g} s per row")
+    print(HEADER)
+    runs: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    for n in counts:
+        for _ in range(3 if n <= 100 else 1):
+            for kind, checkout in (
+                ("simbridge", baseline),
+                ("simbridge", None),
+                ("broadcaster", None),
+            ):
+                r = phase(kind, n, seconds, checkout=checkout)
+                runs.setdefault((r["kind"], n), []).append(r)
+                print(row(r), flush=True)
+    print("medians of the rounds; ratio = after / before (below 1: after costs less)")
+    print(f"{'N':>4} {'figure':<8} {'before':>9} {'after':>9} {'ratio':>7} {'floor':>9}")
+    for n in counts:
+        for key, unit, scale in (("cpu", "%", 100.0), ("p50", "ms", 1.0), ("p99", "ms", 1.0)):
+            b, a, f = (
+                statistics.median(r[key] for r in runs[(kind, n)]) * scale
+                for kind in ("before", "simbridge", "broadcaster")
+            )
+            print(f"{n:>4} {key + ' ' + unit:<8} {b:>9.2f} {a:>9.2f} {a / b:>6.2f}x {f:>9.2f}")
+        lost = {
+            kind: sum(r["missing"] + (r["dropped"] or 0) + r["errors"] for r in runs[(kind, n)])
+            for kind in ("before", "simbridge")
+        }
+        print(f"{n:>4} {'lost':<8} {lost['before']:>9} {lost['simbridge']:>9}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = argv or []
+    args = list(argv or [])
+    if args[:1] == ["--baseline"]:
+        if len(args) < 2:
+            print("usage: python -m bench.fanout --baseline DIR [SECONDS [N ...]]")
+            return 2
+        baseline = Path(args[1]).resolve()
+        rest = args[2:]
+        return before_after(
+            baseline, float(rest[0]) if rest else 20.0, [int(a) for a in rest[1:]] or [100]
+        )
     seconds = float(args[0]) if args else 20.0
     counts = [int(a) for a in args[1:]] or [100, 500]
     print(f"fanout: clients subscribed to /odom + /scan, {seconds:g} s measured per row")
-    print(
-        f"{'server':<17} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'max ms':>7} "
-        f"{'received':>8} {'missing':>7} {'dropped':>7} {'errors':>6} {'RSS MB':>6}"
-    )
+    print(HEADER)
     runs: dict[tuple[str, int], list[dict[str, Any]]] = {}
     for n in counts:
         # Alternate the two servers (3 rounds at 100 clients) so that a burst of load from

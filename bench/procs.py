@@ -52,18 +52,27 @@ def wait_listening(port: int, timeout: float = 20.0) -> None:
 
 
 @contextlib.contextmanager
-def server(kind: str, *, world: Path | None = None) -> Iterator[tuple[psutil.Process, int]]:
-    """Run a server process: ``simbridge`` or ``broadcaster``; yield (process, port)."""
+def server(
+    kind: str, *, world: Path | None = None, checkout: Path | None = None
+) -> Iterator[tuple[psutil.Process, int]]:
+    """Run a server process: ``simbridge`` or ``broadcaster``; yield (process, port).
+
+    ``checkout``: run simbridge as that checkout has it (its code and ``.venv``), e.g. the
+    baseline of a before/after comparison.
+    """
     port = free_port()
+    python, cwd = sys.executable, ROOT
+    if checkout is not None:
+        python, cwd = str(checkout / ".venv" / "bin" / "python"), checkout
     if kind == "simbridge":
-        cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", str(port)]
+        cmd = [python, "-m", "simbridge", "--host", "127.0.0.1", "--port", str(port)]
         # 500-client runs: above the default --max-clients (200) of a classroom server
         cmd += ["--no-http", "--log-level", "warning", "--max-clients", "2000"]
         if world is not None:
             cmd += ["--world", str(world)]
     else:
         cmd = [sys.executable, "-m", "bench.broadcaster", str(port)]
-    proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL)
     try:
         wait_listening(port)
         yield psutil.Process(proc.pid), port

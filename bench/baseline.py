@@ -1,0 +1,146 @@
+"""Before/after: benchmarks of a baseline checkout and of this one, side by side in one run.
+
+``python -m bench quick --baseline DIR`` (or ``python -m bench.baseline DIR NAME ...``) runs each
+named benchmark twice, in fresh processes one after the other: "before" as the checkout at
+``DIR`` has it (its own code and virtualenv: ``DIR/.venv/bin/python -m bench.NAME`` in ``DIR``)
+and "after" here. A benchmark the baseline does not have runs from this checkout's
+``bench/NAME.py`` against the baseline's ``simbridge`` (``PYTHONPATH=DIR``), when it imports
+only what the baseline has; otherwise it is shown for "after" only.
+
+The outputs are then set side by side: every line both runs print with the same words (numbers
+aside) is shown as ``before``, ``after`` and ``ratio``, the ratio being after / before of each
+figure that differs (a figure printed the same in both, such as a client count, is shown as it
+is). Whether a ratio above 1 is better depends on the column: times and CPU want below 1,
+speed-ups and rates above 1.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import subprocess
+import sys
+from collections import defaultdict, deque
+from pathlib import Path
+
+from bench.procs import ROOT
+
+
+#: A figure in a benchmark's output: a number, with an ``x`` or ``%`` after it, if any.
+_FIGURE = re.compile(r"(?<![\w.])(-?\d+(?:\.\d+)?)(?=[x%]?(?![\w.]))")
+
+
+def python_of(checkout: Path) -> str:
+    """Return the Python of a checkout's virtualenv (``make deps`` made it)."""
+    python = checkout / ".venv" / "bin" / "python"
+    if not python.exists():
+        msg = f"{checkout} has no .venv: run 'make deps' there first"
+        raise SystemExit(msg)
+    return str(python)
+
+
+def describe(checkout: Path) -> str:
+    """Return ``DIR (commit)`` for the heading."""
+    head = subprocess.run(
+        ["git", "-C", str(checkout), "log", "-1", "--format=%h"],
+        capture_output=True,
+        text=True,
+        check=False,
+    ).stdout.strip()
+    return f"{checkout} ({head or '?'})"
+
+
+def run(name: str, checkout: Path, args: list[str]) -> tuple[int, str]:
+    """Run ``bench.NAME`` as ``checkout`` has it; return its exit code and its output."""
+    env = dict(os.environ)
+    if checkout == ROOT:
+        cmd = [sys.executable, "-m", f"bench.{name}", *args]
+    elif (checkout / "bench" / f"{name}.py").exists():
+        cmd = [python_of(checkout), "-m", f"bench.{name}", *args]
+    else:  # a benchmark newer than the baseline: ours, on the baseline's simbridge
+        cmd = [python_of(checkout), str(ROOT / "bench" / f"{name}.py"), *args]
+        env["PYTHONPATH"] = os.pathsep.join([str(checkout), str(ROOT)])
+    proc = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True, check=False)
+    out = proc.stdout
+    if proc.returncode != 0 and proc.stderr:
+        out += "".join(f"  ! {line}\n" for line in proc.stderr.strip().splitlines()[-3:])
+    return proc.returncode, out
+
+
+def _shape(line: str) -> str:
+    return _FIGURE.sub("#", line)
+
+
+def _ratio_line(before: str, after: str) -> str:
+    """``after`` with each figure that differs from ``before`` replaced by after / before.
+
+    A ratio ends in the column where its figure ended (taking spaces before it), so that the
+    columns of the table stay aligned.
+    """
+    old = [float(m.group(1)) for m in _FIGURE.finditer(before)]
+    line = after
+    for k, m in reversed(list(enumerate(_FIGURE.finditer(after)))):
+        new = float(m.group(1))
+        start, end = m.span(1)
+        if after[end : end + 1] in ("x", "%"):
+            end += 1
+        if new == old[k]:
+            continue
+        text = f"{new / old[k]:.2f}x" if old[k] else "n/a"
+        left = start
+        while left > 0 and line[left - 1] == " " and end - left < len(text) + 1:
+            left -= 1
+        if end - left >= len(text) + 1:  # room for the ratio and one space before it
+            line = line[:left] + text.rjust(end - left) + line[end:]
+        else:
+            line = line[:start] + text + line[end:]
+    return line
+
+
+def side_by_side(before: str, after: str) -> str:
+    """Return the two outputs as before / after / ratio rows (see the module docstring)."""
+    waiting: dict[str, deque[str]] = defaultdict(deque)
+    for line in before.splitlines():
+        waiting[_shape(line)].append(line)
+    rows: list[str] = []
+    for line in after.splitlines():
+        queue = waiting.get(_shape(line))
+        if not queue:
+            rows.append(f"after  | {line}")
+            continue
+        old = queue.popleft()
+        if old == line:
+            rows.append(f"       | {line}")
+            continue
+        rows.append(f"before | {old}")
+        rows.append(f"after  | {line}")
+        rows.append(f"ratio  | {_ratio_line(old, line)}")
+    left = [line for queue in waiting.values() for line in queue]
+    rows.extend(f"before | {line}" for line in left)
+    return "\n".join(rows)
+
+
+def compare(names: list[str], baseline: Path, args: list[str] | None = None) -> int:
+    """Run each benchmark before and after; print them side by side; return 1 if one failed."""
+    print(f"before: {describe(baseline)}")
+    print(f"after:  {describe(ROOT)}")
+    print("ratio = after / before of each figure that differs")
+    failed = 0
+    for name in names:
+        code_b, out_b = run(name, baseline, args or [])
+        code_a, out_a = run(name, ROOT, args or [])
+        failed += int(code_a != 0)
+        print(f"\n=== {name} (exit codes: before {code_b}, after {code_a}) ===")
+        print(side_by_side(out_b, out_a), flush=True)
+    return 1 if failed else 0
+
+
+def main(argv: list[str]) -> int:
+    if len(argv) < 2:
+        print("usage: python -m bench.baseline DIR NAME [NAME ...]", file=sys.stderr)
+        return 2
+    return compare(argv[1:], Path(argv[0]).resolve())
+
+
+if __name__ == "__main__":
+    raise SystemExit(main(sys.argv[1:]))
