@@ -1,10 +1,15 @@
-"""Run the benchmarks: ``python -m bench [NAME ...]`` (default: all; ``quick``: the quick ones)."""
+"""Run the benchmarks: ``python -m bench [NAME ...]`` (default: all; ``quick``: the quick ones).
+
+``python -m bench quick --baseline DIR`` runs them before (the checkout at ``DIR``, with its own
+``.venv``) and after (this checkout), side by side with ratios (:mod:`bench.baseline`).
+"""
 
 from __future__ import annotations
 
 import importlib
 import importlib.util
 import sys
+from pathlib import Path
 
 
 #: Benchmarks run by default (quick, under a minute together): module name -> what it measures.
@@ -15,6 +20,7 @@ QUICK = {
     "simtime": "server loop real-time factor achieved vs requested (1x to 20x)",
     "cbor": "cbor frames of /scan and /odom: cbor2 + numpy hook vs the hand-written encoder",
     "http": "page and /healthz requests/s: httptools server vs the hand-written one (+ h11 parse)",
+    "publish": "a client publish through the graph: /cmd_vel to the robot, a topic to 10 clients",
 }
 
 
@@ -83,9 +89,17 @@ def runs(argv: list[str]) -> list[tuple[str, list[str]]]:
 
 
 def main(argv: list[str]) -> int:
+    baseline = None
+    if "--baseline" in argv:
+        at = argv.index("--baseline")
+        baseline, argv = argv[at + 1], argv[:at] + argv[at + 2 :]
     names = argv or [*QUICK, *SCALE]
     if names == ["quick"]:
         names = list(QUICK)
+    if baseline is not None:
+        from bench.baseline import compare
+
+        return compare(names, Path(baseline).resolve())
     failed = 0
     for name, args in runs(names):
         module = importlib.import_module(f"bench.{name}")
