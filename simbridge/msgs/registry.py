@@ -202,6 +202,9 @@ class TypeRegistry:
         Raises:
             TypeNotFoundError: the name is malformed or the type is unknown.
         """
+        cached = self._specs.get(name)  # the canonical spelling: every nested field's type
+        if cached is not None:
+            return cached
         canonical = normalize_type(name)
         cached = self._specs.get(canonical)
         if cached is not None:
