@@ -58,7 +58,12 @@ def run(name: str, checkout: Path, args: list[str]) -> tuple[int, str]:
     elif (checkout / "bench" / f"{name}.py").exists():
         cmd = [python_of(checkout), "-m", f"bench.{name}", *args]
     else:  # a benchmark newer than the baseline: ours, on the baseline's simbridge
-        cmd = [python_of(checkout), str(ROOT / "bench" / f"{name}.py"), *args]
+        # run_path, not the script itself: bench/ first on sys.path would shadow the stdlib's
+        # http with bench/http.py
+        path = str(ROOT / "bench" / f"{name}.py")
+        code = "import runpy, sys; sys.argv[0] = sys.argv[1]; del sys.argv[1]; "
+        code += "runpy.run_path(sys.argv[0], run_name='__main__')"
+        cmd = [python_of(checkout), "-c", code, path, *args]
         env["PYTHONPATH"] = os.pathsep.join([str(checkout), str(ROOT)])
     proc = subprocess.run(cmd, cwd=checkout, env=env, capture_output=True, text=True, check=False)
     out = proc.stdout
