@@ -499,6 +499,9 @@ class ServerSettings(BaseModel):
     #: by max_message_size and for all clients by global_fragment_bytes.
     max_fragment_sets: Count = 16
     global_fragment_bytes: Count = 40_000_000
+    #: Length of one frame (or reassembled fragmented message) of a client without the admin
+    #: token, at most max_message_size; longer ones are refused before parsing.
+    max_frame_bytes: Count = 1_000_000
     #: JSON values in one frame (or reassembled fragmented message) of a client without the
     #: admin token; more are refused before parsing (one frame is parsed in one go).
     max_frame_values: Count = 50_000

@@ -80,6 +80,7 @@ def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
         fragment_sets=s.max_fragment_sets,
         fragment_bytes=s.max_message_size,
         frame_values=s.max_frame_values,
+        frame_bytes=min(s.max_frame_bytes, s.max_message_size),
         latched_bytes=s.max_latched_bytes,
         publish_rate=s.publish_rate,
         publish_burst=s.publish_burst,

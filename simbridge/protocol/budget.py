@@ -49,6 +49,9 @@ class Limits:
     publish_burst: int = 400
     #: ``status`` refusals per second (and one per cause per second); the rest are counted.
     statuses_per_second: int = 10
+    #: Length of one frame (characters of a text frame, bytes of a binary one) from a client
+    #: without the admin token; a longer one is refused before it is parsed.
+    frame_bytes: int = 1_000_000
     #: JSON values (about: commas + 1) in one frame from a client without the admin token;
     #: a bigger frame is refused before it is parsed, as parsing it would hold the loop.
     frame_values: int = 50_000

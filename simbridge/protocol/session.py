@@ -224,8 +224,8 @@ class Session:
         """
         if not self.authenticated:
             return self._parse_unadmitted(data)
-        if not self.admin and len(data) > 2 * self.limits.frame_values:
-            refused = self._too_many_values(data)
+        if not self.admin:
+            refused = self._too_costly(data)
             if refused is not None:
                 return [refused]
         try:
@@ -246,17 +246,29 @@ class Session:
                 out.append(_bare(err))
         return out
 
-    def _too_many_values(self, data: str | bytes) -> Refusal | None:
-        """Refuse a frame of more than ``frame_values`` JSON values, before parsing it.
+    def _too_costly(self, data: str | bytes) -> Refusal | None:
+        """Refuse a frame too long (``frame_bytes``) or of too many values, before parsing it.
 
-        A frame is parsed in one go, and the parse costs per value (a 9 MB array of 700,000
-        floats: 57 ms; 1 MB of empty objects: 40 ms on a shared x86 core, five times that on a
-        Pi 4B), so a big one would hold the loop for ticks. Values are counted by their commas
-        (a frame of n bytes holds at most n / 2 values: only bigger frames are counted), a
-        scan ten times cheaper than the parse; commas inside strings count too, erring on the
-        side of the loop.
+        ``frame_values`` bounds its JSON values. A frame is handled in one go (parsed,
+        converted, encoded again for its subscribers) and its cost grows with its length and
+        its values: a 9 MB string published to one subscriber 58 ms, a 9 MB array of 700,000
+        floats 57 ms to parse, 1 MB of empty objects 40 ms, on a shared x86 core; a Pi 4B core
+        is about five times slower. Values are counted by their commas (a frame of n bytes
+        holds at most n / 2 values: only bigger frames are counted), a scan ten times cheaper
+        than the parse; commas inside strings count too, erring on the side of the loop.
         """
+        limit = self.limits.frame_bytes
+        if len(data) > limit:
+            unit = "bytes" if isinstance(data, bytes) else "characters"
+            msg = (
+                f"a frame of {len(data)} {unit} was refused unparsed: longer than {limit} (the "
+                "server's max_frame_bytes for clients without the admin token; handling it "
+                "would hold the simulation loop); send less in one message"
+            )
+            return Refusal(msg, cause="max_frame_bytes")
         limit = self.limits.frame_values
+        if len(data) <= 2 * limit:
+            return None
         count = (data.count(b",") if isinstance(data, bytes) else data.count(",")) + 1
         if count <= limit:
             return None
