@@ -39,7 +39,8 @@ GROUPS: list[tuple[str, list[str]]] = [
     ("simbridge.config (the settings models)", ["simbridge.config"]),
     ("asyncio (no ssl)", ["@asyncio"]),
     ("numpy", ["numpy"]),
-    ("rosbags type store + simbridge.msgs", ["simbridge.msgs"]),
+    ("rosbags (typesys, serde), simbridge.msgs", ["simbridge.msgs"]),
+    ("rosbags' ROS 2 type store (made at start)", ["rosbags.typesys.stores.ros2_kilted"]),
     ("simbridge.protocol (orjson)", ["simbridge.protocol"]),
     ("simbridge.sim", ["simbridge.sim"]),
     ("simbridge.graph", ["simbridge.graph", "simbridge.graph.assembly"]),
@@ -156,21 +157,21 @@ def idle_server(preload: list[str]) -> tuple[tuple[float, float, float], int]:
 
 def _row(label: str, values: tuple[float, float, float], sign: str = "") -> str:
     rss, anon, file = values
-    return f"{label:<40} {rss:{sign}8.1f} {anon:{sign}8.1f} {file:{sign}8.1f}"
+    return f"{label:<52} {rss:{sign}8.1f} {anon:{sign}8.1f} {file:{sign}8.1f}"
 
 
 def main(argv: list[str] | None = None) -> int:
     del argv
     rows = groups()
     print("idle default server: each import group's share (MB; one child, in import order)")
-    print(f"{'group':<40} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8}")
+    print(f"{'group':<52} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8}")
     groups_rows = rows[: len(GROUPS) + 1]
     previous = (0.0, 0.0, 0.0)
     for label, values in groups_rows:
         share = tuple(v - p for v, p in zip(values, previous, strict=True))
         print(_row(label, share, "+") if previous[0] else _row(label, values))
         previous = values
-    print(_row("= the default path's imports", previous))
+    print(_row("= the default path's imports, together", previous))
     print()
     print("cut from the default path (issue 16): what each would add on top (MB)")
     for (label, values), (_name, when) in zip(rows[len(GROUPS) + 1 :], CUT, strict=True):
@@ -184,7 +185,7 @@ def main(argv: list[str] | None = None) -> int:
         )
     }
     print("the idle server: simbridge, default world, both ports, no client (MB; median of 3)")
-    print(f"{'case':<40} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8} {'modules':>8}")
+    print(f"{'case':<52} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8} {'modules':>8}")
     medians = {}
     for name, results in runs.items():
         ordered = sorted(results)
@@ -193,7 +194,7 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{_row(name, values)} {modules:>8}")
     before, now = medians.values()
     print(
-        f"{'ratio now / before':<40} {now[0] / before[0]:8.2f} {now[1] / before[1]:8.2f} "
+        f"{'ratio now / before':<52} {now[0] / before[0]:8.2f} {now[1] / before[1]:8.2f} "
         f"{now[2] / before[2]:8.2f}"
     )
     print("target (issue 16): <= 40 MB RSS")
