@@ -242,15 +242,21 @@ async def row6_unread_interfaces(url: Url, stop: asyncio.Event) -> str:
 
 
 async def row7_wide_fragments(url: Url, stop: asyncio.Event) -> str:
-    """Five clients: never-completed fragment sets of 4-byte characters (fresh ids)."""
-    data = "\U0001f600" * 250_000  # 1 MB of UTF-8, 250,000 characters
+    """Five clients: never-completed fragment sets of 4-byte characters (fresh ids).
+
+    Each frame stays under a student's max_frame_bytes (1 MB): 80,000 characters, 320 kB of
+    UTF-8, 960 kB of JSON (json.dumps escapes each as a surrogate pair); 30 pieces a message
+    (9.6 MB, one short of complete), so each client fills its byte budget, not its 16 sets.
+    """
+    data = "\U0001f600" * 80_000
 
     async def one(k: int) -> str:
         return await _flood(
             url("student"),
             stop,
             lambda i: _dumps(
-                {"op": "fragment", "id": f"w{k}-{i}", "data": data, "num": 0, "total": 3},
+                {"op": "fragment", "id": f"w{k}-{i // 30}", "data": data}
+                | {"num": i % 30, "total": 31},
             ),
             "fragments",
             10**7,
