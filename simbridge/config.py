@@ -503,8 +503,9 @@ class ServerSettings(BaseModel):
     #: token, at most max_message_size; longer ones are refused before parsing.
     max_frame_bytes: Count = 1_000_000
     #: JSON values in one frame (or reassembled fragmented message) of a client without the
-    #: admin token; more are refused before parsing (one frame is parsed in one go).
-    max_frame_values: Count = 50_000
+    #: admin token, each object counting 32 and each array 4; more are refused before parsing
+    #: (one frame is handled in one go).
+    max_frame_values: Count = 100_000
     #: Bytes of latched messages (JSON) a client's publishes leave on the server.
     max_latched_bytes: Count = 16_000_000
     global_latched_bytes: Count = 64_000_000

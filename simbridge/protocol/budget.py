@@ -52,9 +52,9 @@ class Limits:
     #: Length of one frame (characters of a text frame, bytes of a binary one) from a client
     #: without the admin token; a longer one is refused before it is parsed.
     frame_bytes: int = 1_000_000
-    #: JSON values (about: commas + 1) in one frame from a client without the admin token;
-    #: a bigger frame is refused before it is parsed, as parsing it would hold the loop.
-    frame_values: int = 50_000
+    #: JSON values (about: commas + 1, each object counting 32 and each array 4) in one frame
+    #: from a client without the admin token; more are refused before parsing.
+    frame_values: int = 100_000
     #: Largest frame read from a client that has not authenticated yet (only ``auth`` is).
     unauthenticated_frame_bytes: int = 16_384
     #: Seconds of the loop's time one client's frames may take per second (a share: 0.25 is a

@@ -98,11 +98,16 @@ def test_frames_of_more_json_values_than_the_budget_are_refused_unparsed() -> No
     many = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": [1] * 1_000}})
     (refused,) = session.parse(many, 0.0)
     assert isinstance(refused, Refusal) and refused.cause == "max_frame_values"
-    assert "about 1002 JSON values" in str(refused) and "max_frame_values" in str(refused)
+    # 1002 values, two objects and an array
+    assert "about 1070 JSON values" in str(refused) and "max_frame_values" in str(refused)
     (refused,) = session.parse(many.encode(), 0.0)  # binary frames too
     assert isinstance(refused, Refusal)
-    fits = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": [1] * 990}})
+    fits = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": [1] * 900}})
     assert isinstance(session.parse(fits, 0.0)[0], o.Publish)
+    # objects become messages field by field in Python: 30 of them count as ~1,000 numbers
+    poses = json.dumps({"op": "publish", "topic": "/a", "msg": {"poses": [{"x": 1}] * 30}})
+    (refused,) = session.parse(poses, 0.0)
+    assert isinstance(refused, Refusal) and refused.cause == "max_frame_values"
     text = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": "x" * 100_000}})
     assert isinstance(session.parse(text, 0.0)[0], o.Publish)  # big, but few values
     session.admit("*", admin=True)
@@ -128,10 +133,12 @@ def test_a_reassembled_message_of_too_many_values_is_refused() -> None:
     """Fragments are no way around frame_values: the reassembled text is counted too."""
     session = Session(ClientId(1), limits=Limits(frame_values=1_000))
     text = json.dumps({"op": "publish", "topic": "/a", "msg": {"data": [1] * 2_000}})
-    half = len(text) // 2
-    for n, piece in enumerate((text[:half], text[half:])):
-        frame = {"op": "fragment", "id": "m", "data": piece, "num": n, "total": 2}
+    size = len(text) // 4 + 1
+    pieces = [text[i : i + size] for i in range(0, len(text), size)]
+    for n, piece in enumerate(pieces):
+        frame = {"op": "fragment", "id": "m", "data": piece, "num": n, "total": len(pieces)}
         items = session.parse(json.dumps(frame), 0.0)
+        assert n == len(pieces) - 1 or items == []
     (refused,) = items
     assert isinstance(refused, Refusal) and refused.cause == "max_frame_values"
 
