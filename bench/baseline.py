@@ -1,7 +1,8 @@
 """Before/after: benchmarks of a baseline checkout and of this one, side by side in one run.
 
 ``python -m bench quick --baseline DIR`` (or ``python -m bench.baseline DIR NAME ...``) runs each
-named benchmark twice, in fresh processes one after the other: "before" as the checkout at
+named benchmark in fresh processes, alternating (``BASELINE_ROUNDS`` runs of each, default 1;
+each figure is then the median of its runs): "before" as the checkout at
 ``DIR`` has it (its own code and virtualenv: ``DIR/.venv/bin/python -m bench.NAME`` in ``DIR``)
 and "after" here. A benchmark the baseline does not have runs from this checkout's
 ``bench/NAME.py`` against the baseline's ``simbridge`` (``PYTHONPATH=DIR``), when it imports
@@ -18,6 +19,7 @@ from __future__ import annotations
 
 import os
 import re
+import statistics
 import subprocess
 import sys
 from collections import defaultdict, deque
@@ -125,18 +127,66 @@ def side_by_side(before: str, after: str) -> str:
     return "\n".join(rows)
 
 
-def compare(names: list[str], baseline: Path, args: list[str] | None = None) -> int:
-    """Run each benchmark before and after; print them side by side; return 1 if one failed."""
+def median_output(outputs: list[str]) -> str:
+    """Return the first output with each figure replaced by its median over ``outputs``.
+
+    A line's figures are taken from the same-shaped line of each output (the first, second...
+    of that shape); a line some output lacks is kept as the first output printed it.
+    """
+    if len(outputs) == 1:
+        return outputs[0]
+    shaped: list[dict[str, list[str]]] = []
+    for out in outputs:
+        by_shape: dict[str, list[str]] = defaultdict(list)
+        for line in out.splitlines():
+            by_shape[_shape(line)].append(line)
+        shaped.append(by_shape)
+    seen: dict[str, int] = defaultdict(int)
+    lines = []
+    for line in outputs[0].splitlines():
+        shape = _shape(line)
+        k = seen[shape]
+        seen[shape] += 1
+        peers = [by_shape[shape][k] for by_shape in shaped if len(by_shape[shape]) > k]
+        if len(peers) < len(outputs):
+            lines.append(line)
+            continue
+        columns = [[float(m.group(1)) for m in _FIGURE.finditer(p)] for p in peers]
+        figures = list(zip(_FIGURE.finditer(line), zip(*columns, strict=True), strict=True))
+        for m, values in reversed(figures):
+            token = m.group(1)
+            decimals = len(token.partition(".")[2])
+            text = f"{statistics.median(values):.{decimals}f}"
+            start, end = m.span(1)
+            line = line[:start] + text.rjust(len(token)) + line[end:]
+        lines.append(line)
+    return "\n".join(lines)
+
+
+def compare(
+    names: list[str], baseline: Path, args: list[str] | None = None, rounds: int | None = None
+) -> int:
+    """Run each benchmark before and after; print them side by side; return 1 if one failed.
+
+    ``rounds`` (default ``BASELINE_ROUNDS``, 1): runs of each, the order alternating (before
+    first, then after first...), each figure the median of its runs.
+    """
+    rounds = rounds or int(os.environ.get("BASELINE_ROUNDS", "1"))
     print(f"before: {describe(baseline)}")
     print(f"after:  {describe(ROOT)}")
-    print("ratio = after / before of each figure that differs")
+    print(f"{rounds} run(s) of each, alternating; ratio = after / before of each figure")
     failed = 0
     for name in names:
-        code_b, out_b = run(name, baseline, args or [])
-        code_a, out_a = run(name, ROOT, args or [])
-        failed += int(code_a != 0)
-        print(f"\n=== {name} (exit codes: before {code_b}, after {code_a}) ===")
-        print(side_by_side(out_b, out_a), flush=True)
+        outs: dict[Path, list[str]] = {baseline: [], ROOT: []}
+        codes: dict[Path, int] = {baseline: 0, ROOT: 0}
+        for r in range(rounds):
+            for checkout in (baseline, ROOT) if r % 2 == 0 else (ROOT, baseline):
+                code, out = run(name, checkout, args or [])
+                codes[checkout] = max(codes[checkout], code)
+                outs[checkout].append(out)
+        failed += int(codes[ROOT] != 0)
+        print(f"\n=== {name} (exit codes: before {codes[baseline]}, after {codes[ROOT]}) ===")
+        print(side_by_side(median_output(outs[baseline]), median_output(outs[ROOT])), flush=True)
     return 1 if failed else 0
 
 

@@ -13,8 +13,9 @@ also reports, without a target, the 100-client ratio while one client drives the
 default rows keep it parked, as the floor has no robot to move).
 
 ``python -m bench.fanout --baseline DIR [SECONDS [N ...]]`` adds simbridge as the checkout at
-``DIR`` has it (its code and ``.venv``; row ``before``) to the alternation, and prints for each
-N the medians of before and after (this checkout) with the ratios after / before.
+``DIR`` has it (its code and ``.venv``; row ``before``) to the alternation (4 rounds at 100
+clients, the order rotating), and prints for each N the medians of before and after (this
+checkout) with the ratios after / before.
 
 Targets (issue 6): 100 clients: p99 <= 20 ms, nothing lost, CPU <= 1.3x the broadcaster's;
 500 clients: nothing lost.
@@ -118,13 +119,16 @@ def before_after(baseline: Path, seconds: float, counts: list[int]) -> int:
     print(f"fanout before/after: before = {baseline}, after = {ROOT}; {seconds:g} s per row")
     print(HEADER)
     runs: dict[tuple[str, int], list[dict[str, Any]]] = {}
+    servers: list[tuple[str, Path | None]] = [
+        ("simbridge", baseline),
+        ("simbridge", None),
+        ("broadcaster", None),
+    ]
     for n in counts:
-        for _ in range(3 if n <= 100 else 1):
-            for kind, checkout in (
-                ("simbridge", baseline),
-                ("simbridge", None),
-                ("broadcaster", None),
-            ):
+        for k in range(4 if n <= 100 else 1):
+            # each server first, second and last in turn: load from other programs and the
+            # machine's warm-up land on all of them
+            for kind, checkout in servers[k % 3 :] + servers[: k % 3]:
                 r = phase(kind, n, seconds, checkout=checkout)
                 runs.setdefault((r["kind"], n), []).append(r)
                 print(row(r), flush=True)
