@@ -8,11 +8,13 @@ once per type.
 
 from __future__ import annotations
 
+import struct
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from simbridge.msgs.cdrcodec import Reader, Unsupported, Writer, compile_reader, compile_writer
 from simbridge.msgs.convert import NUMPY_DTYPES
 from simbridge.msgs.registry import FieldSpec, TypeRegistry, normalize_type
 
@@ -22,6 +24,8 @@ __all__ = ["CdrReader", "CdrWriter", "to_dict"]
 Builder = Callable[[Any], Any]
 _PLACEHOLDER = "structure_needs_at_least_one_member"
 _BYTES = {"uint8": np.uint8, "char": np.uint8, "byte": np.uint8, "octet": np.uint8}
+#: The encapsulation header of little-endian plain CDR.
+_HEADER = b"\x00\x01\x00\x00"
 
 
 class CdrWriter:
@@ -31,9 +35,23 @@ class CdrWriter:
         #: Where the definitions and rosbags classes come from.
         self.registry = registry
         self._builders: dict[str, Builder] = {}
+        #: Compiled writers (:mod:`~simbridge.msgs.cdrcodec`); None: rosbags writes the type.
+        self._writers: dict[str, Any] = {}
 
     def serialize(self, typename: str, msg: Any) -> bytes:
         """Return the CDR bytes (with encapsulation header) of a canonical message."""
+        canonical = normalize_type(typename)
+        writer = self._writers.get(canonical, _MISSING)
+        if writer is _MISSING:
+            writer = self._writer(canonical)
+        if writer is not None:
+            buffer = bytearray(_HEADER)
+            writer(msg, buffer)
+            return bytes(buffer)
+        return self.serialize_with_rosbags(canonical, msg)
+
+    def serialize_with_rosbags(self, typename: str, msg: Any) -> bytes:
+        """Return the CDR bytes of a canonical message as rosbags writes them (the reference)."""
         canonical = normalize_type(typename)
         obj = self._builder(canonical)(msg)
         return bytes(self.registry.store.serialize_cdr(obj, canonical, little_endian=True))
@@ -41,6 +59,26 @@ class CdrWriter:
     def message(self, typename: str, msg: Any) -> Any:
         """Return the rosbags message object of a canonical message."""
         return self._builder(normalize_type(typename))(msg)
+
+    def _writer(self, typename: str) -> Writer | None:
+        fielddefs = self.registry.store.fielddefs
+        if typename not in fielddefs:
+            self.registry.spec(typename)  # raises TypeNotFoundError with the name
+        try:
+            writer: Writer | None = compile_writer(fielddefs, typename, self._nested)
+        except Unsupported:
+            writer = None
+        self._writers[typename] = writer
+        return writer
+
+    def _nested(self, typename: str) -> Writer:
+        writer = self._writers.get(typename, _MISSING)
+        if writer is _MISSING:
+            writer = self._writer(typename)
+        if writer is None:
+            raise Unsupported(typename)
+        found: Writer = writer
+        return found
 
     def factory(self, typename: str, msg: Any) -> Callable[[], bytes]:
         """Return a function computing the CDR bytes of ``msg`` when first needed (then kept).
@@ -144,6 +182,8 @@ class CdrReader:
         #: Where the definitions and rosbags classes come from.
         self.registry = registry
         self._readers: dict[str, Builder] = {}
+        #: Compiled readers (:mod:`~simbridge.msgs.cdrcodec`); None: rosbags reads the type.
+        self._compiled: dict[str, Any] = {}
 
     def read(self, typename: str, data: bytes) -> dict[str, Any]:
         """Return the canonical message of CDR bytes.
@@ -157,9 +197,44 @@ class CdrReader:
             # an empty message is one placeholder byte after the header in every ROS 2 RMW;
             # a bare header is taken too
             return {}
+        if len(data) >= 4 and data[1] == 1:  # little-endian: the compiled reader, if any
+            reader = self._compiled.get(spec.name, _MISSING)
+            if reader is _MISSING:
+                reader = self._compiled_reader(spec.name)
+            if reader is not None:
+                try:
+                    message: dict[str, Any] = reader(data, 4)[0]
+                except (struct.error, ValueError, UnicodeDecodeError) as err:
+                    msg = f"not CDR of {spec.name}: {err}"
+                    raise ValueError(msg) from None
+                return message
+        return self.read_with_rosbags(spec.name, data)
+
+    def read_with_rosbags(self, typename: str, data: bytes) -> dict[str, Any]:
+        """Return the canonical message of CDR bytes, read by rosbags (the reference)."""
+        spec = self.registry.spec(typename)
         obj = self.registry.store.deserialize_cdr(data, spec.name)
         result: dict[str, Any] = self._reader(spec.name)(obj)
         return result
+
+    def _compiled_reader(self, typename: str) -> Reader | None:
+        try:
+            reader: Reader | None = compile_reader(
+                self.registry.store.fielddefs, typename, self._nested
+            )
+        except Unsupported:
+            reader = None
+        self._compiled[typename] = reader
+        return reader
+
+    def _nested(self, typename: str) -> Reader:
+        reader = self._compiled.get(typename, _MISSING)
+        if reader is _MISSING:
+            reader = self._compiled_reader(typename)
+        if reader is None:
+            raise Unsupported(typename)
+        found: Reader = reader
+        return found
 
     def _reader(self, typename: str) -> Builder:
         reader = self._readers.get(typename)
@@ -201,6 +276,7 @@ class CdrReader:
         return int
 
 
+_MISSING: Any = object()
 _TIME_TYPES = frozenset({"builtin_interfaces/msg/Time", "builtin_interfaces/msg/Duration"})
 
 
