@@ -40,15 +40,18 @@ class CdrWriter:
 
     def serialize(self, typename: str, msg: Any) -> bytes:
         """Return the CDR bytes (with encapsulation header) of a canonical message."""
-        canonical = normalize_type(typename)
-        writer = self._writers.get(canonical, _MISSING)
+        writer = self._writers.get(typename, _MISSING)  # any spelling seen before
         if writer is _MISSING:
-            writer = self._writer(canonical)
+            canonical = normalize_type(typename)
+            writer = self._writers.get(canonical, _MISSING)
+            if writer is _MISSING:
+                writer = self._writer(canonical)
+            self._writers[typename] = writer
         if writer is not None:
             buffer = bytearray(_HEADER)
             writer(msg, buffer)
             return bytes(buffer)
-        return self.serialize_with_rosbags(canonical, msg)
+        return self.serialize_with_rosbags(typename, msg)
 
     def serialize_with_rosbags(self, typename: str, msg: Any) -> bytes:
         """Return the CDR bytes of a canonical message as rosbags writes them (the reference)."""
