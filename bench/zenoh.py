@@ -15,13 +15,16 @@ directly (rmw_zenoh's default topology: the router is not a broker on one host).
   Target: ROS 2 <= 1.3x the rosbridge client.
 * ``classroom``: ``SIMS`` simulators x ``ROBOTS`` robots and ``FRONTS`` ``--no-sim`` front-ends
   x ``CLIENTS`` clients, each client on one robot's /odom and /scan through the router
-  (environment variables; default 2 x 300 and 2 x 300). Per client: /odom rate, losses
-  (gaps in the header stamps), latency p99. Target: 20 Hz +- 10 %, 0 lost, p99 <= 50 ms.
+  (environment variables; default 2 x 300 and 2 x 300). The clients are ``bench.loadgen``
+  processes (``LOADGENS`` per front-end, default 2). Per client: /odom rate, losses (gaps in the
+  header stamps), latency p99. Target: 20 Hz +- 10 %, 0 lost, p99 <= 50 ms.
 """
 
 from __future__ import annotations
 
 import asyncio
+import contextlib
+import itertools
 import json
 import os
 import re
@@ -38,7 +41,16 @@ import psutil
 import yaml
 from websockets.asyncio.client import connect
 
-from bench.procs import ROOT, cpu_seconds, free_port, load_average, percentile, stop
+from bench.procs import (
+    ROOT,
+    collect,
+    cpu_seconds,
+    free_port,
+    load_average,
+    percentile,
+    start_loadgens,
+    stop,
+)
 
 
 def _world(directory: Path, prefix: str, count: int, name: str) -> Path:
@@ -253,67 +265,72 @@ def classroom(seconds: float) -> bool:
     robots = int(os.environ.get("ROBOTS", "300"))
     fronts = int(os.environ.get("FRONTS", "2"))
     clients = int(os.environ.get("CLIENTS", "300"))
+    loadgens = int(os.environ.get("LOADGENS", "2"))  # load-generator processes per front-end
     names = [f"s{s}r{k + 1}" for s in range(sims) for k in range(robots)]
     with tempfile.TemporaryDirectory() as tmp, _router() as router:
         worlds = [_world(Path(tmp), f"s{s}r", robots, f"sim{s}") for s in range(sims)]
-        with contextlib_exit() as stack:
-            for w in worlds:
-                stack.enter_context(_simbridge(router, "--world", str(w)))
-            ports = [stack.enter_context(_simbridge(router, "--no-sim"))[1] for _ in range(fronts)]
-            for port in ports:
-                _wait_topic(port, f"/{names[-1]}/odom", timeout=120)
-            specs = []
-            for f, port in enumerate(ports):
-                for c in range(clients):
-                    robot = names[(f * clients + c) % len(names)]
-                    specs.append((port, robot))
-            results = asyncio.run(_classroom_clients(specs, seconds))
-    rates = [r["odom"] / seconds for r in results]
-    lost = sum(r["lost"] for r in results)
-    lat = [x for r in results for x in r["lat"]]
+        with contextlib.ExitStack() as stack:
+            sim_procs = [
+                stack.enter_context(_simbridge(router, "--world", str(w)))[0] for w in worlds
+            ]
+            started = [stack.enter_context(_simbridge(router, "--no-sim")) for _ in range(fronts)]
+            front_procs = [proc for proc, _ in started]
+            for _, port in started:
+                for s in range(sims):
+                    _wait_topic(port, f"/s{s}r{robots}/odom", timeout=180)
+            time.sleep(2)
+            start = time.time() + 5.0
+            end = start + seconds
+            procs = []
+            for f, (_, port) in enumerate(started):
+                specs = [
+                    {
+                        "subscribe": [f"/{robot}/odom", f"/{robot}/scan"],
+                        "drive": None,
+                    }
+                    for robot in (names[(f * clients + c) % len(names)] for c in range(clients))
+                ]
+                procs += start_loadgens(f"ws://127.0.0.1:{port}", specs, loadgens, start, end)
+            time.sleep(max(0.0, start - time.time()))
+            cpu0 = [cpu_seconds(p) for p in sim_procs + front_procs]
+            time.sleep(max(0.0, end - time.time()))
+            cpu1 = [cpu_seconds(p) for p in sim_procs + front_procs]
+            load = load_average()
+            results = collect(procs, timeout=seconds + 120)
+    rates: list[float] = []
+    lost = 0
+    lat: list[float] = []
+    errors = [r["error"] for r in results if r.get("error")]
+    for r in results:
+        lat += r.get("latencies", [])
+        odom = next((t for t in r.get("stamps", {}) if t.endswith("/odom")), None)
+        stamps = r["stamps"][odom] if odom is not None else []
+        rates.append(len(stamps) / seconds)
+        lost += sum(max(0, round((b - a) / 50e6) - 1) for a, b in itertools.pairwise(stamps))
+    cpu = [100 * (b - a) / seconds for a, b in zip(cpu0, cpu1, strict=True)]
     low, high = percentile(rates, 0.01), percentile(rates, 0.99)
-    p99 = percentile(lat, 0.99) * 1e3
+    p50, p99 = percentile(lat, 0.5) * 1e3, percentile(lat, 0.99) * 1e3
     print(
         f"zenoh classroom: {sims} simulators x {robots} robots, {fronts} front-ends x "
-        f"{clients} clients (/odom + /scan each), {seconds:g} s, {load_average()}"
+        f"{clients} clients (/odom + /scan each), {seconds:g} s, {load}"
     )
-    print(f"/odom rate per client: p1 {low:.1f} Hz, p99 {high:.1f} Hz (target 18-22 Hz)")
-    print(f"/odom lost (stamp gaps): {lost} (target 0); latency p99 {p99:.1f} ms (target <= 50)")
-    return low >= 18.0 and high <= 22.0 and lost == 0 and p99 <= 50.0
-
-
-def contextlib_exit() -> Any:
-    import contextlib
-
-    return contextlib.ExitStack()
-
-
-async def _classroom_clients(specs: list[tuple[int, str]], seconds: float) -> list[Any]:
-    async def one(port: int, robot: str) -> dict[str, Any]:
-        result: dict[str, Any] = {"odom": 0, "lost": 0, "lat": []}
-        last: float | None = None
-        async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
-            for topic in (f"/{robot}/odom", f"/{robot}/scan"):
-                await ws.send(json.dumps({"op": "subscribe", "topic": topic}))
-            await asyncio.sleep(3)
-            end = time.monotonic() + seconds
-            while time.monotonic() < end:
-                try:
-                    msg = json.loads(await asyncio.wait_for(ws.recv(), 2))
-                except TimeoutError:
-                    continue
-                if not msg.get("topic", "").endswith("/odom"):
-                    continue
-                s = msg["msg"]["header"]["stamp"]
-                t = s["sec"] + s["nanosec"] * 1e-9
-                result["odom"] += 1
-                result["lat"].append(time.time() - t)
-                if last is not None and t - last > 0.075:
-                    result["lost"] += round((t - last) / 0.05) - 1
-                last = t
-        return result
-
-    return list(await asyncio.gather(*(one(p, r) for p, r in specs)))
+    print(
+        "CPU % of one core: simulators "
+        + " ".join(f"{c:.0f}" for c in cpu[:sims])
+        + ", front-ends "
+        + " ".join(f"{c:.0f}" for c in cpu[sims:])
+    )
+    print(
+        f"/odom rate per client: p1 {low:.1f} Hz, p99 {high:.1f} Hz (target 18-22 Hz); "
+        f"{len(results)} clients, {len(errors)} errors {errors[:2]}"
+    )
+    print(
+        f"/odom lost (stamp gaps): {lost} (target 0); latency p50 {p50:.1f} ms, "
+        f"p99 {p99:.1f} ms (target <= 50), {len(lat)} messages"
+    )
+    ok = low >= 18.0 and high <= 22.0 and lost == 0 and p99 <= 50.0 and not errors
+    print(f"targets: {'met' if ok else 'NOT met'}")
+    return ok
 
 
 def main(argv: list[str] | None = None) -> int:

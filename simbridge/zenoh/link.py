@@ -206,6 +206,8 @@ class ZenohLink:
         self._next_reconcile = 0.0
         self._generation = -1
         self._logged: dict[str, float] = {}
+        #: Deliveries to send to ROS 2 at the end of the current event-loop callback.
+        self._outbox: list[tuple[_Declared, Outgoing]] = []
         #: Counters for /healthz.
         self.stats: Counter[str] = Counter()
         self._liveliness_sub: Any = None
@@ -478,7 +480,21 @@ class ZenohLink:
         entry = self._publishers.get(topic.name)
         if entry is None or not (entry.latched or self._remote_subs[topic.name]):
             return
-        self._put(entry, out)
+        loop = self._loop
+        if loop is None:
+            self._put(entry, out)
+            return
+        # sent together once the current callback (a tick publishes every robot) is done:
+        # Zenoh's puts cost half as much back to back as spread between other work
+        if not self._outbox:
+            loop.call_soon(self._flush)
+        self._outbox.append((entry, out))
+
+    def _flush(self) -> None:
+        outbox, self._outbox = self._outbox, []
+        for entry, out in outbox:
+            if self.session is not None:
+                self._put(entry, out)
 
     def _put(self, entry: _Declared, out: Outgoing) -> None:
         try:
