@@ -75,7 +75,8 @@ def run(name: str, checkout: Path, args: list[str]) -> tuple[int, str]:
 
 
 def _shape(line: str) -> str:
-    return _FIGURE.sub("#", line)
+    """The line's words with its figures as ``#``, spacing ignored (columns are padded)."""
+    return " ".join(_FIGURE.sub("#", line).split())
 
 
 def _ratio_line(before: str, after: str) -> str:
