@@ -701,7 +701,54 @@ def tutorials(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     }
 
 
+def action_goals(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """roslibpy.ActionClient: one goal to its result, one long goal cancelled after feedback."""
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    name, type_name = args["action"], args["type"]
+    wait_for(
+        lambda: (
+            name
+            in call_service(
+                roslibpy, ros, "/rosapi/action_servers", "rosapi/GetActionServers", {}, timeout_s
+            )["action_servers"]
+        ),
+        timeout_s,
+        f"{name} among the action servers",
+    )
+    client = roslibpy.ActionClient(ros, name, type_name)
+
+    def send(goal: dict[str, Any]) -> tuple[str, dict[str, Any], threading.Event]:
+        state: dict[str, Any] = {"feedback": []}
+        done = threading.Event()
+
+        def resultback(result: Any) -> None:
+            state.update(ok=True, status=int(result["status"].value), values=result["values"])
+            done.set()
+
+        def errback(err: Any) -> None:
+            state.update(ok=False, status=int(err["status"].value), values=err["values"])
+            done.set()
+
+        goal_id = client.send_goal(
+            goal, resultback, lambda fb: state["feedback"].append(dict(fb)), errback
+        )
+        return goal_id, state, done
+
+    def finished(item: tuple[str, dict[str, Any], threading.Event]) -> dict[str, Any]:
+        if not item[2].wait(timeout_s):
+            raise TimeoutError(f"goal {item[0]} did not finish")
+        return item[1]
+
+    out: JSON = {"succeeded": finished(send(args["goal"]))}
+    long = send(args["long_goal"])
+    wait_for(lambda: long[1]["feedback"], timeout_s, "feedback of the long goal")
+    client.cancel_goal(long[0])
+    out["canceled"] = finished(long)
+    return out
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
+    "action_goals": action_goals,
     "tutorials": tutorials,
     "tf_clients": tf_clients,
     "services_actions": services_actions,

@@ -397,3 +397,29 @@ async def test_rosbridge_client_runs_and_cancels_goals_of_a_ros2_action_server(
         await asyncio.to_thread(server.close)
     # the server's tokens are gone: the action leaves the graph
     await wait_for(lambda: "/ros2_fibonacci" not in zapp.graph.actions.actions, timeout=10)
+
+
+async def test_roslibpy_action_client_runs_and_cancels_goals_of_a_ros2_action_server(
+    zapp: App, router: Router, run_roslibpy: Any
+) -> None:
+    server = await asyncio.to_thread(Ros2FibonacciServer, router, "/ros2_fib_py")
+    try:
+        result = await run_roslibpy(
+            ws_url(zapp),
+            "action_goals",
+            {
+                "action": "/ros2_fib_py",
+                "type": FIB,
+                "goal": {"order": 3},
+                "long_goal": {"order": 40},
+            },
+            timeout=30,
+        )
+    finally:
+        await asyncio.to_thread(server.close)
+    done = result["succeeded"]
+    assert done["ok"] and done["status"] == 4
+    assert done["values"]["sequence"] == [0, 1, 1, 2]
+    assert done["feedback"] and done["feedback"][0]["sequence"][:1] == [0]
+    canceled = result["canceled"]
+    assert canceled["status"] == 5 and canceled["feedback"]
