@@ -423,3 +423,43 @@ async def test_roslibpy_action_client_runs_and_cancels_goals_of_a_ros2_action_se
     assert done["feedback"] and done["feedback"][0]["sequence"][:1] == [0]
     canceled = result["canceled"]
     assert canceled["status"] == 5 and canceled["feedback"]
+
+
+async def test_a_goal_that_is_not_cdr_gets_an_error_reply_and_the_action_goes_on(
+    demo: App, router: Router, ros2: Any
+) -> None:
+    from zenoh_ros2_sdk import get_message_class, get_service_names_and_types
+
+    from simbridge.zenoh.attachment import Attachment
+
+    await eventually(
+        lambda: "/fibonacci/_action/send_goal" in dict(get_service_names_and_types(**kw(router)))
+    )
+    key = (
+        "0/fibonacci/_action/send_goal/example_interfaces::action::dds_::Fibonacci_SendGoal_/"
+        + HASHES["send_goal"]
+    )
+    attachment = Attachment(1, time.time_ns(), bytes(16)).pack()
+
+    def ask(payload: bytes) -> list[str]:
+        errors = []
+        for reply in ros2.session.get(key, payload=payload, attachment=attachment, timeout=5):
+            if reply.err is not None:
+                errors.append(bytes(reply.err.payload.to_bytes()).decode())
+        return errors
+
+    for garbage in (b"", b"\x00\x01\x00\x00\x01", b"\x00\x01\x00\x00" + b"\xff" * 3):
+        errors = await asyncio.to_thread(ask, garbage)
+        assert errors and "not CDR of" in errors[0] and "Fibonacci_SendGoal_Request" in errors[0]
+    assert demo.zenoh is not None and demo.zenoh.stats["bad_payloads"] >= 3
+    # the action still takes well-formed goals
+    send_goal = await _client(router, "/fibonacci", "send_goal")
+    goal_class = get_message_class(f"{FIB}_Goal")
+    assert goal_class is not None
+    try:
+        accepted = await asyncio.to_thread(
+            send_goal.call, goal_id=_uuid(uuid.uuid4().bytes), goal=goal_class(order=1)
+        )
+    finally:
+        send_goal.close()
+    assert accepted is not None and accepted.accepted
