@@ -73,6 +73,10 @@ LOG_EVERY = 30.0
 SHARED_TOPICS = frozenset({"/tf", "/tf_static", "/rosout", "/parameter_events"})
 #: Seconds a call from ROS 2 waits for a rosbridge client that provides the service.
 SERVICE_TIMEOUT = 10.0
+#: Samples waiting for the event loop at most (the oldest are dropped, and counted, past it).
+INBOX_LIMIT = 20_000
+#: Samples handed to the graph per event-loop callback at most.
+DRAIN_BATCH = 500
 #: The interpreter's GIL switch interval while Zenoh runs (seconds; Python's default is 5 ms).
 SWITCH_INTERVAL = 0.0005
 
@@ -210,7 +214,7 @@ class ZenohLink:
         self._generation = -1
         self._logged: dict[str, float] = {}
         #: Samples from Zenoh's threads waiting for the event loop, and whether it was woken.
-        self._inbox: deque[tuple[str, bytes]] = deque()
+        self._inbox: deque[tuple[str, bytes]] = deque(maxlen=INBOX_LIMIT)
         self._inbox_rung = False
         self._switch_interval = sys.getswitchinterval()
         #: Deliveries to send to ROS 2 at the end of the current event-loop callback.
@@ -795,6 +799,8 @@ class ZenohLink:
         inbox = self._inbox
 
         def on_sample(sample: Any) -> None:  # a Zenoh thread: as little as it can
+            if len(inbox) == INBOX_LIMIT:
+                self.stats["samples_dropped"] += 1  # the oldest goes: the loop is overloaded
             inbox.append((name, bytes(sample.payload.to_bytes())))
             if not self._inbox_rung:
                 loop = self._loop
@@ -805,12 +811,19 @@ class ZenohLink:
         return on_sample
 
     def _drain(self) -> None:
-        """Hand every sample that arrived to the graph (the event loop)."""
+        """Hand the samples that arrived to the graph (the event loop).
+
+        Only those already there: under a flood, the loop's other work (clients, the tick)
+        runs between two batches instead of waiting for the flood to end.
+        """
         self._inbox_rung = False
         inbox = self._inbox
-        while inbox:
+        for _ in range(min(len(inbox), DRAIN_BATCH)):
             name, payload = inbox.popleft()
             self._on_sample(name, payload)
+        if inbox and not self._inbox_rung and self._loop is not None:
+            self._inbox_rung = True
+            self._loop.call_soon(self._drain)
 
     def _on_sample(self, name: str, payload: bytes) -> None:
         topic = self.graph.topics.topics.get(name)

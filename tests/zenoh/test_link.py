@@ -341,3 +341,26 @@ def test_token_of_sdk_parses(router: Router) -> None:
         "bda11202e7b68f198d6f67922cf30364858239c81a/::,10:,:,:,,"
     )
     assert Entity.parse(token).token() == token
+
+
+async def test_a_flood_of_samples_is_handed_over_in_batches_and_bounded(
+    zapp: App, router: Router
+) -> None:
+    from simbridge.zenoh.link import DRAIN_BATCH, INBOX_LIMIT
+
+    link = zapp.zenoh
+    assert link is not None
+    on_sample = link._sample_handler("/nobody_listens")
+
+    class Sample:
+        class payload:
+            @staticmethod
+            def to_bytes() -> bytes:
+                return b"\x00\x01\x00\x00"
+
+    for _ in range(INBOX_LIMIT + 10):
+        on_sample(Sample)
+    assert len(link._inbox) == INBOX_LIMIT and link.stats["samples_dropped"] == 10
+    link._drain()  # one batch, then the loop's other work, then the next batch
+    assert len(link._inbox) == INBOX_LIMIT - DRAIN_BATCH
+    await wait_for(lambda: not link._inbox, timeout=10)
