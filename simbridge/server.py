@@ -68,6 +68,9 @@ READ_CHUNK = 32 * 1024
 #: Incoming WebSocket messages websockets buffers for a client before it stops reading its
 #: socket (each up to max_message_size): what a client whose frames wait can make us hold.
 MAX_QUEUE = 4
+#: A client without the admin token: websockets reads messages up to this many times
+#: max_frame_bytes (longer ones between get the session's named refusal; longer still close).
+STUDENT_READ_FACTOR = 2
 
 
 def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
@@ -332,10 +335,25 @@ class BridgeServer:
     def _admitted(self, client: Client) -> None:
         """The connection authenticated: it leaves the pool of those that owe a token."""
         client.unauthenticated = False
-        _frame_limit(client.ws, self.settings.max_message_size)
+        _frame_limit(client.ws, self._read_limit(client.session))
         self._unauthenticated.discard(client.ws)
         if client.auth_timer is not None:
             client.auth_timer.cancel()
+
+    def _read_limit(self, session: Session) -> int:
+        """Return the largest message websockets reads for an admitted ``session``.
+
+        websockets holds up to :data:`MAX_QUEUE` read messages per connection, each up to this
+        size, before the session sees them. A client without the admin token has its frames
+        refused by the session past ``max_frame_bytes``, so websockets need not read more than
+        twice that for it: a longer message closes the connection (1009, "message too big")
+        instead of being buffered, and what a student's connection can make the server hold
+        before the session is ``MAX_QUEUE`` x 2 x ``max_frame_bytes`` (8 MB by default).
+        """
+        s = self.settings
+        if session.admin:
+            return s.max_message_size
+        return min(s.max_message_size, STUDENT_READ_FACTOR * s.max_frame_bytes)
 
     async def _watch_stalls(self, timeout: float) -> None:
         """Disconnect clients that have read nothing for ``timeout`` s while frames wait."""
@@ -384,6 +402,8 @@ class BridgeServer:
         graph.add_peer(client)
         if not session.authenticated:  # set on connect by the guard (none: all admitted)
             self._owes_token(client)
+        else:
+            _frame_limit(ws, self._read_limit(session))
         writer = asyncio.create_task(client.write_loop(), name=f"writer-{session.client_id}")
         logger.info("%s connected", client.label)
         loop = asyncio.get_running_loop()

@@ -411,34 +411,46 @@ async def test_row17_big_frames_wait_for_their_share_of_the_loop(make_app: AppFa
 async def test_row17_long_frames_and_frames_of_many_values_are_refused_unparsed(
     make_app: AppFactory,
 ) -> None:
-    """A student's 9 MB frame, and a 400 kB one of 200,000 values: refused unparsed, by name.
+    """A student's 1.7 MB frame, and a 400 kB one of 200,000 values: refused unparsed, by name.
 
-    A 9 MB frame takes ~58 ms to handle here, five times that on a Pi. The admin's frames are
-    not limited.
+    A 9 MB frame takes ~58 ms to handle here, five times that on a Pi; websockets does not even
+    read one for a student (more than twice max_frame_bytes): the connection closes with 1009
+    and nothing of it is held. The admin's frames are not limited.
     """
     app = await student_app(make_app)
-    big = json.dumps(
-        {"op": "publish", "topic": "/r1/big", "type": "std_msgs/Float64MultiArray"}
-        | {"msg": {"data": [0.123456789] * 700_000}}
-    )
+
+    def floats(topic: str, n: int) -> str:
+        return json.dumps(
+            {"op": "publish", "topic": topic, "type": "std_msgs/Float64MultiArray"}
+            | {"msg": {"data": [0.123456789] * n}}
+        )
+
+    long = floats("/r1/big", 130_000)
+    assert 1_000_000 < len(long) < 2_000_000
+    huge = floats("/r1/big", 700_000)  # made before the observer: 0.3 s of this process's loop
     many = json.dumps(
         {"op": "publish", "topic": "/r1/big", "type": "std_msgs/Int8MultiArray"}
         | {"msg": {"data": [0] * 200_000}}
     )
     async with observed(app) as steady:
         async with connect(f"{ws_url(app)}/?token={STUDENT}", max_size=None) as ws:
-            await ws.send(big)
+            await ws.send(long)
             told = await statuses(ws, 0.5)
             assert len(told) == 1 and "max_frame_bytes" in told[0], told
-            assert f"a frame of {len(big)} characters" in told[0]
+            assert f"a frame of {len(long)} characters" in told[0]
             await ws.send(many)
             told = await statuses(ws, 0.5)
             assert len(told) == 1 and "200071 JSON values" in told[0], told
             assert "max_frame_values" in told[0]
             assert "/r1/big" not in app.graph.topics.topics
+        ws = await connect(f"{ws_url(app)}/?token={STUDENT}", max_size=None)
+        with contextlib.suppress(ConnectionClosed):  # the server may close while it is sent
+            await ws.send(huge)
+        await asyncio.wait_for(ws.wait_closed(), 10 * TIMEOUT_FACTOR)
+        assert ws.close_code == 1009, (ws.close_code, ws.close_reason)
         await steady()
     async with connect(f"{ws_url(app)}/?token=teacher-token-xyz", max_size=None) as admin:
-        await admin.send(big.replace("/r1/big", "/big"))
+        await admin.send(huge.replace("/r1/big", "/big"))
         await wait_for(lambda: "/big" in app.graph.topics.topics, 10)
 
 
