@@ -78,6 +78,15 @@ class ZenohLink(Protocol):
     def _put_bytes(self, entry: Any, payload: bytes) -> None: ...
     def _log(self, key: str, text: str) -> None: ...
     def _note(self, key: str, text: str) -> None: ...
+    def _query(
+        self,
+        entity: Entity,
+        on_reply: Callable[[Any], None],
+        on_done: Callable[[], None],
+        payload: bytes,
+        attachment: bytes,
+        timeout: float,
+    ) -> None: ...
 
 
 __all__ = [
@@ -625,17 +634,8 @@ class ActionBridge:
             if loop is not None:
                 loop.call_soon_threadsafe(done)
 
-        link.stats["calls_out"] += 1
         try:
-            link.session.get(
-                entity.keyexpr(),
-                link.zenoh.handlers.Callback(on_zenoh_reply, on_done),
-                target=link.zenoh.QueryTarget.ALL_COMPLETE,
-                consolidation=link.zenoh.ConsolidationMode.NONE,
-                payload=payload,
-                attachment=attachment,
-                timeout=timeout,
-            )
+            link._query(entity, on_zenoh_reply, on_done, payload, attachment, timeout)
         except Exception as err:
             on_error(f"query failed: {err}")
 

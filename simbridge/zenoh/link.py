@@ -882,20 +882,35 @@ class ZenohLink:
             if loop is not None:
                 loop.call_soon_threadsafe(self._remote_done, server_id, replies)
 
-        self.stats["calls_out"] += 1
         try:
-            self.session.get(
-                entity.keyexpr(),
-                self.zenoh.handlers.Callback(on_reply, on_done),
-                target=self.zenoh.QueryTarget.ALL_COMPLETE,
-                consolidation=self.zenoh.ConsolidationMode.NONE,
-                payload=payload,
-                attachment=attachment,
-                timeout=SERVICE_TIMEOUT,
-            )
+            self._query(entity, on_reply, on_done, payload, attachment, SERVICE_TIMEOUT)
         except Exception as err:
             self._calls.pop(server_id, None)
             self._answer_remote(provider, server_id, f"query failed: {err}", ok=False)
+
+    def _query(
+        self,
+        entity: Entity,
+        on_reply: Callable[[Any], None],
+        on_done: Callable[[], None],
+        payload: bytes,
+        attachment: bytes,
+        timeout: float,
+    ) -> None:
+        """Query every server of a remote service, each reply to ``on_reply``, then ``on_done``.
+
+        Both run on a Zenoh thread; what Zenoh raises (no session, a bad key) reaches the caller.
+        """
+        self.stats["calls_out"] += 1
+        self.session.get(
+            entity.keyexpr(),
+            self.zenoh.handlers.Callback(on_reply, on_done),
+            target=self.zenoh.QueryTarget.ALL_COMPLETE,
+            consolidation=self.zenoh.ConsolidationMode.NONE,
+            payload=payload,
+            attachment=attachment,
+            timeout=timeout,
+        )
 
     def _remote_done(self, server_id: str, replies: list[tuple[bool, bytes]]) -> None:
         pending = self._calls.pop(server_id, None)
