@@ -6,7 +6,6 @@ Its robot picker lists the robot the other process simulates, and shows where th
 from __future__ import annotations
 
 import asyncio
-import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
 
@@ -15,9 +14,8 @@ import pytest
 from simbridge.config import ServerSettings
 from simbridge.runner import App
 from tests.browser.conftest import OpenPage
-from tests.helpers import ROOT, TIMEOUT_FACTOR, ws_url
-from tests.zenoh.conftest import Router, zenoh_options
-from tests.zenoh.test_classroom import WORLD
+from tests.helpers import TIMEOUT_FACTOR, ws_url
+from tests.zenoh.conftest import Router, room_a_process, zenoh_options
 
 
 pytestmark = pytest.mark.e2e
@@ -29,38 +27,18 @@ async def classroom(tmp_path: Path) -> AsyncIterator[App]:
     pytest.importorskip("zenoh")
     router = Router()
     await asyncio.to_thread(router.start)
-    world = tmp_path / "room_a.yaml"
-    world.write_text(WORLD)
-    other = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "simbridge",
-        "--zenoh",
-        "--zenoh-connect",
-        router.endpoint,
-        "--zenoh-listen",
-        "tcp/127.0.0.1:0",
-        "--world",
-        str(world),
-        "--host",
-        "127.0.0.1",
-        "--port",
-        "0",
-        "--no-http",
-        cwd=ROOT,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.DEVNULL,
-    )
-    assert other.stdout is not None
-    await asyncio.wait_for(other.stdout.readline(), 20 * TIMEOUT_FACTOR)
-    app = App(ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router))
-    await app.start()
     try:
-        yield app
+        async with room_a_process(router, tmp_path):
+            app = App(
+                ServerSettings(host="127.0.0.1", port=0, http_port=0),
+                zenoh=zenoh_options(router),
+            )
+            await app.start()
+            try:
+                yield app
+            finally:
+                await app.stop()
     finally:
-        await app.stop()
-        other.terminate()
-        await other.communicate()
         router.stop()
 
 

@@ -8,6 +8,7 @@ definitions from a local directory.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import re
 import socket
 import subprocess
@@ -177,6 +178,55 @@ async def zapp(router: Router, ros2: Any) -> AsyncIterator[App]:
     await app.start()
     yield app
     await app.stop()
+
+
+#: The world of the second process of the classroom tests: robot a1 in a room of its own.
+ROOM_A = """\
+name: room_a
+walls:
+  - [-3.0, -2.0, 3.0, -2.0]
+  - [-3.0, 2.0, 3.0, 2.0]
+robots:
+  - {name: a1, pose: [-1.0, 0.0, 0.0]}
+"""
+
+
+@contextlib.asynccontextmanager
+async def room_a_process(router: Router, tmp_path: Path) -> AsyncIterator[None]:
+    """A second simbridge process simulating robot a1 (:data:`ROOM_A`) on ``router``.
+
+    Entered once it serves (its first line names its rosbridge URL); stopped on exit.
+    """
+    world = tmp_path / "room_a.yaml"
+    world.write_text(ROOM_A)
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable,
+        "-m",
+        "simbridge",
+        "--zenoh",
+        "--zenoh-connect",
+        router.endpoint,
+        "--zenoh-listen",
+        "tcp/127.0.0.1:0",
+        "--world",
+        str(world),
+        "--host",
+        "127.0.0.1",
+        "--port",
+        "0",
+        "--no-http",
+        cwd=ROOT,
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.DEVNULL,
+    )
+    try:
+        assert proc.stdout is not None
+        line = await asyncio.wait_for(proc.stdout.readline(), 20 * TIMEOUT_FACTOR)
+        assert b"rosbridge ws://" in line, line
+        yield
+    finally:
+        proc.terminate()
+        await proc.communicate()
 
 
 async def eventually(check: Any, timeout: float = 8.0, step: float = 0.05) -> Any:

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import asyncio
 import json
-import sys
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -19,53 +18,18 @@ from websockets.asyncio.client import connect
 from simbridge.config import ServerSettings
 from simbridge.runner import App
 from tests.conftest import ClientRunner
-from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, wait_for, ws_url
-from tests.zenoh.conftest import Router, zenoh_options
+from tests.helpers import recv_until, send_json, wait_for, ws_url
+from tests.zenoh.conftest import Router, room_a_process, zenoh_options
 
 
 pytestmark = pytest.mark.e2e
-
-WORLD = """\
-name: room_a
-walls:
-  - [-3.0, -2.0, 3.0, -2.0]
-  - [-3.0, 2.0, 3.0, 2.0]
-robots:
-  - {name: a1, pose: [-1.0, 0.0, 0.0]}
-"""
 
 
 @pytest.fixture
 async def other_process(router: Router, tmp_path: Path) -> AsyncIterator[None]:
     """A second simbridge process simulating robot a1, on the same router."""
-    world = tmp_path / "room_a.yaml"
-    world.write_text(WORLD)
-    proc = await asyncio.create_subprocess_exec(
-        sys.executable,
-        "-m",
-        "simbridge",
-        "--zenoh",
-        "--zenoh-connect",
-        router.endpoint,
-        "--zenoh-listen",
-        "tcp/127.0.0.1:0",
-        "--world",
-        str(world),
-        "--host",
-        "127.0.0.1",
-        "--port",
-        "0",
-        "--no-http",
-        cwd=ROOT,
-        stdout=asyncio.subprocess.PIPE,
-        stderr=asyncio.subprocess.PIPE,
-    )
-    assert proc.stdout is not None
-    line = await asyncio.wait_for(proc.stdout.readline(), 20 * TIMEOUT_FACTOR)
-    assert b"rosbridge ws://" in line, line
-    yield
-    proc.terminate()
-    await proc.communicate()
+    async with room_a_process(router, tmp_path):
+        yield
 
 
 async def test_a_client_of_one_process_drives_a_robot_of_another(
