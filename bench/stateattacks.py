@@ -27,11 +27,9 @@ observer thread counting /odom by its header stamps), as the before/after figure
 from __future__ import annotations
 
 import asyncio
-import base64
 import itertools
 import json
 import os
-import socket
 import sys
 import tempfile
 import threading
@@ -45,6 +43,7 @@ from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import connect as sync_connect
 
 from bench._server import server
+from tests.helpers import unread_socket
 
 
 #: The attacker's student token (scope r1) and the observer's admin token.
@@ -201,23 +200,8 @@ async def row6_unread_interfaces(url: Url, stop: asyncio.Event) -> str:
     """A client that never reads floods ``/rosapi/interfaces`` calls."""
     address, _, target = url("student").removeprefix("ws://").partition("/")
     host, port = address.split(":")
-    sock = socket.socket()
-    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
-    sock.setblocking(False)
+    sock = await unread_socket(host, int(port), f"/{target}")
     loop = asyncio.get_running_loop()
-    await loop.sock_connect(sock, (host, int(port)))
-    key = base64.b64encode(os.urandom(16)).decode()
-    await loop.sock_sendall(
-        sock,
-        (
-            f"GET /{target} HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\n"
-            f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
-            "Sec-WebSocket-Version: 13\r\n\r\n"
-        ).encode(),
-    )
-    head = b""
-    while b"\r\n\r\n" not in head:
-        head += await loop.sock_recv(sock, 1)
     sent = 0
     try:
         while not stop.is_set():

@@ -147,21 +147,21 @@ class RecordingPeer:
         return out
 
 
-async def stalled_client(port: int, subscribe: dict[str, object], path: str = "/") -> socket.socket:
-    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again.
+async def unread_socket(host: str, port: int, path: str = "/") -> socket.socket:
+    """Open a WebSocket by hand with a tiny receive buffer and return it, upgraded, unread.
 
-    ``subscribe`` is the one op sent (any op); ``path`` the request target (``/?token=T``).
+    ``path`` is the request target (``/?token=T``); nothing is read after the upgrade's head.
     """
     sock = socket.socket()
     sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
     sock.setblocking(False)
     loop = asyncio.get_running_loop()
-    await loop.sock_connect(sock, ("127.0.0.1", port))
+    await loop.sock_connect(sock, (host, port))
     key = base64.b64encode(os.urandom(16)).decode()
     await loop.sock_sendall(
         sock,
         (
-            f"GET {path} HTTP/1.1\r\nHost: 127.0.0.1\r\nUpgrade: websocket\r\n"
+            f"GET {path} HTTP/1.1\r\nHost: {host}\r\nUpgrade: websocket\r\n"
             f"Connection: Upgrade\r\nSec-WebSocket-Key: {key}\r\n"
             "Sec-WebSocket-Version: 13\r\n\r\n"
         ).encode(),
@@ -169,7 +169,17 @@ async def stalled_client(port: int, subscribe: dict[str, object], path: str = "/
     head = b""
     while b"\r\n\r\n" not in head:
         head += await loop.sock_recv(sock, 1)
-    assert head.startswith(b"HTTP/1.1 101")
+    assert head.startswith(b"HTTP/1.1 101"), head
+    return sock
+
+
+async def stalled_client(port: int, subscribe: dict[str, object], path: str = "/") -> socket.socket:
+    """Open a WebSocket by hand with a tiny receive buffer, subscribe, and never read again.
+
+    ``subscribe`` is the one op sent (any op); ``path`` the request target (``/?token=T``).
+    """
+    sock = await unread_socket("127.0.0.1", port, path)
+    loop = asyncio.get_running_loop()
     payload = json.dumps(subscribe).encode()
     mask = os.urandom(4)
     masked = bytes(b ^ mask[i % 4] for i, b in enumerate(payload))
