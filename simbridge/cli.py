@@ -447,6 +447,38 @@ def _import_asyncio(*, tls: bool) -> None:
             del sys.modules["ssl"]
 
 
+#: CPython's own hash modules, which hashlib falls back to without OpenSSL's ``_hashlib``.
+_BUILTIN_HASHES = ("_md5", "_sha1", "_sha3", "_blake2") + (
+    ("_sha2",) if sys.version_info >= (3, 12) else ("_sha256", "_sha512")
+)
+
+
+def _import_hashlib() -> None:
+    """Import hashlib and hmac with CPython's own hash functions instead of OpenSSL's.
+
+    With ``_hashlib`` importable, ``import hashlib`` (websockets' handshake: SHA-1; pydantic's
+    ``secrets`` import, rosauth's SHA-512, the page's ETags) loads OpenSSL's libcrypto and
+    initialises its digests: 3.5 MB of an idle server's resident memory on x86-64 (issue 16),
+    for a few hashes of short strings that CPython's built-in modules compute alike (the same
+    digests; ``hashlib.algorithms_guaranteed`` all there). So for this import ``_hashlib`` is
+    hidden, as :func:`_import_asyncio` hides ssl. A TLS run loads libcrypto through ``ssl``
+    as before. Where hashlib or ``_hashlib`` is already imported (tests, a program embedding
+    simbridge), or a Python was built without the built-in modules, nothing changes.
+    """
+    import importlib.util  # here: `simbridge healthcheck` does not need it
+
+    if any(name in sys.modules for name in ("hashlib", "hmac", "_hashlib")):
+        return
+    if any(importlib.util.find_spec(name) is None for name in _BUILTIN_HASHES):
+        return
+    sys.modules["_hashlib"] = None  # type: ignore[assignment]  # `import _hashlib` raises
+    try:
+        importlib.import_module("hashlib")
+        importlib.import_module("hmac")
+    finally:
+        del sys.modules["_hashlib"]
+
+
 def _release_startup_memory() -> None:
     """Give the heap that start-up freed back to the system (glibc's ``malloc_trim``).
 
@@ -464,6 +496,7 @@ def _release_startup_memory() -> None:
 
 
 def _cmd_run(argv: Sequence[str]) -> int:
+    _import_hashlib()  # before simbridge.config: pydantic imports hashlib (through secrets)
     from simbridge.config import load_params, load_world, server_settings
 
     try:

@@ -1,6 +1,9 @@
 from __future__ import annotations
 
 import asyncio
+import hashlib
+import hmac
+import json
 import os
 import re
 import signal
@@ -160,6 +163,36 @@ def test_healthcheck_stays_light_without_pydantic_or_numpy() -> None:
     )
     assert proc.stdout.strip() == "[]", proc.stdout + proc.stderr
     assert "unhealthy" in proc.stderr
+
+
+def test_the_command_hashes_with_cpythons_own_functions_alike() -> None:
+    """`simbridge` hashes without OpenSSL (issue 16): no libcrypto, the same digests.
+
+    Those of websockets' handshake (SHA-1), rosauth (SHA-512) and the page's ETags.
+    """
+    code = (
+        "import json, sys; from simbridge.cli import _import_hashlib; _import_hashlib(); "
+        "import base64, hashlib, hmac; k = b'dGhlIHNhbXBsZSBub25jZQ==' "
+        "b'258EAFA5-E914-47DA-95CA-C5AB0DC85B11'; "
+        "print(json.dumps([sorted(m for m in ('_hashlib', '_ssl') if m in sys.modules), "
+        "'libcrypto' in open('/proc/self/maps').read(), "
+        "base64.b64encode(hashlib.sha1(k).digest()).decode(), "
+        "[hashlib.new(n, k).hexdigest() for n in ('md5', 'sha256', 'sha512', 'sha3_256')], "
+        "hmac.new(b'secret', k, 'sha512').hexdigest(), "
+        "sorted(hashlib.algorithms_guaranteed - set(dir(hashlib)))]))"
+    )
+    proc = subprocess.run(
+        [PY, "-c", code], capture_output=True, text=True, timeout=30, check=True, cwd=ROOT
+    )
+    imported, libcrypto, accept, digests, mac, missing = json.loads(proc.stdout)
+    assert imported == [] and not libcrypto
+    key = b"dGhlIHNhbXBsZSBub25jZQ==258EAFA5-E914-47DA-95CA-C5AB0DC85B11"
+    assert accept == "s3pPLMBiTxaQ9kYGzzhZRbK+xOo="  # RFC 6455 section 1.3
+    assert digests == [
+        hashlib.new(n, key).hexdigest() for n in ("md5", "sha256", "sha512", "sha3_256")
+    ]
+    assert mac == hmac.new(b"secret", key, "sha512").hexdigest()
+    assert missing == []
 
 
 async def test_use_sim_time_flag_stamps_headers_with_sim_time() -> None:

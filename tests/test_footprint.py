@@ -34,22 +34,26 @@ import pytest
 from tests.helpers import ROOT, TIMEOUT_FACTOR
 
 
-#: Idle RSS ceiling of the default server, MB: measured 53.4 in a development venv and 60.7 in a
-#: fresh clone's venv (the page cache's large folios, see above), plus a margin wide enough for
-#: what the page cache adds (fresh clones measured 61.4-65.0 before issue 16's cuts, dev venvs
-#: 57.7): RSS is a coarse guard; the RssAnon ceiling below is the tight one.
-IDLE_RSS_CEILING_MB = 65.0
+#: Idle RSS ceiling of the default server, MB: measured 50.3 in a venv whose libraries were read
+#: back from disk and 56.5 in a freshly installed one (the page cache's large folios, see above;
+#: 53.4 and 60.7 before OpenSSL's hashes were cut), plus a margin for what the page cache adds
+#: (fresh clones measured up to 3.5 MB apart before): RSS is a coarse guard; the RssAnon ceiling
+#: below is the tight one.
+IDLE_RSS_CEILING_MB = 61.0
 
 #: Idle RssAnon ceiling, MB (the process's own memory; the page cache does not change it):
-#: measured 33.0-33.1 in both venvs (34.7 before the cuts), plus a margin.
-IDLE_ANON_CEILING_MB = 34.5
+#: measured 32.7-32.8 in both venvs (33.1 before OpenSSL's hashes were cut, 34.7 before issue
+#: 16's cuts), plus a margin.
+IDLE_ANON_CEILING_MB = 34.0
 
 #: Modules a default run has no use for: tools, bag writing, optional transports, test libraries;
 #: and those it needs only when asked for: ssl (--certfile), numpy.random (LiDAR noise), cbor2
-#: (a client subscribing with compression cbor or cbor-raw), the tutorial nodes (--demo-nodes).
+#: (a client subscribing with compression cbor or cbor-raw), the tutorial nodes (--demo-nodes);
+#: OpenSSL's hashes (``_hashlib``, libcrypto: CPython's own compute the same digests).
 NOT_ON_THE_DEFAULT_PATH = (
     "ssl",
     "_ssl",
+    "_hashlib",
     "numpy.random",
     "cbor2",
     "simbridge.graph.tutorials",
@@ -100,8 +104,12 @@ def watch():
     with open("/proc/self/status") as status:
         kb = {k: int(v.split()[0]) for k, _, v in (ln.partition(":") for ln in status)
               if k in ("VmRSS", "RssAnon", "RssFile")}
+    with open("/proc/self/maps") as maps:
+        libraries = sorted({ln.split()[5].rsplit("/", 1)[-1] for ln in maps
+                            if len(ln.split()) > 5 and ".so" in ln})
     report = {"rss_mb": kb["VmRSS"] / 1024, "anon_mb": kb["RssAnon"] / 1024,
-              "file_mb": kb["RssFile"] / 1024, "modules": sorted(sys.modules)}
+              "file_mb": kb["RssFile"] / 1024, "modules": sorted(sys.modules),
+              "libraries": libraries}
     print(json.dumps(report), file=sys.stderr)
     os.kill(os.getpid(), signal.SIGINT)
 
@@ -141,6 +149,13 @@ def test_default_server_imports_nothing_it_does_not_use(idle_server: dict[str, A
     """No tool, bag writer, optional transport or HTTP client module on the default path."""
     loaded = [m for m in idle_server["modules"] if m.startswith(NOT_ON_THE_DEFAULT_PATH)]
     assert loaded == []
+
+
+def test_default_server_maps_no_openssl(idle_server: dict[str, Any]) -> None:
+    """Neither libcrypto nor libssl: hashes are CPython's own, TLS is off (issue 16: 3.5 MB)."""
+    assert [
+        lib for lib in idle_server["libraries"] if lib.startswith(("libcrypto", "libssl"))
+    ] == []
 
 
 def test_default_server_idle_rss_stays_under_the_ceiling(idle_server: dict[str, Any]) -> None:
