@@ -146,14 +146,12 @@ class Client:
         if self.queue.push(frame, key, limit) and not self.told_dropped:
             self.told_dropped = True
             logger.info("%s is not keeping up: dropping its oldest queued messages", self.label)
-            if self.session.wants_status("warning"):
-                self.queue.push(
-                    status_frame(
-                        "warning",
-                        "you are not reading fast enough: the oldest queued messages were "
-                        "dropped (throttle_rate or queue_length limit what you receive)",
-                    )
-                )
+            for reply in self.session.status(
+                "warning",
+                "you are not reading fast enough: the oldest queued messages were dropped "
+                "(throttle_rate or queue_length limit what you receive)",
+            ):
+                self.queue.push(reply.frame)
         self.wake.set()
 
     async def write_loop(self) -> None:
@@ -319,15 +317,11 @@ class BridgeServer:
                 logger.info(
                     "%s did not authenticate within %g s: closing", client.label, s.auth_timeout
                 )
-                if client.session.wants_status("error"):
-                    client.send(
-                        status_frame(
-                            "error",
-                            f"not authenticated within {s.auth_timeout:g} s (the server's "
-                            "auth_timeout): connect with ?token=YOUR_TOKEN or send an auth op "
-                            "first",
-                        )
-                    )
+                text = (
+                    f"not authenticated within {s.auth_timeout:g} s (the server's auth_timeout): "
+                    "connect with ?token=YOUR_TOKEN or send an auth op first"
+                )
+                self.graph.apply(client, client.session.status("error", text))
                 client.close_soon(1008, "authentication timeout")
 
         client.auth_timer = asyncio.get_running_loop().call_later(s.auth_timeout, deadline)
@@ -378,22 +372,17 @@ class BridgeServer:
             return False
         if client.session.may_tell("message_rate", now):
             logger.info("%s sends too fast: dropping messages", client.label)
-            if client.session.wants_status("error"):
-                s = self.settings
-                client.send(
-                    status_frame(
-                        "error",
-                        f"too many messages: more than {s.message_rate:g} per second (the "
-                        f"server's message_rate, burst {s.message_burst}); messages were dropped",
-                    )
-                )
+            s = self.settings
+            text = (
+                f"too many messages: more than {s.message_rate:g} per second (the server's "
+                f"message_rate, burst {s.message_burst}); messages were dropped"
+            )
+            self.graph.apply(client, client.session.status("error", text))
         return True
 
     async def _handler(self, ws: ServerConnection) -> None:
         graph = self.graph
-        session = graph.new_session()
-        if ws.request is not None:
-            session.extra["token"] = _query_token(ws.request.path)
+        session = graph.new_session(_query_token(ws.request.path) if ws.request else None)
         client = Client(ws, session, self.settings)
         _read_chunk(ws)
         self.clients.add(client)

@@ -127,8 +127,8 @@ def clocked_graph() -> Any:
 class RecordingPeer:
     """A graph peer that records what it is sent (the seam where a socket would be)."""
 
-    def __init__(self, graph: Any, label: str = "peer") -> None:
-        self.session = graph.new_session()
+    def __init__(self, graph: Any, label: str = "peer", *, token: str | None = None) -> None:
+        self.session = graph.new_session(token)
         self.label = label
         self.frames: list[Any] = []
         graph.add_peer(self)

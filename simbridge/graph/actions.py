@@ -11,7 +11,8 @@ the goal.
 Status codes are ``action_msgs/msg/GoalStatus``: 0 unknown, 1 accepted, 2 executing,
 3 canceling, 4 succeeded, 5 canceled, 6 aborted. Every goal is answered:
 
-* no such action, or a goal that does not fit a known action type: ``action_result`` with
+* no such action, or a goal that does not fit a known action type (admission decides, see
+  :meth:`Admission.goal <simbridge.graph.admission.Admission.goal>`): ``action_result`` with
   ``result: false``, ``status: 0`` and the reason (rosbridge 2.1 hangs here, #1139);
 * the server's ``action_result`` with ``result: true``: status 4 and 5 are passed on, anything
   else becomes 6 (as rosbridge's goal handle does);
@@ -40,8 +41,8 @@ from typing import Any, Protocol
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
 from simbridge.graph.services import ServiceTable, caller
 from simbridge.graph.topics import BRIDGE_NODE, Peer
-from simbridge.msgs import Converter, TypeRegistry, normalize_type, positional_args
-from simbridge.protocol import OpId, json_frame, ops as o
+from simbridge.msgs import Converter, TypeRegistry, normalize_type
+from simbridge.protocol import OpId, Provided, json_frame, ops as o
 
 
 __all__ = [
@@ -167,9 +168,6 @@ class ActionTable:
     def handlers(self) -> dict[type, Callable[[Peer, Any, float], None]]:
         """Return the graph op handlers of the action ops."""
         return {
-            o.AdvertiseAction: self._advertise,
-            o.UnadvertiseAction: self._unadvertise,
-            o.SendActionGoal: self._send_goal,
             o.CancelActionGoal: self._cancel,
             o.ActionFeedback: self._feedback,
             o.ActionResult: self._result,
@@ -188,8 +186,8 @@ class ActionTable:
         old = self.actions.get(action.name)
         if old is not None:
             self._fail_goals(old, f"action {action.name} was re-advertised by another server")
-            if old.provider is not None:
-                old.provider.session.disown_action(action.name)
+            if old.provider is not None and old.provider is not action.provider:
+                old.provider.session.disown("action", action.name)
         self.actions[action.name] = action
 
         def cancel_goal(request: Any) -> dict[str, Any]:
@@ -212,22 +210,20 @@ class ActionTable:
         canonical = normalize_type(type_name, "action")
         action = Action(name, canonical, canonical, node, provider=provider)
         self._install(action)
-        provider.session.own_action(name, canonical)
         return action
 
-    def _advertise(self, peer: Peer, op: o.AdvertiseAction, now: float) -> None:
-        # admitted (graph.admission): not an action the server provides, a well-formed type
-        canonical = normalize_type(op.type, "action")
-        self._install(
-            Action(op.name, canonical, op.type, BRIDGE_NODE, provider=peer, written=op.action)
+    def provided(self, peer: Peer, effect: Provided) -> Action:
+        """Install an action a client advertised (its session's :class:`Provided` effect)."""
+        action = Action(
+            effect.name,
+            effect.type,
+            effect.written_type,
+            BRIDGE_NODE,
+            provider=peer,
+            written=effect.written,
         )
-        peer.session.own_action(op.name, canonical)
-
-    def _unadvertise(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
-        name = op.name
-        if not self.remove(peer, name):
-            msg = f"unadvertise_action: action {name} is not advertised by this client"
-            raise ProtocolError(msg)
+        self._install(action)
+        return action
 
     def remove(self, peer: Peer, name: str) -> bool:
         """Remove ``peer``'s action ``name``; return whether it served it."""
@@ -235,15 +231,16 @@ class ActionTable:
         if action is None or action.provider is not peer:
             return False
         del self.actions[name]
-        peer.session.disown_action(name)
         self.graph.services.services.pop(f"{name}/_action/cancel_goal", None)
         self._fail_goals(action, f"action {name} was unadvertised by its server")
         return True
 
     def drop_peer(self, peer: Peer) -> None:
-        """Forget a client that left: its actions (goals fail) and its goals (cancelled)."""
-        for name in list(peer.session.actions):
-            self.remove(peer, name)
+        """Forget the goals of a client that left (cancelled).
+
+        Its actions go with its session's effects (:meth:`Graph.remove_peer
+        <simbridge.graph.graph.Graph.remove_peer>`).
+        """
         for goal in [g for g in self.goals.values() if g.caller is peer]:
             goal.done = True
             del self.goals[goal.server_id]
@@ -254,9 +251,6 @@ class ActionTable:
             goal.finish(ABORTED, reason, result=False)
 
     # -- goals --------------------------------------------------------------------------------
-
-    def _fail(self, peer: Peer, op: o.SendActionGoal, reason: str) -> None:
-        self.fail(peer, op.action, op.id, reason)
 
     def fail(self, peer: Peer, action: str, op_id: OpId | None, reason: str) -> None:
         """Answer a goal that was not accepted: ``action_result`` false, status 0 (unknown)."""
@@ -271,49 +265,22 @@ class ActionTable:
             body["id"] = op_id
         peer.send(json_frame(body))
 
-    def _goal_message(self, action: Action, args: Any) -> Any:
-        """Return the complete goal message (known type) or ``args`` unchanged."""
-        registry = self.graph.registry
-        try:
-            goal_type = registry.action(action.type)[0]
-        except TypeNotFoundError:
-            return args if args is not None else {}
-        if args is None:
-            args = {}
-        elif isinstance(args, list):
-            names = [f.name for f in registry.spec(goal_type).fields]
-            args = positional_args(args, names, f"goal of {action.type}")
-        return self.graph.converter.from_json(goal_type, args)
-
-    def _send_goal(self, peer: Peer, op: o.SendActionGoal, now: float) -> None:
-        outcome = self.submit(
-            peer, op.name, op.args, op_id=op.id, written=op.action, feedback=op.feedback
-        )
-        if isinstance(outcome, str):
-            self._fail(peer, op, outcome)
-
     def submit(
         self,
         peer: Peer,
-        name: str,
-        args: Any,
+        action: Action,
+        message: Any,
         *,
         op_id: OpId | None,
         written: str,
         feedback: bool,
         goal_uuid: bytes | None = None,
-    ) -> Goal | str:
-        """Send a goal of ``peer`` to action ``name``; return the goal or why it was refused.
+    ) -> Goal:
+        """Send an admitted goal of ``peer`` (``message`` validated) to ``action``.
 
         ``goal_uuid`` is the goal's id when the sender chose one (a ROS 2 client does).
         """
-        action = self.actions.get(name)
-        if action is None:
-            return f"Action {name} does not exist (no server advertised it)"
-        try:
-            message = self._goal_message(action, args)
-        except ConversionError as err:
-            return f"invalid goal for {action.type}: {err}"
+        name = action.name
         server_id = f"action_goal:{name}:{next(self._counter)}"
         goal = Goal(
             server_id,

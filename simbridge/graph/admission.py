@@ -15,9 +15,13 @@ handler on the graph, which then only carries it out. The checks, in this order:
    service or action the server provides cannot be advertised by a client;
 5. **type**: the type of a ``publish``, ``advertise`` or typed ``subscribe`` is well formed and
    is the topic's type (rosbridge's TypeConflictException); a ``publish`` without a type takes
-   the topic's; a service or action type is well formed;
-6. **payload**: a ``publish`` message is validated against its type and completed with
-   defaults (:class:`~simbridge.msgs.Converter`; an unknown type needs a JSON object).
+   the topic's; a service or action type is well formed; the op carries on with the canonical
+   spelling;
+6. **payload**: a ``publish`` message, the request of a ``call_service`` and the goal of a
+   ``send_action_goal`` are validated against their types and completed with defaults
+   (:class:`~simbridge.msgs.Converter`; ``args`` given as a list are zipped onto the fields in
+   declaration order; a type simbridge does not know passes as it is, a message of it must be a
+   JSON object); a call or goal to a service or action that does not exist is refused here.
 
 Checks 1-4 are access rules. They apply once a :class:`~simbridge.graph.guard.Guard` is
 installed (it authenticates clients and gives each session its scope and rights, and sets
@@ -26,10 +30,13 @@ installed (it authenticates clients and gives each session its scope and rights,
 session's budgets, when the handler takes it; names it may own are counted here too, so that a
 scope refusal comes before a budget one.
 
-A refused op raises :class:`~simbridge.protocol.Refusal` or :class:`ProtocolError`, answered
-to its sender only by the graph; a dropped op (rate) makes :meth:`Admission.admit` return
-``None``. The payloads of service calls and action goals are checked by their tables
-(:mod:`~simbridge.graph.services`, :mod:`~simbridge.graph.actions`), whose answers they are.
+What :meth:`Admission.admit` returns is what the op's handler carries out: a
+:class:`Publication`, a :class:`Typed` op, a :class:`Call` or a :class:`GoalRequest` (the
+tables receive requests already validated), or the op itself. A refused op raises
+:class:`~simbridge.protocol.Refusal` or :class:`ProtocolError`, answered to its sender only by
+the graph (a refused call or goal gets its failed answer, its caller waits for one).
+Admission reads the client's session (its access, what it holds) and changes nothing in it but
+the charge of its publish rate.
 """
 
 from __future__ import annotations
@@ -39,11 +46,11 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from simbridge.errors import ProtocolError, TypeNotFoundError
-from simbridge.graph.actions import ActionTable
-from simbridge.graph.services import ServiceTable
+from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
+from simbridge.graph.actions import Action, ActionTable
+from simbridge.graph.services import Prepare, Service, ServiceTable
 from simbridge.graph.topics import Peer, Topic, TopicTable
-from simbridge.msgs import normalize_type
+from simbridge.msgs import normalize_type, positional_args
 from simbridge.protocol import (
     ANY_SCOPE,
     NOT_AUTHENTICATED,
@@ -51,7 +58,6 @@ from simbridge.protocol import (
     Refusal,
     Session,
     ops as o,
-    status_frame,
 )
 
 
@@ -59,7 +65,10 @@ __all__ = [
     "ADMIN_SUFFIXES",
     "MIN_FRAGMENT_SIZE",
     "Admission",
+    "Call",
+    "GoalRequest",
     "Publication",
+    "Typed",
     "in_namespace",
 ]
 
@@ -90,12 +99,52 @@ class Publication:
     msg: Any
 
 
+@dataclass(frozen=True, slots=True)
+class Typed:
+    """An admitted ``advertise``, ``subscribe``, ``advertise_service`` or ``advertise_action``."""
+
+    op: Any
+    #: The canonical spelling of the op's type (``None``: a subscribe without one).
+    type: str | None
+
+
+@dataclass(frozen=True, slots=True)
+class Call:
+    """An admitted ``call_service``: the service called and the request, validated."""
+
+    op: o.CallService
+    service: Service
+    #: The complete request message when the service type is known, else ``args`` as sent.
+    request: Any
+
+
+@dataclass(frozen=True, slots=True)
+class GoalRequest:
+    """An admitted goal: the action and the goal message, validated."""
+
+    action: Action
+    #: The complete goal message when the action type is known, else ``args`` as sent.
+    message: Any
+    #: The client's ``send_action_goal`` (``None``: a goal from outside the protocol).
+    op: o.SendActionGoal | None = None
+
+
 class Admission:
     """Decides, for every op of a client, whether the graph carries it out."""
 
-    def __init__(self, topics: TopicTable, services: ServiceTable, actions: ActionTable) -> None:
+    def __init__(
+        self,
+        topics: TopicTable,
+        services: ServiceTable,
+        actions: ActionTable,
+        *,
+        prepare: Prepare | None = None,
+    ) -> None:
         #: The graph's topics (types of existing topics; payload validation).
         self.topics = topics
+        #: Validates and completes the requests of known service types
+        #: (:func:`~simbridge.graph.services.typed_calls`).
+        self.prepare = prepare
         #: The graph's services and actions (a client may not advertise what the server
         #: provides).
         self.services = services
@@ -110,7 +159,8 @@ class Admission:
     def admit(self, peer: Peer, op: Op, now: float) -> Any:
         """Return what the op's handler carries out, or ``None`` if the op is dropped.
 
-        That is the op itself, or for a ``publish`` its :class:`Publication`.
+        That is a :class:`Publication`, :class:`Typed`, :class:`Call` or :class:`GoalRequest`
+        (see the module doc), or the op itself.
 
         Raises:
             ProtocolError: the op is refused (a :class:`Refusal` says how to answer it).
@@ -134,10 +184,14 @@ class Admission:
     def _publish(self, peer: Peer, session: Session, op: o.Publish, now: float) -> Any:
         name = op.name
         if self.guarded:
-            if not session.publishes.take(now):
-                self._too_fast(peer, session, op, now)
-                return None
-            self._may_own(session, "publish", name, name not in session.advertisements)
+            if not session.take_publish(now):
+                limits = session.limits
+                msg = (
+                    f"publish {name}: dropped, more than {limits.publish_rate:g} publishes per "
+                    f"second (the server's publish_rate, burst {limits.publish_burst}); slow down"
+                )
+                raise Refusal(msg, cause="publish_rate")
+            self._may_own(session, "publish", name, not session.advertises(name))
         topic = self.topics.topics.get(name)
         if op.type is not None:
             canonical = self.topics.check_type(name, op.type)
@@ -155,26 +209,14 @@ class Admission:
             canonical, known = topic.type, topic.known
         return Publication(op, topic, canonical, self.topics.validate(canonical, known, op.msg))
 
-    def _too_fast(self, peer: Peer, session: Session, op: o.Publish, now: float) -> None:
-        limits = session.limits
-        text = (
-            f"publish {op.name}: dropped, more than {limits.publish_rate:g} publishes per "
-            f"second (the server's publish_rate, burst {limits.publish_burst}); slow down"
-        )
-        if session.may_tell("publish_rate", now):
-            logger.info("%s: %s", peer.label, text)
-            if session.wants_status("error"):
-                peer.send(status_frame("error", text))
-
     def _advertise(self, peer: Peer, session: Session, op: o.Advertise, now: float) -> Any:
         if self.guarded:
-            self._may_own(session, "advertise", op.name, op.name not in session.advertisements)
-        self.topics.check_type(op.name, op.type)
-        return op
+            self._may_own(session, "advertise", op.name, not session.advertises(op.name))
+        return Typed(op, self.topics.check_type(op.name, op.type))
 
     def _subscribe(self, peer: Peer, session: Session, op: o.Subscribe, now: float) -> Any:
         if not op.type:
-            return op
+            return Typed(op, None)
         if self.guarded and session.scope != ANY_SCOPE:
             # a typed subscription fixes the type of a topic nobody publishes yet: outside its
             # own namespace that would squat a name (a robot spawned later could not take it)
@@ -187,8 +229,7 @@ class Admission:
                     "name); subscribe without a type and it waits for the topic"
                 )
                 raise Refusal(msg, cause="typed subscribe outside scope")
-        self.topics.check_type(op.name, op.type)
-        return op
+        return Typed(op, self.topics.check_type(op.name, op.type))
 
     def _advertise_service(
         self, peer: Peer, session: Session, op: o.AdvertiseService, now: float
@@ -201,16 +242,16 @@ class Admission:
                     "itself; choose another name"
                 )
                 raise Refusal(msg, cause="server service")
-            self._may_own(session, "advertise_service", op.name, op.name not in session.services)
-        _interface_type(op.type, "srv", "advertise_service")
-        return op
+            new = not session.provides("service", op.name)
+            self._may_own(session, "advertise_service", op.name, new)
+        return Typed(op, _interface_type(op.type, "srv", "advertise_service"))
 
     def _advertise_action(
         self, peer: Peer, session: Session, op: o.AdvertiseAction, now: float
     ) -> Any:
         name = op.name
         if self.guarded:
-            self._may_own(session, "advertise_action", name, name not in session.actions)
+            self._may_own(session, "advertise_action", name, not session.provides("action", name))
         existing = self.actions.actions.get(name)
         if existing is not None and existing.server is not None:
             # what the server provides stays the server's: taking it over would break it for
@@ -220,12 +261,11 @@ class Admission:
                 "choose another name"
             )
             raise ProtocolError(msg)
-        _interface_type(op.type, "action", "advertise_action")
-        return op
+        return Typed(op, _interface_type(op.type, "action", "advertise_action"))
 
     def _call_service(self, peer: Peer, session: Session, op: o.CallService, now: float) -> Any:
         if not self.guarded:
-            return op
+            return self.call(op)
         name = op.name
         admin_only = name in self.admin_services or name.endswith(ADMIN_SUFFIXES)
         if admin_only and not session.admin:
@@ -236,7 +276,7 @@ class Admission:
         elif not self._may_reach(session, name):
             reason = f"service {name} belongs to another robot; this connection may not call it"
         else:
-            return op
+            return self.call(op)
         logger.info("%s: %s", peer.label, reason)
         raise Refusal(reason, op="call_service", target=op.service, op_id=op.id)
 
@@ -246,7 +286,59 @@ class Admission:
         if self.guarded and not self._may_reach(session, op.name):
             msg = f"action {op.name} belongs to another robot; this connection may not use it"
             raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
-        return op
+        return self.goal(op.name, op.args, op)
+
+    # -- payloads of calls and goals (also for callers outside the protocol: Zenoh) ----------
+
+    def call(self, op: o.CallService) -> Call:
+        """Return the call with its service and validated request.
+
+        Raises:
+            Refusal: no such service, or ``args`` do not fit its request type (answered as a
+                failed ``service_response``).
+        """
+        name = op.name
+        service = self.services.services.get(name)
+        if service is None:
+            text = f"Service {name} does not exist"
+            raise Refusal(text, op="call_service", target=op.service, op_id=op.id)
+        request: Any = op.args
+        if self.prepare is not None:
+            try:
+                prepared = self.prepare(service.type, op.args)
+            except ServiceError as err:
+                text = str(err)
+                raise Refusal(text, op="call_service", target=op.service, op_id=op.id) from None
+            if prepared is not None:
+                request = prepared
+        return Call(op, service, request)
+
+    def goal(self, name: str, args: Any, op: o.SendActionGoal | None = None) -> GoalRequest:
+        """Return the action ``name`` and its goal message made of ``args``, validated.
+
+        Raises:
+            ProtocolError: no such action, or ``args`` do not fit its goal type (answered as a
+                failed ``action_result``).
+        """
+        action = self.actions.actions.get(name)
+        if action is None:
+            msg = f"Action {name} does not exist (no server advertised it)"
+            raise ProtocolError(msg)
+        registry = self.topics.registry
+        try:
+            goal_type = registry.action(action.type)[0]
+        except TypeNotFoundError:
+            return GoalRequest(action, args if args is not None else {}, op)
+        try:
+            if args is None:
+                args = {}
+            elif isinstance(args, list):
+                names = [f.name for f in registry.spec(goal_type).fields]
+                args = positional_args(args, names, f"goal of {action.type}")
+            return GoalRequest(action, self.topics.converter.from_json(goal_type, args), op)
+        except ConversionError as err:
+            msg = f"invalid goal for {action.type}: {err}"
+            raise ProtocolError(msg) from None
 
     # -- scope -----------------------------------------------------------------------------
 

@@ -73,14 +73,14 @@ def connection_rights(peer: Peer | None) -> tuple[str, bool]:
 
 
 def _credential(peer: Peer | None) -> str | None:
-    token = None if peer is None else peer.session.extra.get("token")
+    token = None if peer is None else peer.session.token
     return hashlib.sha256(token.encode()).hexdigest() if isinstance(token, str) else None
 
 
 def describe_peer(peer: Peer) -> str:
     """Name a connection for people: ``client 7 (r1's token)``."""
     scope, admin = connection_rights(peer)
-    token = peer.session.extra.get("token")
+    token = peer.session.token
     if admin and isinstance(token, str):
         what = "admin token"
     elif isinstance(token, str):

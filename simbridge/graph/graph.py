@@ -2,9 +2,11 @@
 
 :class:`Graph` receives every client frame, turns it into ops (via the client's
 :class:`~simbridge.protocol.Session`), lets its :class:`~simbridge.graph.admission.Admission`
-decide whether each is allowed, and carries them out on its topic, service and action tables. A
-bad op is answered with a ``status`` error to its sender only (when the sender's ``set_level``
-allows it) and logged at debug level; it never touches other clients or the simulation.
+decide whether each is allowed, hands each allowed op to the client's session (ops in, effects
+out: the session updates what the client holds and says what the graph must do), and carries out
+the effects on its topic, service and action tables (:meth:`Graph.apply`). A bad op is answered
+with a ``status`` error to its sender only (when the sender's ``set_level`` allows it) and logged
+at debug level; it never touches other clients or the simulation.
 
 The graph is sans-I/O: the server hands it frames and a monotonic ``now``; it hands frames
 back to peers through :meth:`Peer.send`. ``tick(now)`` expires what waits on time.
@@ -19,10 +21,12 @@ A ``/cmd_vel`` from a page, in a straight line (each step once):
    once (authenticated, publish rate, scope, type, payload) and returns a
    :class:`~simbridge.graph.admission.Publication`: the topic, its type and the validated
    message;
-4. **graph**: :meth:`Graph._publish` registers the client as a publisher the first time (its
-   session counts it against its budgets) and :meth:`TopicTable.deliver
-   <simbridge.graph.topics.TopicTable.deliver>` hands the message, wrapped once, to the
-   subscribers: encoded frames to clients, the message to in-process nodes;
+4. **session, then graph**: :meth:`Graph._publish` hands the publication to the client's session
+   (:meth:`Session.publish <simbridge.protocol.Session.publish>`: the first time, an
+   ``Advertised`` effect, counted against its budgets; after that, nothing) and carries out
+   what it returns; :meth:`TopicTable.deliver <simbridge.graph.topics.TopicTable.deliver>`
+   hands the message, wrapped once, to the subscribers: encoded frames to clients, the message
+   to in-process nodes;
 5. **robot**: the robot's subscriber (:class:`~simbridge.graph.bridge.RobotBridge`) sets the
    command of its robot in the world (``World.command``); a command it refuses (not finite,
    absurd) comes back to the sender as a ``status`` error.
@@ -33,27 +37,35 @@ from __future__ import annotations
 import itertools
 import logging
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from typing import Any
 
 from simbridge.config import ServerSettings
 from simbridge.errors import ProtocolError, SimbridgeError
 from simbridge.graph.actions import ActionTable
-from simbridge.graph.admission import Admission, Publication
+from simbridge.graph.admission import Admission, Call, GoalRequest, Publication, Typed
 from simbridge.graph.params import ParameterStore
 from simbridge.graph.services import Handler, ServiceTable, service_response, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
-from simbridge.msgs import Converter, TypeRegistry, normalize_type
+from simbridge.msgs import Converter, TypeRegistry
 from simbridge.msgs.cdr import CdrWriter
 from simbridge.protocol import (
+    Advertised,
     ClientId,
+    Effect,
     Limits,
     Op,
     Pool,
+    Provided,
     Refusal,
+    Reply,
     Session,
+    Subscribed,
+    Unadvertised,
+    Unlatched,
+    Unsubscribed,
+    Withdrawn,
     ops as o,
-    status_frame,
 )
 
 
@@ -64,6 +76,7 @@ logger = logging.getLogger(__name__)
 ROSOUT = "/rosout"
 _LOG_LEVELS = {"debug": 10, "info": 20, "warn": 30, "error": 40, "fatal": 50}
 OpHandler = Callable[[Peer, Any, float], None]
+EffectHandler = Callable[[Peer, Any], None]
 
 
 def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
@@ -128,7 +141,7 @@ class Graph:
         self.topics.cdr_factory = CdrWriter(self.registry).factory  # cbor-raw
         #: Services.
         self.services = ServiceTable(default_timeout=self.settings.service_timeout)
-        self.services.prepare, self.services.finish = typed_calls(self.registry, self.converter)
+        prepare, self.services.finish = typed_calls(self.registry, self.converter)
         #: Parameters of the in-process nodes.
         self.params = ParameterStore()
         #: Connected clients.
@@ -146,7 +159,21 @@ class Graph:
             o.AdvertiseService: self._advertise_service,
             o.UnadvertiseService: self._unadvertise_service,
             o.ServiceResponse: self._service_response,
+            o.AdvertiseAction: self._advertise_action,
+            o.UnadvertiseAction: self._unadvertise_action,
+            o.SendActionGoal: self._send_action_goal,
             o.SetLevel: self._set_level,
+        }
+        #: How each effect of a session is carried out (see :meth:`apply`).
+        self.effects: dict[type, EffectHandler] = {
+            Reply: lambda peer, e: peer.send(e.frame),
+            Subscribed: self._subscribed,
+            Unsubscribed: lambda peer, e: self.topics.unsubscribed(peer, e.sub, e.gone),
+            Advertised: self._advertised,
+            Unadvertised: lambda peer, e: self.topics.unadvertise(e.name, peer, e.op_id),
+            Unlatched: lambda peer, e: self.topics.unlatched(peer, e.name),
+            Provided: self._provided,
+            Withdrawn: self._withdrawn,
         }
         #: Called with each peer that leaves, after the graph cleaned up (extensions).
         self.on_disconnect: list[Callable[[Peer], None]] = []
@@ -155,7 +182,7 @@ class Graph:
         #: Actions (client-served and in-process) and the goals in flight.
         self.actions = ActionTable(self)
         #: Decides whether each op of a client is carried out (the guard sets its access rules).
-        self.admission = Admission(self.topics, self.services, self.actions)
+        self.admission = Admission(self.topics, self.services, self.actions, prepare=prepare)
         #: Services that need admin rights (see :mod:`simbridge.graph.guard`).
         self.admin_services = self.admission.admin_services
         self.handlers.update(self.actions.handlers())
@@ -166,9 +193,12 @@ class Graph:
 
     # -- clients ------------------------------------------------------------------------------
 
-    def new_session(self) -> Session:
-        """Return a fresh session for a connecting client (its budgets from the settings)."""
-        return Session(ClientId(next(self._ids)), limits=self.limits, pool=self.pool)
+    def new_session(self, token: str | None = None) -> Session:
+        """Return a fresh session for a connecting client (its budgets from the settings).
+
+        ``token``: the one it connected with (``?token=``), if any.
+        """
+        return Session(ClientId(next(self._ids)), limits=self.limits, pool=self.pool, token=token)
 
     def add_peer(self, peer: Peer) -> None:
         """Register a connected client."""
@@ -179,17 +209,23 @@ class Graph:
     def remove_peer(self, peer: Peer) -> None:
         """Forget a client and everything it owned (subscriptions, publishers, services).
 
-        Every callback runs, whatever an earlier one raised; the session's budgets are given
-        back last.
+        Its session gives back its budgets and says what it held (effects, carried out here);
+        every callback runs, whatever an earlier one raised.
         """
         self.peers.discard(peer)
         # each part runs whatever failed before it: stop-on-disconnect must never be skipped
-        for callback in (self.topics.drop_peer, self.services.drop_peer, *self.on_disconnect):
+        for callback in (self._release, self.services.drop_peer, *self.on_disconnect):
             try:
                 callback(peer)
             except Exception:
                 logger.exception("%s: cleanup after disconnect failed in %r", peer.label, callback)
-        peer.session.close()
+
+    def _release(self, peer: Peer) -> None:
+        for effect in peer.session.close():
+            try:
+                self.effects[type(effect)](peer, effect)
+            except Exception:
+                logger.exception("%s: cleanup after disconnect failed for %r", peer.label, effect)
 
     def receive(self, peer: Peer, data: str | bytes, now: float) -> None:
         """Handle one frame from ``peer``: every op in it, in order.
@@ -208,8 +244,9 @@ class Graph:
         """Admit one op and carry it out; a :class:`SimbridgeError` becomes an answer to the sender.
 
         The handler receives what :meth:`Admission.admit
-        <simbridge.graph.admission.Admission.admit>` returns: the op, or for a ``publish`` its
-        :class:`~simbridge.graph.admission.Publication`.
+        <simbridge.graph.admission.Admission.admit>` returns (the op, or what was decided for
+        it: a ``Publication``, a ``Typed`` op, a ``Call``, a ``GoalRequest``), hands it to the
+        client's session and carries out the effects.
         """
         handler = self.handlers.get(type(op))
         try:
@@ -254,14 +291,18 @@ class Graph:
             # one text for two kinds of op is two causes: a page that subscribed with the wrong
             # type still hears why its advertise is refused (it waits for that id's answer)
             cause = f"{type(op).__name__}: {cause}"
-        if peer.session.wants_status("error") and peer.session.may_tell(cause, now):
-            peer.send(status_frame("error", text, op_id))
+        self.apply(peer, peer.session.refused(text, cause, now, op_id))
 
-    def reject(self, peer: Peer, text: str, op_id: object) -> None:
+    def reject(self, peer: Peer, text: str, op_id: Any) -> None:
         """Tell ``peer`` (only) that its op failed, as a ``status`` error (not budgeted)."""
         logger.debug("%s: %s", peer.label, text)
-        if peer.session.wants_status("error"):
-            peer.send(status_frame("error", text, op_id))
+        self.apply(peer, peer.session.status("error", text, op_id))
+
+    def apply(self, peer: Peer, effects: Iterable[Effect]) -> None:
+        """Carry out the effects a session returned for its client ``peer``, in order."""
+        handlers = self.effects
+        for effect in effects:
+            handlers[type(effect)](peer, effect)
 
     def tick(self, now: float) -> None:
         """Expire what waits on time (service calls)."""
@@ -318,65 +359,65 @@ class Graph:
 
     # -- op handlers ------------------------------------------------------------------------
 
-    def _advertise(self, peer: Peer, op: o.Advertise, now: float) -> None:
-        fresh = peer.session.advertise(op.name, op.id, op.type)
-        try:
-            topic = self.topics.advertise(op.name, op.type, peer, op.id, latch=op.latch)
-        except ProtocolError:
-            if fresh:
-                peer.session.unadvertise(op.name, op.id)
-            raise
-        peer.session.advertisements[op.name][op.id] = topic.type or op.type
+    def _advertise(self, peer: Peer, admitted: Typed, now: float) -> None:
+        assert admitted.type is not None  # admitted: the canonical type
+        self.apply(peer, peer.session.advertise(admitted.op, admitted.type))
 
     def _unadvertise(self, peer: Peer, op: o.Unadvertise, now: float) -> None:
-        ads = peer.session.advertisements.get(op.name)
-        if ads is None:
-            return
-        one = op.id if op.id is not None and op.id in ads else None
-        peer.session.unadvertise(op.name, one)
-        self.topics.unadvertise(op.name, peer, one)
+        self.apply(peer, peer.session.unadvertise(op))
 
     def _publish(self, peer: Peer, admitted: Publication, now: float) -> None:
-        op, topic, session = admitted.op, admitted.topic, peer.session
+        op = admitted.op
         name = op.name
-        if (
-            topic is None
-            or op.type is not None
-            or topic.type is None
-            or name not in session.advertisements
-        ):
-            # rosbridge registers a publishing client as a publisher implicitly
-            session.advertise(name, None, admitted.type)
-            topic = self.topics.advertise(name, admitted.type, peer, None)
+        effects = peer.session.publish(name, admitted.type)
+        if effects:
+            self.apply(peer, effects)  # the first publish: the client becomes a publisher
+        topic = admitted.topic
+        if topic is None or topic.type is None:
+            topic = self.topics.topics.get(name) or self.topics.advertise(
+                name, admitted.type, peer, None
+            )
         out = self.topics.outgoing(topic, admitted.msg, self.stamp())
         if op.latch or topic.latch:
-            session.latch(name, len(out.json_body()))  # what later subscribers will cost
+            peer.session.latch(name, len(out.json_body()))  # what later subscribers will cost
             topic.latch = True
         self.topics.deliver(topic, out, now, peer)
 
-    def _subscribe(self, peer: Peer, op: o.Subscribe, now: float) -> None:
-        if op.fragment_size is not None:
-            peer.session.fragment_size = op.fragment_size
-        topic, sub, new = self.topics.subscribe(peer, op)
-        if new:
-            self.topics.replay_latched(peer, topic, sub)
+    def _subscribe(self, peer: Peer, admitted: Typed, now: float) -> None:
+        self.apply(peer, peer.session.subscribe(admitted.op, admitted.type))
 
     def _unsubscribe(self, peer: Peer, op: o.Unsubscribe, now: float) -> None:
-        self.topics.unsubscribe(peer, op.topic, op.id)
+        self.apply(peer, peer.session.unsubscribe(op))
 
-    def _call_service(self, peer: Peer, op: o.CallService, now: float) -> None:
-        if op.fragment_size is not None:
-            peer.session.fragment_size = op.fragment_size
-        self.services.call(peer, op, op.name, now)
+    def _call_service(self, peer: Peer, call: Call, now: float) -> None:
+        service = call.service
+        deadline = peer.session.call_service(
+            call.op, now, waits=service.handler is None, default=self.services.default_timeout
+        )
+        self.services.call(peer, call.op, service, call.request, deadline)
 
-    def _advertise_service(self, peer: Peer, op: o.AdvertiseService, now: float) -> None:
-        type_name = normalize_type(op.type, "srv")  # admitted: well formed
-        self.services.advertise(peer, op.name, type_name, op.service)
+    def _advertise_service(self, peer: Peer, admitted: Typed, now: float) -> None:
+        op, type_name = admitted.op, admitted.type
+        assert type_name is not None
+        self.apply(peer, peer.session.provide("service", op.name, type_name, op.service))
 
     def _unadvertise_service(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:
-        if not self.services.unadvertise(peer, op.name):
-            msg = f"unadvertise_service: service {op.name} is not advertised by this client"
-            raise ProtocolError(msg)
+        self.apply(peer, peer.session.withdraw("service", op.name))
+
+    def _advertise_action(self, peer: Peer, admitted: Typed, now: float) -> None:
+        op, type_name = admitted.op, admitted.type
+        assert type_name is not None
+        self.apply(peer, peer.session.provide("action", op.name, type_name, op.action, op.type))
+
+    def _unadvertise_action(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
+        self.apply(peer, peer.session.withdraw("action", op.name))
+
+    def _send_action_goal(self, peer: Peer, goal: GoalRequest, now: float) -> None:
+        op = goal.op
+        assert op is not None
+        self.actions.submit(
+            peer, goal.action, goal.message, op_id=op.id, written=op.action, feedback=op.feedback
+        )
 
     def _service_response(self, peer: Peer, op: o.ServiceResponse, now: float) -> None:
         error = self.services.respond(peer, op)
@@ -384,4 +425,26 @@ class Graph:
             raise ProtocolError(error)
 
     def _set_level(self, peer: Peer, op: o.SetLevel, now: float) -> None:
-        peer.session.set_level(op.level)
+        self.apply(peer, peer.session.set_level(op))
+
+    # -- effects ------------------------------------------------------------------------------
+
+    def _subscribed(self, peer: Peer, effect: Subscribed) -> None:
+        topic = self.topics.subscribed(peer, effect.sub, effect.type)
+        if effect.new:
+            self.topics.replay_latched(peer, topic, effect.sub)
+
+    def _advertised(self, peer: Peer, effect: Advertised) -> None:
+        self.topics.advertise(effect.name, effect.type, peer, effect.op_id, latch=effect.latch)
+
+    def _provided(self, peer: Peer, effect: Provided) -> None:
+        if effect.kind == "service":
+            self.services.advertise(peer, effect.name, effect.type, effect.written)
+        else:
+            self.actions.provided(peer, effect)
+
+    def _withdrawn(self, peer: Peer, effect: Withdrawn) -> None:
+        if effect.kind == "service":
+            self.services.unadvertise(peer, effect.name)
+        else:
+            self.actions.remove(peer, effect.name)

@@ -31,7 +31,7 @@ from simbridge.config import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph.graph import Graph
 from simbridge.graph.topics import Peer
-from simbridge.protocol import ANY_SCOPE, TokenBucket, ops as o, status_frame
+from simbridge.protocol import ANY_SCOPE, TokenBucket, ops as o
 
 
 __all__ = [
@@ -115,21 +115,18 @@ class Guard:
     # -- access ----------------------------------------------------------------------------
 
     def connect(self, peer: Peer) -> None:
-        """Give a new client its access from its connection token (``session.extra``)."""
+        """Give a new client its access from its connection token (``session.token``)."""
         s = self.settings
         session = peer.session
-        token = session.extra.get("token")
-        granted = token_access(s, token if isinstance(token, str) else None)
+        granted = token_access(s, session.token)
         if granted is not None:
             scope, admin = granted
         else:
             scope, admin = ANY_SCOPE, False
         # without an admin token, administration is open to whoever may use every topic
         admin = admin or (s.admin_token is None and scope == ANY_SCOPE)
-        session.admit(scope, admin)
-        session.guarded = True
-        if granted is None and s.auth_required:
-            session.authenticated = False  # only auth is read until it succeeds
+        # without a token where one is required, only auth is read until it succeeds
+        session.connect(scope, admin, authenticated=granted is not None or not s.auth_required)
 
     # -- the auth op ---------------------------------------------------------------------
 
@@ -146,8 +143,7 @@ class Guard:
         if not (fresh and hmac.compare_digest(expected, op.mac.lower())):
             why = "expired or clock skew" if not fresh else "wrong MAC"
             logger.warning("%s failed authentication (%s)", peer.label, why)
-            if peer.session.wants_status("error"):
-                peer.send(status_frame("error", f"auth: authentication failed ({why})"))
+            self.graph.apply(peer, session.status("error", f"auth: authentication failed ({why})"))
             close = getattr(peer, "close_soon", None)
             if callable(close):
                 close(1008, "authentication failed")
@@ -159,5 +155,6 @@ class Guard:
         else:  # "user" and other rosauth levels: every topic, admin only without admin token
             session.admit(ANY_SCOPE, self.settings.admin_token is None)
         logger.info("%s authenticated (scope %s)", peer.label, session.scope)
-        if session.wants_status("info"):
-            peer.send(status_frame("info", f"auth: authenticated, scope {session.scope}"))
+        self.graph.apply(
+            peer, session.status("info", f"auth: authenticated, scope {session.scope}")
+        )

@@ -38,8 +38,10 @@ from simbridge.protocol.ops import CallService, ServiceResponse
 
 
 __all__ = [
+    "Finish",
     "Handler",
     "PendingCall",
+    "Prepare",
     "Service",
     "ServiceTable",
     "caller",
@@ -50,9 +52,9 @@ __all__ = [
 logger = logging.getLogger(__name__)
 
 #: An in-process service: request -> response object. The request is the complete, validated
-#: request message when the service type is known (see :attr:`ServiceTable.prepare`), else
-#: ``args`` as sent (object, list or None). Raise :class:`ServiceError` to answer
-#: ``result: false`` with the error text.
+#: request message when the service type is known (admission validated it, see
+#: :func:`typed_calls`), else ``args`` as sent (object, list or None). Raise
+#: :class:`ServiceError` to answer ``result: false`` with the error text.
 Handler = Callable[[Any], dict[str, Any]]
 #: The client whose call an in-process handler is answering (None outside a call): handlers
 #: whose answer depends on who asks (the e-stop's scope, ``/simbridge/access``) read it.
@@ -166,8 +168,6 @@ class ServiceTable:
         self._by_caller: dict[Peer, dict[str, PendingCall]] = {}
         self._by_service: dict[Service, dict[str, PendingCall]] = {}
         self._deadlines: list[tuple[float, int, str]] = []
-        #: Validates and completes requests of known service types (set by the graph).
-        self.prepare: Prepare | None = None
         #: Validates and completes provider responses of known service types (set by the graph).
         self.finish: Finish | None = None
         self._counter = itertools.count(1)
@@ -180,15 +180,17 @@ class ServiceTable:
         return service
 
     def advertise(self, peer: Peer, name: str, type_name: str, written: str = "") -> Service:
-        """Make ``peer`` the provider of ``name``; a previous provider's pending calls fail."""
+        """Make ``peer`` the provider of ``name``; a previous provider's pending calls fail.
+
+        A client provider that loses the name to ``peer`` is told (its session disowns it).
+        """
         old = self.services.get(name)
         if old is not None:
             self._fail_pending(old, f"service {name} was re-advertised by another provider")
-            if old.provider is not None:
-                old.provider.session.disown_service(name)
+            if old.provider is not None and old.provider is not peer:
+                old.provider.session.disown("service", name)
         service = Service(name, type_name, BRIDGE_NODE, provider=peer, written=written or name)
         self.services[name] = service
-        peer.session.own_service(name, type_name)
         return service
 
     def unadvertise(self, peer: Peer, name: str) -> bool:
@@ -197,30 +199,18 @@ class ServiceTable:
         if service is None or service.provider is not peer:
             return False
         del self.services[name]
-        peer.session.disown_service(name)
         self._fail_pending(service, f"service {name} was unadvertised by its provider")
         return True
 
-    def call(self, peer: Peer, op: CallService, name: str, now: float) -> None:
-        """Answer a ``call_service`` (at once, or once the provider replies or time runs out)."""
-        service = self.services.get(name)
-        if service is None:
-            self.reply(
-                peer,
-                service_response(
-                    op.service, f"Service {name} does not exist", result=False, op_id=op.id
-                ),
-            )
-            return
-        request: Any = op.args
-        if self.prepare is not None:
-            try:
-                prepared = self.prepare(service.type, op.args)
-            except ServiceError as err:
-                self.reply(peer, service_response(op.service, str(err), result=False, op_id=op.id))
-                return
-            if prepared is not None:
-                request = prepared
+    def call(
+        self, peer: Peer, op: CallService, service: Service, request: Any, deadline: float | None
+    ) -> None:
+        """Answer an admitted ``call_service``: at once, or when the provider replies or times out.
+
+        ``request`` is validated (admission); ``deadline`` is when a call to a client provider
+        times out (the caller's session counted it as pending).
+        """
+        name = service.name
         if service.handler is not None:
             token = caller.set(peer)
             try:
@@ -236,9 +226,7 @@ class ServiceTable:
             self.reply(peer, service_response(op.service, values, result=ok, op_id=op.id))
             return
         provider = service.provider
-        assert provider is not None
-        peer.session.start_call(op.service, op.id)  # raises Refusal past its budget
-        deadline = now + peer.session.call_timeout(op.timeout, self.default_timeout)
+        assert provider is not None and deadline is not None
         seq = next(self._counter)
         server_id = f"service_request:{name}:{seq}"
         call = PendingCall(server_id, service, peer, op.id, op.service, deadline)
@@ -313,9 +301,7 @@ class ServiceTable:
             heap.clear()
 
     def drop_peer(self, peer: Peer) -> None:
-        """Remove the services of a client that left and fail the calls waiting on them."""
-        for name in list(peer.session.services):
-            self.unadvertise(peer, name)
+        """Forget the calls of a client that left (its services go with its session's effects)."""
         for call in list(self._by_caller.get(peer, {}).values()):
             self._forget(call)
 

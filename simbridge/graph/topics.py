@@ -25,9 +25,7 @@ from simbridge.protocol import (
     Session,
     Subscription,
     split_frame,
-    status_frame,
 )
-from simbridge.protocol.ops import Subscribe
 
 
 __all__ = ["BRIDGE_NODE", "InternalCallback", "Peer", "Topic", "TopicTable"]
@@ -193,34 +191,29 @@ class TopicTable:
             topic.latched_by = None
         topic.latched = None
 
-    def subscribe(self, peer: Peer, op: Subscribe) -> tuple[Topic, Subscription, bool]:
-        """Add a subscribe id of ``peer``; return the topic, the subscription, and if it is new.
+    def subscribed(self, peer: Peer, sub: Subscription, type_name: str | None) -> Topic:
+        """Deliver topic ``sub.resolved`` to ``peer`` as its session's subscription ``sub``.
 
-        Raises:
-            ProtocolError: the type conflicts with the topic's type or is malformed, or the
-                client's subscription budget is spent (:meth:`Session.subscribe`).
+        ``type_name`` (canonical, admitted) fixes the topic's type if nothing did yet.
         """
-        topic = self.topics.get(op.name) or Topic(op.name)
-        if op.type:
-            self._typed(topic, op.type)  # raises before anything is registered
-        sub, new = peer.session.subscribe(op)
-        self.topics[op.name] = topic
-        topic.subscriptions[(peer, op.topic)] = sub
-        self.generation += 1
-        return topic, sub, new
+        topic = self.topics.get(sub.resolved) or Topic(sub.resolved)
+        if type_name:
+            self._typed(topic, type_name)
+        self.topics[sub.resolved] = topic
+        topic.subscriptions[(peer, sub.topic)] = sub
+        self.generation += 1  # the options may have changed: plans are rebuilt
+        return topic
 
-    def unsubscribe(self, peer: Peer, written: str, op_id: OpId | None) -> None:
-        """Remove one subscribe id (``None``: all) of ``peer`` on a topic spelling."""
-        if written not in peer.session.subscriptions:
-            return
+    def unsubscribed(self, peer: Peer, sub: Subscription, gone: bool) -> None:
+        """A subscribe id of ``sub`` went; ``gone``: ``peer`` no longer receives the topic."""
         self.generation += 1
-        sub = peer.session.unsubscribe(written, op_id)
-        if sub is not None:
-            topic = self.topics.get(sub.resolved)
-            if topic is not None:
-                topic.subscriptions.pop((peer, written), None)
-                topic.plan = None  # holds the peer: drop it now, not at the next publish
-                self._forget_if_unused(topic)
+        if not gone:
+            return
+        topic = self.topics.get(sub.resolved)
+        if topic is not None:
+            topic.subscriptions.pop((peer, sub.topic), None)
+            topic.plan = None  # holds the peer: drop it now, not at the next publish
+            self._forget_if_unused(topic)
 
     def subscribe_internal(
         self, name: str, type_name: str, node: str, callback: InternalCallback
@@ -240,19 +233,11 @@ class TopicTable:
         topic.internal = [(n, cb) for n, cb in topic.internal if cb is not callback]
         self._forget_if_unused(topic)
 
-    def drop_peer(self, peer: Peer) -> None:
-        """Remove every subscription and advertisement of a client that left."""
-        session = peer.session
-        for written in list(session.subscriptions):
-            self.unsubscribe(peer, written, None)
-        for name in list(session.advertisements):
-            self.unadvertise(name, peer, None)
-            session.unadvertise(name, None)
-        for name in list(session.latched):
-            topic = self.topics.get(name)
-            if topic is not None and topic.latched_by is peer:
-                self.unlatch(topic)  # its message goes with it: the bytes were its budget
-            session.unlatch(name)
+    def unlatched(self, peer: Peer, name: str) -> None:
+        """Drop the latched message ``peer`` left on topic ``name``, if it is still there."""
+        topic = self.topics.get(name)
+        if topic is not None and topic.latched_by is peer:
+            self.unlatch(topic)  # its message goes with it: the bytes were its budget
 
     def _forget_if_unused(self, topic: Topic) -> None:
         if topic.unused() and self.topics.get(topic.name) is topic:
@@ -375,9 +360,9 @@ class TopicTable:
         try:
             frame = out.frame(sub.compression, sub.topic)
         except ProtocolError as err:
-            if not sub.warned and peer.session.wants_status("error"):
-                sub.warned = True  # once per subscription, not once per message
-                peer.send(status_frame("error", f"subscribe {sub.topic}: {err}"))
+            if sub.first_warning():  # once per subscription, not once per message
+                for reply in peer.session.status("error", f"subscribe {sub.topic}: {err}"):
+                    peer.send(reply.frame)
             return
         size = sub.fragment_size or peer.session.fragment_size
         limit = sub.queue_length or default_limit

@@ -1,6 +1,9 @@
 """The rosbridge v2 protocol, sans-I/O: typed ops, per-client sessions, encodings, fragments.
 
 Nothing here imports asyncio or websockets: bytes and decoded objects go in, frames come out.
+A client's :class:`Session` takes its ops and returns effects (:class:`Reply`,
+:class:`Subscribed`, :class:`Unsubscribed`, :class:`Advertised`, :class:`Unadvertised`,
+:class:`Provided`, :class:`Withdrawn`, :class:`Unlatched`) for the graph to carry out.
 """
 
 from __future__ import annotations
@@ -30,8 +33,17 @@ from simbridge.protocol.session import (
     ANY_SCOPE,
     NOT_AUTHENTICATED,
     STATUS_LEVELS,
+    Advertised,
+    Effect,
+    Provided,
+    Reply,
     Session,
+    Subscribed,
     Subscription,
+    Unadvertised,
+    Unlatched,
+    Unsubscribed,
+    Withdrawn,
 )
 
 
@@ -40,19 +52,28 @@ __all__ = [
     "GLOBAL_LIMITS",
     "NOT_AUTHENTICATED",
     "STATUS_LEVELS",
+    "Advertised",
     "ClientId",
     "Defragmenter",
+    "Effect",
     "Frame",
     "Limits",
     "Op",
     "OpId",
     "Outgoing",
     "Pool",
+    "Provided",
     "Refusal",
+    "Reply",
     "SendQueue",
     "Session",
+    "Subscribed",
     "Subscription",
     "TokenBucket",
+    "Unadvertised",
+    "Unlatched",
+    "Unsubscribed",
+    "Withdrawn",
     "decode_frame",
     "encode_cbor",
     "encode_json",

@@ -16,11 +16,25 @@ compression by precedence ``cbor-raw > cbor > png > none``. A throttled subscrip
 messages that arrive less than ``throttle_rate`` ms after the last one sent (less a small
 jitter allowance).
 
-Where the session stands in the path of an op (step by step for a ``/cmd_vel`` in
-:mod:`simbridge.graph.graph`): the server's connection hands a frame to the graph,
-:meth:`Session.parse` makes typed ops of it, the graph's admission decides whether each is
-allowed, and the graph's handlers carry it out, taking what the client holds from the session's
-budgets.
+Ops in, effects out (the sans-I/O shape of python-websockets and h11): the graph hands the
+session a client op once :class:`~simbridge.graph.admission.Admission` has allowed it, with what
+the graph decided for it (a canonical type); the session updates only its own state, within
+its budgets, and returns **effects**, typed data saying what the graph must do for this client
+(:class:`Reply`, :class:`Subscribed`, :class:`Unsubscribed`, :class:`Advertised`,
+:class:`Unadvertised`, :class:`Provided`, :class:`Withdrawn`, :class:`Unlatched`). The graph
+carries them out on its tables (:meth:`Graph.apply <simbridge.graph.graph.Graph.apply>`). A
+spent budget raises :class:`~simbridge.protocol.ops.Refusal` before anything changed.
+
+The session changes in no other way than through these methods: :meth:`Session.parse` (frames
+in), the op methods (:meth:`~Session.subscribe`, :meth:`~Session.unsubscribe`,
+:meth:`~Session.advertise`, :meth:`~Session.unadvertise`, :meth:`~Session.publish`,
+:meth:`~Session.latch`, :meth:`~Session.provide`, :meth:`~Session.withdraw`,
+:meth:`~Session.call`, :meth:`~Session.set_level`, :meth:`~Session.refused`,
+:meth:`~Session.close`), and what the graph reports about the client: its access
+(:meth:`~Session.connect`, :meth:`~Session.admit`, decided by the guard), a latched message
+dropped (:meth:`~Session.unlatch`), a call answered (:meth:`~Session.end_call`), a name taken
+over by another provider (:meth:`~Session.disown`). Everything else is read-only outside
+:mod:`simbridge.protocol` (the access is exposed as properties).
 """
 
 from __future__ import annotations
@@ -28,19 +42,24 @@ from __future__ import annotations
 import dataclasses
 import math
 from dataclasses import dataclass, field
-from typing import Any
+from typing import Literal, TypeAlias
 
 from simbridge.errors import ProtocolError
 from simbridge.protocol.budget import Limits, Pool, TokenBucket
-from simbridge.protocol.encoding import decode_frame
+from simbridge.protocol.encoding import Frame, decode_frame, status_frame
 from simbridge.protocol.fragments import Defragmenter
 from simbridge.protocol.ops import (
+    Advertise,
+    CallService,
     ClientId,
     Fragment,
     Op,
     OpId,
     Refusal,
+    SetLevel,
     Subscribe,
+    Unadvertise,
+    Unsubscribe,
     parse_op,
     resolve_name,
 )
@@ -50,8 +69,17 @@ __all__ = [
     "ANY_SCOPE",
     "NOT_AUTHENTICATED",
     "STATUS_LEVELS",
+    "Advertised",
+    "Effect",
+    "Provided",
+    "Reply",
     "Session",
+    "Subscribed",
     "Subscription",
+    "Unadvertised",
+    "Unlatched",
+    "Unsubscribed",
+    "Withdrawn",
     "resolve_name",
 ]
 
@@ -122,6 +150,13 @@ class Subscription:
         self.last_sent = now
         return True
 
+    def first_warning(self) -> bool:
+        """Return whether no encoding error was told for this subscription yet (and count it)."""
+        if self.warned:
+            return False
+        self.warned = True
+        return True
+
     def _merge(self) -> None:
         ops = list(self.ids.values())
         self.throttle_rate = min(o.throttle_rate for o in ops)
@@ -129,6 +164,95 @@ class Subscription:
         sizes = [o.fragment_size for o in ops if o.fragment_size is not None]
         self.fragment_size = min(sizes) if sizes else None
         self.compression = max((o.compression for o in ops), key=_COMPRESSION_RANK.__getitem__)
+
+
+# -- effects: what a session asks the graph to do for its client ----------------------------
+
+#: What a client may provide besides topics.
+Kind = Literal["service", "action"]
+
+
+@dataclass(frozen=True, slots=True)
+class Reply:
+    """Send ``frame`` to this client (a ``status``, an answer)."""
+
+    frame: Frame
+
+
+@dataclass(frozen=True, slots=True)
+class Subscribed:
+    """The client receives topic ``sub.resolved`` as ``sub.topic`` (options merged in ``sub``).
+
+    ``type`` (canonical) fixes the topic's type when nothing did yet; ``new``: the subscription
+    is new, the topic's latched message (if any) is sent to it.
+    """
+
+    sub: Subscription
+    new: bool
+    type: str | None = None
+
+
+@dataclass(frozen=True, slots=True)
+class Unsubscribed:
+    """A subscribe id was removed: ``gone`` when the client no longer receives the topic."""
+
+    sub: Subscription
+    gone: bool
+
+
+@dataclass(frozen=True, slots=True)
+class Advertised:
+    """The client publishes topic ``name`` (canonical ``type``) under advertise id ``op_id``."""
+
+    name: str
+    type: str
+    op_id: OpId | None
+    latch: bool = False
+
+
+@dataclass(frozen=True, slots=True)
+class Unadvertised:
+    """The client no longer publishes ``name`` under ``op_id`` (``None``: under any id)."""
+
+    name: str
+    op_id: OpId | None
+
+
+@dataclass(frozen=True, slots=True)
+class Provided:
+    """The client provides service or action ``name`` (canonical ``type``).
+
+    ``written`` and ``written_type`` are the name and type as the client spelled them (calls and
+    goals are forwarded to it so).
+    """
+
+    kind: Kind
+    name: str
+    type: str
+    written: str = ""
+    written_type: str = ""
+
+
+@dataclass(frozen=True, slots=True)
+class Withdrawn:
+    """The client no longer provides service or action ``name``."""
+
+    kind: Kind
+    name: str
+
+
+@dataclass(frozen=True, slots=True)
+class Unlatched:
+    """The latched message the client left on topic ``name`` goes (the client left)."""
+
+    name: str
+
+
+Effect: TypeAlias = (
+    Reply | Subscribed | Unsubscribed | Advertised | Unadvertised | Provided | Withdrawn | Unlatched
+)
+#: No effect (shared: the hot path allocates nothing).
+NOTHING: tuple[Effect, ...] = ()
 
 
 class Session:
@@ -142,6 +266,7 @@ class Session:
         pool: Pool | None = None,
         max_message_size: int | None = None,
         fragment_timeout: float | None = None,
+        token: str | None = None,
     ) -> None:
         limits = limits or Limits()
         if max_message_size is not None:
@@ -154,15 +279,12 @@ class Session:
         self.limits = limits
         #: What every client together may hold (shared by the sessions of one graph).
         self.pool = pool or Pool()
-        # -- access (set on connect from the token, or by a successful ``auth`` op) --
-        #: The client is admitted: its ops are carried out (else only ``auth`` is read).
-        self.authenticated = True
-        #: ``"*"`` (any topic) or a robot name (its namespace only).
-        self.scope = ANY_SCOPE
-        #: The client may call administrative services.
-        self.admin = False
-        #: A guard gave this client its access (a graph without one trusts everyone).
-        self.guarded = False
+        # access (set on connect from the token, or by a successful ``auth`` op; see the
+        # properties below)
+        self._authenticated = True
+        self._scope = ANY_SCOPE
+        self._admin = False
+        self._guarded = False
         #: ``publish`` rate limit.
         self.publishes = TokenBucket(limits.publish_rate, limits.publish_burst)
         # -- what the client holds --
@@ -197,9 +319,59 @@ class Session:
         self.refusals_untold = 0
         self._told: dict[str, float] = {}
         self._statuses = TokenBucket(limits.statuses_per_second, limits.statuses_per_second)
-        #: Free-form per-client data of extensions.
-        self.extra: dict[str, Any] = {}
+        #: The token the client connected with (``?token=``), if any: the guard reads its access.
+        self.token = token
         self.closed = False
+
+    # -- access: decided by the graph's guard, read by its admission ------------------------
+
+    @property
+    def authenticated(self) -> bool:
+        """The client is admitted: its ops are carried out (else only ``auth`` is read)."""
+        return self._authenticated
+
+    @property
+    def scope(self) -> str:
+        """``"*"`` (any topic) or a robot name (its namespace only)."""
+        return self._scope
+
+    @property
+    def admin(self) -> bool:
+        """The client may call administrative services."""
+        return self._admin
+
+    @property
+    def guarded(self) -> bool:
+        """A guard gave this client its access (a graph without one trusts everyone)."""
+        return self._guarded
+
+    def connect(self, scope: str, admin: bool, *, authenticated: bool = True) -> None:
+        """Take the access a guard gives on connect; ``authenticated=False``: a token is owed."""
+        self._guarded = True
+        self._scope, self._admin = scope, admin
+        self._authenticated = authenticated
+
+    def admit(self, scope: str, admin: bool) -> None:
+        """Admit the client with an access (a token on connect, or a good ``auth`` op)."""
+        self._authenticated = True
+        self._scope = scope
+        self._admin = admin
+
+    def take_publish(self, now: float) -> bool:
+        """Charge one ``publish`` to the client's rate (``publish_rate``); whether it fits.
+
+        Admission decides by it (:meth:`Admission.admit
+        <simbridge.graph.admission.Admission.admit>`); the token bucket is the client's.
+        """
+        return self.publishes.take(now)
+
+    def advertises(self, name: str) -> bool:
+        """Return whether the client publishes topic ``name`` (advertised, or by publishing)."""
+        return name in self.advertisements
+
+    def provides(self, kind: Kind, name: str) -> bool:
+        """Return whether the client provides service or action ``name``."""
+        return name in (self.services if kind == "service" else self.actions)
 
     #: Bumped whenever any session's :attr:`fragment_size` changes (delivery plans of topics
     #: depend on it; see :class:`~simbridge.graph.topics.TopicTable`).
@@ -227,9 +399,9 @@ class Session:
         yields nothing yet. Before the client is admitted only a small frame holding ``auth``
         is read: anything else is refused unparsed, fragments are not reassembled.
         """
-        if not self.authenticated:
+        if not self._authenticated:
             return self._parse_unadmitted(data)
-        if not self.admin:
+        if not self._admin:
             refused = self._too_costly(data)
             if refused is not None:
                 return [refused]
@@ -327,12 +499,6 @@ class Session:
                 out.append(Refusal(NOT_AUTHENTICATED, cause="unauthenticated"))
         return out
 
-    def admit(self, scope: str, admin: bool) -> None:
-        """Admit the client with an access (a token on connect, or a good ``auth`` op)."""
-        self.authenticated = True
-        self.scope = scope
-        self.admin = admin
-
     # -- status ---------------------------------------------------------------------------
 
     def wants_status(self, level: str) -> bool:
@@ -341,16 +507,36 @@ class Session:
             return False
         return STATUS_LEVELS.index(level) >= STATUS_LEVELS.index(self.status_level)
 
-    def set_level(self, level: str) -> None:
-        """Apply a ``set_level`` op.
+    def set_level(self, op: SetLevel) -> tuple[Effect, ...]:
+        """Apply a ``set_level`` op (no effect on the graph).
 
         Raises:
             ProtocolError: an unknown level.
         """
+        level = op.level
         if level not in STATUS_LEVELS:
             msg = f"set_level: level '{level}' is not one of {', '.join(STATUS_LEVELS)}"
             raise ProtocolError(msg)
         self.status_level = level
+        return NOTHING
+
+    def status(self, level: str, text: str, op_id: OpId | None = None) -> tuple[Reply, ...]:
+        """Return the ``status`` of ``level`` to send, if the client's ``set_level`` wants it."""
+        if not self.wants_status(level):
+            return ()
+        return (Reply(status_frame(level, text, op_id)),)
+
+    def refused(
+        self, text: str, cause: str, now: float, op_id: OpId | None = None
+    ) -> tuple[Reply, ...]:
+        """Return the ``status`` error telling the client of a refusal, within its budgets.
+
+        Nothing when its ``set_level`` silences errors or the refusal is not told (past the
+        status budget, :meth:`may_tell`: it is counted).
+        """
+        if not self.wants_status("error") or not self.may_tell(cause, now):
+            return ()
+        return (Reply(status_frame("error", text, op_id)),)
 
     def may_tell(self, cause: str, now: float) -> bool:
         """Return whether a refusal of ``cause`` may be told now (and count it if not).
@@ -373,12 +559,17 @@ class Session:
 
     # -- subscriptions --------------------------------------------------------------------
 
-    def subscribe(self, op: Subscribe) -> tuple[Subscription, bool]:
-        """Add a subscribe id; return the merged subscription and whether it is new.
+    def subscribe(self, op: Subscribe, type_name: str | None = None) -> tuple[Effect, ...]:
+        """Add a subscribe id (``type_name``: its canonical type, if the op gives one).
+
+        Effect: :class:`Subscribed`, with the merged subscription. A ``fragment_size`` becomes
+        the client's outgoing fragment size.
 
         Raises:
             Refusal: a subscription, subscribe-id or global budget is spent.
         """
+        if op.fragment_size is not None:
+            self.fragment_size = op.fragment_size
         sub = self.subscriptions.get(op.topic)
         limits = self.limits
         if sub is None and len(self.subscriptions) >= limits.subscriptions:
@@ -409,25 +600,28 @@ class Session:
         if sub is None:
             sub = self.subscriptions[op.topic] = Subscription(op.topic, op.name)
         sub.add(op)
-        return sub, new
+        return (Subscribed(sub, new, type_name),)
 
-    def unsubscribe(self, written: str, op_id: OpId | None) -> Subscription | None:
+    def unsubscribe(self, op: Unsubscribe) -> tuple[Effect, ...]:
         """Remove one subscribe id (``None``: all) of a topic spelling.
 
-        Returns the subscription when it is now empty (and forgotten), else ``None``.
+        Effect: :class:`Unsubscribed` (``gone`` when the topic is no longer received), or none
+        when the client does not subscribe to that spelling.
         """
+        return self._unsubscribe(op.topic, op.id)
+
+    def _unsubscribe(self, written: str, op_id: OpId | None) -> tuple[Effect, ...]:
         sub = self.subscriptions.get(written)
         if sub is None:
-            return None
+            return NOTHING
         before = len(sub.ids)
         empty = sub.remove(op_id)
         released = before - len(sub.ids)
         self.subscribe_ids -= released
         self.pool.give("subscribe_ids", released)
-        if not empty:
-            return None
-        del self.subscriptions[written]
-        return sub
+        if empty:
+            del self.subscriptions[written]
+        return (Unsubscribed(sub, empty),)
 
     # -- advertisements, services, actions ------------------------------------------------
 
@@ -449,12 +643,35 @@ class Session:
             )
             raise Refusal(msg, op=what, cause="max_advertisements")
 
-    def advertise(self, name: str, op_id: OpId | None, type_name: str) -> bool:
-        """Record an advertise id of topic ``name``; return whether the id is new.
+    def advertise(self, op: Advertise, type_name: str) -> tuple[Effect, ...]:
+        """Record an ``advertise`` of canonical type ``type_name``.
+
+        Effect: :class:`Advertised` (again for an id already held: the op may add ``latch``).
 
         Raises:
             Refusal: the advertisement or advertise-id budget is spent.
         """
+        self._advertise(op.name, op.id, type_name)
+        return (Advertised(op.name, type_name, op.id, op.latch),)
+
+    def publish(self, name: str, type_name: str) -> tuple[Effect, ...]:
+        """Record a ``publish`` on ``name`` (canonical ``type_name``), as the graph admitted it.
+
+        A client that publishes is a publisher of the topic (rosbridge advertises it
+        implicitly, advertise id ``None``). Effect: :class:`Advertised` the first time, else
+        none (the hot path: a dict lookup).
+
+        Raises:
+            Refusal: the advertisement or advertise-id budget is spent.
+        """
+        ads = self.advertisements.get(name)
+        if ads is not None and None in ads:
+            return NOTHING
+        self._advertise(name, None, type_name)
+        return (Advertised(name, type_name, None),)
+
+    def _advertise(self, name: str, op_id: OpId | None, type_name: str) -> bool:
+        """Record an advertise id of topic ``name``; return whether the id is new."""
         ads = self.advertisements.get(name)
         self.may_own("advertise", name, ads is None)
         if ads is not None and op_id in ads:
@@ -473,7 +690,20 @@ class Session:
         ads[op_id] = type_name
         return True
 
-    def unadvertise(self, name: str, op_id: OpId | None) -> bool:
+    def unadvertise(self, op: Unadvertise) -> tuple[Effect, ...]:
+        """Remove one advertise id of ``op.name`` (``None`` or an id not held: all of them).
+
+        Effect: :class:`Unadvertised` with the id removed (``None``: all), or none when the
+        client does not advertise the topic.
+        """
+        ads = self.advertisements.get(op.name)
+        if ads is None:
+            return NOTHING
+        one = op.id if op.id is not None and op.id in ads else None
+        self._unadvertise(op.name, one)
+        return (Unadvertised(op.name, one),)
+
+    def _unadvertise(self, name: str, op_id: OpId | None) -> bool:
         """Remove one advertise id of ``name`` (``None`` or unknown: all of them).
 
         Returns whether the client no longer advertises ``name`` at all.
@@ -494,21 +724,34 @@ class Session:
         del self.advertisements[name]
         return True
 
-    def own_service(self, name: str, type_name: str) -> None:
-        """Record that the client provides service ``name``."""
-        self.services[name] = type_name
+    def provide(
+        self, kind: Kind, name: str, type_name: str, written: str = "", written_type: str = ""
+    ) -> tuple[Effect, ...]:
+        """Record an ``advertise_service`` or ``advertise_action`` (canonical ``type_name``).
 
-    def disown_service(self, name: str) -> None:
-        """Forget service ``name`` (unadvertised, or taken over by another provider)."""
-        self.services.pop(name, None)
+        Effect: :class:`Provided`. (Whether the name may be taken, and the count of names, is
+        admission's: a service the server provides stays the server's.)
+        """
+        (self.services if kind == "service" else self.actions)[name] = type_name
+        return (Provided(kind, name, type_name, written or name, written_type or type_name),)
 
-    def own_action(self, name: str, type_name: str) -> None:
-        """Record that the client serves action ``name``."""
-        self.actions[name] = type_name
+    def withdraw(self, kind: Kind, name: str) -> tuple[Effect, ...]:
+        """Record an ``unadvertise_service`` or ``unadvertise_action``.
 
-    def disown_action(self, name: str) -> None:
-        """Forget action ``name``."""
-        self.actions.pop(name, None)
+        Effect: :class:`Withdrawn`.
+
+        Raises:
+            ProtocolError: the client does not provide ``name``.
+        """
+        owned = self.services if kind == "service" else self.actions
+        if owned.pop(name, None) is None:
+            msg = f"unadvertise_{kind}: {kind} {name} is not advertised by this client"
+            raise ProtocolError(msg)
+        return (Withdrawn(kind, name),)
+
+    def disown(self, kind: Kind, name: str) -> None:
+        """The graph gave ``name`` to another provider: the client no longer provides it."""
+        (self.services if kind == "service" else self.actions).pop(name, None)
 
     # -- calls and latched messages -------------------------------------------------------
 
@@ -525,12 +768,27 @@ class Session:
             return longest
         return min(requested, longest)
 
-    def start_call(self, service: str, op_id: OpId | None) -> None:
-        """Count one more call waiting for a client provider.
+    def call_service(
+        self, op: CallService, now: float, *, waits: bool, default: float
+    ) -> float | None:
+        """Record a ``call_service``; return its deadline when it ``waits`` for a client provider.
+
+        A waiting call is counted against the pending-call budgets, for ``op.timeout`` (see
+        :meth:`call_timeout`; ``default`` when it gives none); the graph reports its end
+        (answered, timed out, dropped) with :meth:`end_call`. A ``fragment_size`` becomes the
+        client's outgoing fragment size (its answer may be long).
 
         Raises:
             Refusal: the pending-call budget is spent (answered as a failed call).
         """
+        if op.fragment_size is not None:
+            self.fragment_size = op.fragment_size
+        if not waits:
+            return None
+        self._start_call(op.service, op.id)
+        return now + self.call_timeout(op.timeout, default)
+
+    def _start_call(self, service: str, op_id: OpId | None) -> None:
         limit = self.limits.pending_calls
         if self.pending_calls >= limit:
             msg = (
@@ -593,20 +851,33 @@ class Session:
 
     # -- leaving --------------------------------------------------------------------------
 
-    def close(self) -> None:
-        """Give back everything the client held to the shared pool (it left)."""
+    def close(self) -> list[Effect]:
+        """Give back everything the client held to the shared pool (it left).
+
+        Effects: what the graph withdraws for it (:class:`Unsubscribed`, :class:`Unadvertised`,
+        :class:`Unlatched`, :class:`Withdrawn`). Calls still waiting are ended here; the graph
+        forgets them on its side.
+        """
         if self.closed:
-            return
+            return []
         self.closed = True
         self.defrag.clear()
+        effects: list[Effect] = []
         for written in list(self.subscriptions):
-            self.unsubscribe(written, None)
+            effects.extend(self._unsubscribe(written, None))
         for name in list(self.advertisements):
-            self.unadvertise(name, None)
+            self._unadvertise(name, None)
+            effects.append(Unadvertised(name, None))
         for name in list(self.latched):
             self.unlatch(name)
+            effects.append(Unlatched(name))
+        effects.extend(Withdrawn("service", name) for name in self.services)
+        effects.extend(Withdrawn("action", name) for name in self.actions)
+        self.services.clear()
+        self.actions.clear()
         while self.pending_calls:
             self.end_call()
+        return effects
 
     def _take(
         self, what: str, used: int, limit: int, doing: str, things: str, op_id: OpId | None

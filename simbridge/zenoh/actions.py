@@ -39,7 +39,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 
 import orjson
 
-from simbridge.errors import ConversionError, SimbridgeError, TypeNotFoundError
+from simbridge.errors import ConversionError, ProtocolError, SimbridgeError, TypeNotFoundError
 from simbridge.graph.actions import ABORTED, CANCELED, SUCCEEDED, UNKNOWN, Action, Goal
 from simbridge.protocol import Frame, Session
 from simbridge.zenoh.attachment import Attachment
@@ -266,20 +266,22 @@ class ActionBridge:
         self._served[op_id] = served
         self._by_uuid[(name, goal_id)] = served
         args = orjson.loads(_json(request["goal"]))
+        try:
+            admitted = self.graph.admission.goal(name, args)  # the goal validated
+        except ProtocolError as err:
+            self._forget(op_id)
+            self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {err}")
+            answer(False)
+            return
         outcome = self.graph.actions.submit(
             self.link._caller,
-            name,
-            args,
+            admitted.action,
+            admitted.message,
             op_id=op_id,
             written=name,
             feedback=True,
             goal_uuid=goal_id,
         )
-        if isinstance(outcome, str):
-            self._forget(op_id)
-            self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {outcome}")
-            answer(False)
-            return
         served.goal = outcome
         if not served.done:
             served.status = outcome.status

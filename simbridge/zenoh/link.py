@@ -42,7 +42,7 @@ from simbridge.graph.estop import connection_rights
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.protocol import Frame, Outgoing, Session
+from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session
 from simbridge.protocol.ops import CallService, ServiceResponse
 from simbridge.zenoh.actions import ActionBridge, split_action
 from simbridge.zenoh.attachment import Attachment
@@ -207,7 +207,11 @@ class ZenohLink:
         self._queries: dict[str, tuple[Any, str, Attachment]] = {}
         #: Calls to ROS 2 waiting for a reply: server id -> (provider, response type).
         self._calls: dict[str, tuple[_Provider, str]] = {}
-        self._caller = _Caller(self, graph.new_session())
+        caller_session = graph.new_session()
+        # ROS 2 callers pass admission as a client with every right: what they may not call
+        # (administrative services, with an admin token set) is refused in _on_query
+        caller_session.connect(ANY_SCOPE, admin=True)
+        self._caller = _Caller(self, caller_session)
         self._call_ids = itertools.count(1)
         self._forwarding = False
         self._next_reconcile = 0.0
@@ -567,7 +571,9 @@ class ZenohLink:
         op_id = f"zenoh:{next(self._call_ids)}"
         self._queries[op_id] = (query, type_name, attachment)
         op = CallService(service=name, args=args, id=op_id, timeout=SERVICE_TIMEOUT)
-        self.graph.services.call(self._caller, op, name, asyncio.get_running_loop().time())
+        # the straight line of a client's call: admission (the request validated), the
+        # caller's session (pending-call budget), the service table
+        self.graph.dispatch(self._caller, op, asyncio.get_running_loop().time())
 
     def _service_answer(self, body: dict[str, Any]) -> None:
         """The graph answered a call from ROS 2: reply to the query."""

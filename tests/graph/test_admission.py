@@ -3,11 +3,13 @@ from __future__ import annotations
 import json
 from typing import Any
 
+import pytest
+
 from simbridge.config import Params, ServerSettings, load_world
 from simbridge.graph import Graph, RobotBridge
-from simbridge.graph.admission import Publication
+from simbridge.graph.admission import Call, GoalRequest, Publication
 from simbridge.graph.guard import Guard
-from simbridge.protocol import ops as o
+from simbridge.protocol import Refusal, ops as o
 from simbridge.sim import World
 from tests.helpers import ROOT, RecordingPeer
 
@@ -80,8 +82,7 @@ def test_cmd_vel_reaches_its_robot_and_another_robots_client_is_refused_by_scope
     RobotBridge(graph, world)
     settings = ServerSettings(client_tokens={"r1-token-aaaa": "r1"})
     guard = Guard(graph, settings, robots=world.robots.keys)
-    r1 = RecordingPeer(graph)
-    r1.session.extra["token"] = "r1-token-aaaa"
+    r1 = RecordingPeer(graph, token="r1-token-aaaa")
     guard.connect(r1)  # its access from its token, as on connect
     assert op(r1, graph, op="publish", topic="r1/cmd_vel", msg=TWIST) == []
     assert (world.robots["r1"].cmd_v, world.robots["r1"].cmd_omega) == (0.2, 0.5)
@@ -92,3 +93,50 @@ def test_cmd_vel_reaches_its_robot_and_another_robots_client_is_refused_by_scope
     ]
     assert world.robots["r2"].cmd_v == 0.0
     assert "/r2/cmd_vel" not in r1.session.advertisements
+
+
+def test_a_call_is_admitted_with_its_service_and_its_request_validated() -> None:
+    """The service table receives a complete request: list args zipped, defaults filled."""
+    graph = Graph()
+    peer = RecordingPeer(graph)
+    graph.add_service("/add", "example_interfaces/srv/AddTwoInts", "/n", lambda r: {"sum": 0})
+    call = graph.admission.admit(peer, o.CallService("add", args=[1]), 0.0)
+    assert isinstance(call, Call) and call.service is graph.services.services["/add"]
+    assert call.request == {"a": 1, "b": 0}
+
+
+def test_a_call_with_a_bad_request_or_to_no_service_is_refused_before_any_table() -> None:
+    """Refused in admission: the provider never hears of it, nothing waits, the caller is told."""
+    graph = Graph()
+    provider, caller = RecordingPeer(graph), RecordingPeer(graph)
+    advertise = {"op": "advertise_service", "service": "/add"}
+    op(provider, graph, **advertise, type="example_interfaces/AddTwoInts")
+    with pytest.raises(Refusal, match=r"Message type .* does not have a field c") as refused:
+        graph.admission.admit(caller, o.CallService("/add", args={"c": 1}, id="x"), 0.0)
+    assert (refused.value.op, refused.value.target, refused.value.op_id) == (
+        "call_service",
+        "/add",
+        "x",
+    )
+    (answer,) = op(caller, graph, op="call_service", service="/add", args={"c": 1}, id="x")
+    assert answer["op"] == "service_response" and answer["result"] is False
+    (answer,) = op(caller, graph, op="call_service", service="/none", id="y")
+    assert answer["values"] == "Service /none does not exist" and answer["result"] is False
+    assert provider.take() == [] and graph.services.pending == {}
+    assert caller.session.pending_calls == 0
+
+
+def test_a_goal_is_admitted_with_its_action_and_its_message_validated() -> None:
+    graph = Graph()
+    server, client = RecordingPeer(graph), RecordingPeer(graph)
+    fib = {"op": "advertise_action", "action": "fib", "type": "example_interfaces/Fibonacci"}
+    op(server, graph, **fib)
+    send = o.SendActionGoal("fib", "example_interfaces/Fibonacci", args=[5], id="g")
+    goal = graph.admission.admit(client, send, 0.0)
+    assert isinstance(goal, GoalRequest) and goal.action is graph.actions.actions["/fib"]
+    assert goal.message == {"order": 5} and goal.op is send
+    bad = {"op": "send_action_goal", "action": "fib", "action_type": "x/Y", "id": "b"}
+    (answer,) = op(client, graph, **bad, args={"order": "many"})
+    assert answer["op"] == "action_result" and answer["status"] == 0
+    assert answer["values"].startswith("invalid goal for example_interfaces/action/Fibonacci")
+    assert server.take() == [] and graph.actions.goals == {}

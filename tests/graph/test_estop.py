@@ -101,8 +101,7 @@ def classroom() -> tuple[Graph, World, EStop, Guard]:
 
 
 def student(graph: Graph, guard: Guard, token: str) -> RecordingPeer:
-    p = RecordingPeer(graph)
-    p.session.extra["token"] = token
+    p = RecordingPeer(graph, token=token)
     guard.connect(p)
     return p
 

@@ -26,8 +26,7 @@ def make(**settings: Any) -> tuple[Graph, Guard]:
 
 
 def peer(graph: Graph, guard: Guard, token: str | None = None) -> RecordingPeer:
-    p = RecordingPeer(graph)
-    p.session.extra["token"] = token
+    p = RecordingPeer(graph, token=token)
     guard.connect(p)
     return p
 

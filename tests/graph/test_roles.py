@@ -24,8 +24,7 @@ def setup(**settings: Any) -> tuple[Graph, Guard, World]:
 
 
 def access(graph: Graph, guard: Guard, token: str | None) -> Any:
-    peer = RecordingPeer(graph)
-    peer.session.extra["token"] = token
+    peer = RecordingPeer(graph, token=token)
     guard.connect(peer)
     frame = {"op": "call_service", "service": "/simbridge/access", "id": "a"}
     graph.receive(peer, json.dumps(frame), 0.0)

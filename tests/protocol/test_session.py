@@ -8,12 +8,20 @@ import pytest
 
 from simbridge.errors import ProtocolError
 from simbridge.protocol import (
+    Advertised,
     ClientId,
     Limits,
     Pool,
+    Provided,
     Refusal,
+    Reply,
     Session,
+    Subscribed,
     Subscription,
+    Unadvertised,
+    Unlatched,
+    Unsubscribed,
+    Withdrawn,
     ops as o,
     resolve_name,
 )
@@ -147,12 +155,13 @@ def test_status_level_filters_what_is_sent() -> None:
     """Default level error: warnings are not sent; set_level none silences everything."""
     session = Session(ClientId(1))
     assert session.wants_status("error") and not session.wants_status("warning")
-    session.set_level("info")
+    assert session.set_level(o.SetLevel("info")) == ()
     assert session.wants_status("warning")
-    session.set_level("none")
+    session.set_level(o.SetLevel("none"))
     assert not session.wants_status("error")
+    assert session.status("error", "x") == ()
     with pytest.raises(ProtocolError, match="level"):
-        session.set_level("loud")
+        session.set_level(o.SetLevel("loud"))
 
 
 @pytest.mark.parametrize(
@@ -193,23 +202,27 @@ def test_subscribe_ids_are_budgeted_per_topic_per_client_and_globally() -> None:
     with pytest.raises(Refusal, match="global_subscribe_ids"):
         other.subscribe(o.Subscribe("/y", id=1))
     assert session.subscribe_ids == 4 and pool.used["subscribe_ids"] == 5
-    assert session.unsubscribe("/a", 1) is None and session.subscribe_ids == 3
+    (effect,) = session.unsubscribe(o.Unsubscribe("/a", id=1))
+    assert isinstance(effect, Unsubscribed) and not effect.gone and session.subscribe_ids == 3
     session.close()
     assert pool.used["subscribe_ids"] == 1 and not session.subscriptions
 
 
 def test_advertise_ids_and_names_are_budgeted() -> None:
     session, pool = budgeted(advertise_ids=3, advertisements=2)
-    assert session.advertise("/a", 1, "std_msgs/msg/String")
-    assert not session.advertise("/a", 1, "std_msgs/msg/String")
-    session.advertise("/a", 2, "std_msgs/msg/String")
-    session.advertise("/b", None, "std_msgs/msg/String")
+    string = "std_msgs/msg/String"
+    session.advertise(o.Advertise("/a", string, id=1), string)
+    session.advertise(o.Advertise("/a", string, id=1), string)  # the same id: not counted
+    session.advertise(o.Advertise("/a", string, id=2), string)
+    session.publish("/b", string)
     with pytest.raises(Refusal, match="max_advertise_ids"):
-        session.advertise("/a", 3, "std_msgs/msg/String")
+        session.advertise(o.Advertise("/a", string, id=3), string)
     with pytest.raises(Refusal, match="max_advertisements"):
-        session.advertise("/c", None, "std_msgs/msg/String")
-    assert session.unadvertise("/a", 1) is False  # id 2 remains
-    assert session.unadvertise("/a", None) is True and pool.used["advertise_ids"] == 1
+        session.publish("/c", string)
+    assert session.unadvertise(o.Unadvertise("/a", id=1)) == (Unadvertised("/a", 1),)
+    assert session.advertises("/a")  # id 2 remains
+    assert session.unadvertise(o.Unadvertise("/a")) == (Unadvertised("/a", None),)
+    assert not session.advertises("/a") and pool.used["advertise_ids"] == 1
 
 
 def test_calls_wait_at_most_the_call_timeout_and_are_budgeted() -> None:
@@ -218,10 +231,12 @@ def test_calls_wait_at_most_the_call_timeout_and_are_budgeted() -> None:
     assert session.call_timeout(None, 5.0) == 5.0
     assert session.call_timeout(0.0, 5.0) == 60.0 == session.call_timeout(1e9, 5.0)
     assert session.call_timeout(2.0, 5.0) == 2.0
-    session.start_call("/s", 1)
-    session.start_call("/s", 2)
+    assert session.call_service(o.CallService("/s", id=1), 10.0, waits=False, default=5.0) is None
+    assert session.pending_calls == 0  # an in-process service answers at once
+    assert session.call_service(o.CallService("/s", id=1), 10.0, waits=True, default=5.0) == 15.0
+    session.call_service(o.CallService("/s", id=2, timeout=0), 10.0, waits=True, default=5.0)
     with pytest.raises(Refusal, match="max_pending_calls") as refused:
-        session.start_call("/s", 3)
+        session.call_service(o.CallService("/s", id=3), 10.0, waits=True, default=5.0)
     assert refused.value.op == "call_service" and refused.value.op_id == 3
     session.end_call()
     session.close()
@@ -245,7 +260,8 @@ def test_latched_bytes_replace_per_topic_and_are_budgeted() -> None:
 def test_before_admission_only_a_small_auth_op_is_read() -> None:
     """A client that owes a token: fragments are not reassembled, big frames not decoded."""
     session = Session(ClientId(1), limits=Limits(unauthenticated_frame_bytes=200))
-    session.authenticated = False
+    session.connect("*", False, authenticated=False)
+    assert session.guarded and not session.authenticated
     frag = json.dumps({"op": "fragment", "id": "f", "data": "x", "num": 0, "total": 2})
     (refused,) = session.parse(frag, 0.0)
     assert isinstance(refused, Refusal) and "not authenticated" in str(refused)
@@ -277,3 +293,104 @@ def test_ops_resolve_their_names_once_when_made() -> None:
     assert o.CallService("rosapi/topics").name == "/rosapi/topics"
     with pytest.raises(ProtocolError, match="not a valid ROS name"):
         o.Publish("/a\x00", {})
+
+
+# -- ops in, effects out ---------------------------------------------------------------------
+
+
+def test_a_subscribe_says_what_the_graph_delivers_and_an_unsubscribe_what_it_stops() -> None:
+    """Subscribed carries the merged subscription (new once); Unsubscribed says when it is gone."""
+    session = Session(ClientId(1))
+    (first,) = session.subscribe(o.Subscribe("odom", id="a"), None)
+    assert isinstance(first, Subscribed) and first.new and first.type is None
+    assert (first.sub.topic, first.sub.resolved) == ("odom", "/odom")
+    (again,) = session.subscribe(
+        o.Subscribe("odom", id="b", type="nav_msgs/Odometry", throttle_rate=50),
+        "nav_msgs/msg/Odometry",
+    )
+    assert isinstance(again, Subscribed) and not again.new and again.sub is first.sub
+    assert again.type == "nav_msgs/msg/Odometry" and again.sub.throttle_rate == 0
+    assert session.unsubscribe(o.Unsubscribe("odom", id="a")) == (Unsubscribed(first.sub, False),)
+    assert session.unsubscribe(o.Unsubscribe("odom", id="b")) == (Unsubscribed(first.sub, True),)
+    assert session.unsubscribe(o.Unsubscribe("odom")) == ()  # nothing left: no effect
+    assert session.subscriptions == {} and session.subscribe_ids == 0
+
+
+def test_a_subscribe_with_a_fragment_size_sets_the_clients_fragment_size() -> None:
+    session = Session(ClientId(1))
+    session.subscribe(o.Subscribe("/scan", fragment_size=1000))
+    assert session.fragment_size == 1000
+    session.call_service(o.CallService("/s", fragment_size=500), 0.0, waits=False, default=1.0)
+    assert session.fragment_size == 500
+
+
+def test_the_first_publish_advertises_the_topic_and_later_ones_have_no_effect() -> None:
+    """The implicit publisher of rosbridge: one Advertised, then nothing on the hot path."""
+    session = Session(ClientId(1))
+    twist = "geometry_msgs/msg/Twist"
+    assert session.publish("/cmd_vel", twist) == (Advertised("/cmd_vel", twist, None),)
+    assert session.publish("/cmd_vel", twist) == ()
+    assert session.advertisements == {"/cmd_vel": {None: twist}}
+    # an advertise op records the canonical type the graph decided, and its latch
+    op = o.Advertise("/map", "nav_msgs/OccupancyGrid", id="m", latch=True)
+    grid = "nav_msgs/msg/OccupancyGrid"
+    assert session.advertise(op, grid) == (Advertised("/map", grid, "m", True),)
+    assert session.advertisements["/map"] == {"m": grid}
+
+
+def test_services_and_actions_provided_are_recorded_and_withdrawn() -> None:
+    session = Session(ClientId(1))
+    (provided,) = session.provide("service", "/add", "example_interfaces/srv/AddTwoInts", "add")
+    add = "example_interfaces/srv/AddTwoInts"
+    assert provided == Provided("service", "/add", add, "add", add)
+    fib = "example_interfaces/action/Fibonacci"
+    (action,) = session.provide("action", "/fib", fib, "fib", "example_interfaces/Fibonacci")
+    assert (action.written, action.written_type) == ("fib", "example_interfaces/Fibonacci")
+    assert session.provides("service", "/add") and session.provides("action", "/fib")
+    assert session.withdraw("service", "/add") == (Withdrawn("service", "/add"),)
+    with pytest.raises(ProtocolError, match="unadvertise_service: service /add is not advertised"):
+        session.withdraw("service", "/add")
+    session.disown("action", "/fib")  # the graph gave it to another provider
+    assert not session.provides("action", "/fib") and session.owned() == 0
+
+
+def test_closing_gives_everything_back_and_says_what_the_graph_withdraws() -> None:
+    session, pool = budgeted()
+    (subscribed,) = session.subscribe(o.Subscribe("/odom"))
+    assert isinstance(subscribed, Subscribed)
+    session.publish("/chatter", "std_msgs/msg/String")
+    session.latch("/chatter", 10)
+    session.provide("service", "/s", "std_srvs/srv/Trigger")
+    session.provide("action", "/a", "example_interfaces/action/Fibonacci")
+    session.call_service(o.CallService("/s"), 0.0, waits=True, default=1.0)
+    effects = session.close()
+    assert effects == [
+        Unsubscribed(subscribed.sub, True),
+        Unadvertised("/chatter", None),
+        Unlatched("/chatter"),
+        Withdrawn("service", "/s"),
+        Withdrawn("action", "/a"),
+    ]
+    assert all(used == 0 for used in pool.used.values())
+    assert session.close() == []  # once
+
+
+def test_refusals_become_replies_within_the_status_budget() -> None:
+    session = Session(ClientId(1), limits=Limits(statuses_per_second=1))
+    (reply,) = session.refused("publish /x: refused", "cause", 0.0, op_id="p1")
+    assert isinstance(reply, Reply)
+    assert json.loads(reply.frame.data) == {
+        "op": "status",
+        "level": "error",
+        "msg": "publish /x: refused",
+        "id": "p1",
+    }
+    assert session.refused("again", "cause", 0.1) == ()
+    assert session.refusals_untold == 1
+
+
+def test_the_publish_rate_is_the_clients_token_bucket() -> None:
+    session = Session(ClientId(1), limits=Limits(publish_rate=1.0, publish_burst=2))
+    assert session.take_publish(0.0) and session.take_publish(0.0)
+    assert not session.take_publish(0.0)
+    assert session.take_publish(1.0)
