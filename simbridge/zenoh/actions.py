@@ -43,7 +43,7 @@ from simbridge.errors import ConversionError, ProtocolError, SimbridgeError, Typ
 from simbridge.graph.actions import ABORTED, CANCELED, SUCCEEDED, UNKNOWN, Action, Goal
 from simbridge.protocol import Frame, Session
 from simbridge.zenoh.attachment import Attachment
-from simbridge.zenoh.names import DEFAULT_QOS, LATCHED_QOS, Entity, Qos, dds_type, entity_gid
+from simbridge.zenoh.names import DEFAULT_QOS, LATCHED_QOS, Entity, Qos, dds_type
 
 
 if TYPE_CHECKING:
@@ -78,14 +78,14 @@ class ZenohLink(Protocol):
     def _put_bytes(self, entry: Any, payload: bytes) -> None: ...
     def _log(self, key: str, text: str) -> None: ...
     def _note(self, key: str, text: str) -> None: ...
+    def client_attachment(self, entity: Entity, sequence: int) -> bytes: ...
     def _query(
         self,
         entity: Entity,
-        on_reply: Callable[[Any], None],
-        on_done: Callable[[], None],
         payload: bytes,
         attachment: bytes,
         timeout: float,
+        done: Callable[[list[tuple[bool, bytes]]], None],
     ) -> None: ...
 
 
@@ -607,17 +607,9 @@ class ActionBridge:
         except SimbridgeError as err:
             on_error(str(err))
             return
-        gid = entity_gid(f"client:{link.zid}:{entity.name}")
-        attachment = Attachment(next(self._calls), time.time_ns(), gid).pack()
-        replies: list[tuple[bool, bytes]] = []
+        attachment = link.client_attachment(entity, next(self._calls))
 
-        def on_zenoh_reply(reply: Any) -> None:  # a Zenoh thread
-            if reply.ok is not None:
-                replies.append((True, bytes(reply.ok.payload.to_bytes())))
-            else:
-                replies.append((False, bytes(reply.err.payload.to_bytes())))
-
-        def done() -> None:  # the event loop
+        def done(replies: list[tuple[bool, bytes]]) -> None:  # the event loop
             if not replies:
                 on_error(f"{entity.name} gave no reply (its node may have gone)")
                 return
@@ -631,13 +623,8 @@ class ActionBridge:
                 link.stats["bad_payloads"] += 1
                 on_error(f"{entity.name}: reply is not what its type says: {err}")
 
-        def on_done() -> None:  # a Zenoh thread
-            loop = link._loop
-            if loop is not None:
-                loop.call_soon_threadsafe(done)
-
         try:
-            link._query(entity, on_zenoh_reply, on_done, payload, attachment, timeout)
+            link._query(entity, payload, attachment, timeout, done)
         except Exception as err:
             on_error(f"query failed: {err}")
 

@@ -872,9 +872,37 @@ class ZenohLink:
         except SimbridgeError as err:
             self._answer_remote(provider, server_id, str(err), ok=False)
             return
-        gid = entity_gid(f"client:{self.zid}:{entity.name}")
-        attachment = Attachment(next(self._call_ids), time.time_ns(), gid).pack()
+        attachment = self.client_attachment(entity, next(self._call_ids))
         self._calls[server_id] = (provider, response_type)
+
+        def done(replies: list[tuple[bool, bytes]]) -> None:
+            self._remote_done(server_id, replies)
+
+        try:
+            self._query(entity, payload, attachment, SERVICE_TIMEOUT, done)
+        except Exception as err:
+            self._calls.pop(server_id, None)
+            self._answer_remote(provider, server_id, f"query failed: {err}", ok=False)
+
+    def client_attachment(self, entity: Entity, sequence: int) -> bytes:
+        """Return the attachment of this process's ``sequence``-th request to ``entity``."""
+        gid = entity_gid(f"client:{self.zid}:{entity.name}")
+        return Attachment(sequence, time.time_ns(), gid).pack()
+
+    def _query(
+        self,
+        entity: Entity,
+        payload: bytes,
+        attachment: bytes,
+        timeout: float,
+        done: Callable[[list[tuple[bool, bytes]]], None],
+    ) -> None:
+        """Query every server of a remote service; ``done(replies)`` once all have answered.
+
+        ``replies`` are ``(ok, payload bytes)`` as they came, gathered on Zenoh's threads;
+        ``done`` runs on the event loop. What Zenoh raises (no session, a bad key) reaches the
+        caller.
+        """
         replies: list[tuple[bool, bytes]] = []
 
         def on_reply(reply: Any) -> None:  # a Zenoh thread
@@ -886,27 +914,8 @@ class ZenohLink:
         def on_done() -> None:  # a Zenoh thread
             loop = self._loop
             if loop is not None:
-                loop.call_soon_threadsafe(self._remote_done, server_id, replies)
+                loop.call_soon_threadsafe(done, replies)
 
-        try:
-            self._query(entity, on_reply, on_done, payload, attachment, SERVICE_TIMEOUT)
-        except Exception as err:
-            self._calls.pop(server_id, None)
-            self._answer_remote(provider, server_id, f"query failed: {err}", ok=False)
-
-    def _query(
-        self,
-        entity: Entity,
-        on_reply: Callable[[Any], None],
-        on_done: Callable[[], None],
-        payload: bytes,
-        attachment: bytes,
-        timeout: float,
-    ) -> None:
-        """Query every server of a remote service, each reply to ``on_reply``, then ``on_done``.
-
-        Both run on a Zenoh thread; what Zenoh raises (no session, a bad key) reaches the caller.
-        """
         self.stats["calls_out"] += 1
         self.session.get(
             entity.keyexpr(),
