@@ -88,8 +88,8 @@ class Refusal(ProtocolError):
     A ``call_service`` is answered with a failed ``service_response`` and a
     ``send_action_goal`` with a failed ``action_result`` (their callers wait for one); every
     other op with a ``status`` error. ``cause`` groups refusals for the status budget (one
-    ``status`` per cause per second, see :meth:`Session.refusal
-    <simbridge.protocol.session.Session.refusal>`).
+    ``status`` per cause per second, see :meth:`Session.refused
+    <simbridge.protocol.session.Session.refused>`).
     """
 
     def __init__(
