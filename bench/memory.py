@@ -1,6 +1,6 @@
 """Where an idle default server's memory goes: each import group's share, and what was cut.
 
-``python -m bench memory`` (about 20 s): three kinds of rows, each from fresh child processes.
+``python -m bench memory`` (about a minute): four tables, each from fresh child processes.
 
 1. **Import groups**, in the order ``simbridge`` imports them, in one child: VmRSS and its two
    parts after each group (RssAnon: the process's own memory; RssFile: the mapped pages of
@@ -13,6 +13,12 @@
    same server with the cut modules imported first (the default path as it was before the cuts),
    with the ratio. MB here are MiB (VmRSS / 1024), as in the test. Twice: with the page cache
    as found, then with the server's shared libraries evicted from it (read back from disk).
+4. **Exclusive shares**: a child imports the modules the idle server imported, in its order
+   (not simbridge's own), once with everything and once without each large package (and so
+   without what only that package imports): the difference is what that package alone costs,
+   where the first table charges a shared module (``importlib.metadata``: pydantic's and
+   websockets') to whichever imports it first. The idle server minus that child is simbridge's
+   own code and what it builds at start.
 
 RssFile depends on the page cache: a library pip has just written is cached in large folios
 (Linux 6.16+ ext4), and a fault maps a whole folio, so a fresh venv shows several MB more RssFile
@@ -38,7 +44,7 @@ GROUPS: list[tuple[str, list[str]]] = [
     ("simbridge.cli (argparse, logging)", ["simbridge.cli"]),
     ("hashlib, hmac, secrets (CPython's own hashes)", ["@hashlib", "secrets"]),
     ("pydantic, PyYAML", ["pydantic", "yaml"]),
-    ("importlib.metadata (pydantic plugins)", ["importlib.metadata"]),
+    ("importlib.metadata (pydantic's plugins, websockets)", ["importlib.metadata"]),
     ("pydantic's schema builder", ["pydantic._internal._generate_schema"]),
     ("simbridge.config (the settings models)", ["simbridge.config"]),
     ("asyncio (no ssl)", ["@asyncio"]),
@@ -122,7 +128,7 @@ def watch():
         last = now
     with open("/proc/self/maps") as f:
         files = sorted({ln.split()[5] for ln in f if len(ln.split()) > 5 and ".so" in ln})
-    print("MEMORY " + json.dumps([status(), len(sys.modules), files]), file=sys.stderr, flush=True)
+    print("MEMORY " + json.dumps([status(), list(sys.modules), files]), file=sys.stderr, flush=True)
     os.kill(os.getpid(), signal.SIGINT)
 
 
@@ -152,8 +158,8 @@ def groups() -> list[tuple[str, tuple[float, float, float]]]:
     return [(label, (r, a, f)) for label, (r, a, f) in json.loads(proc.stdout)]
 
 
-def idle_server(preload: list[str]) -> tuple[tuple[float, float, float], int, list[str]]:
-    """(RSS, anon, file) MB, the module count and the shared libraries of the idle server."""
+def idle_server(preload: list[str]) -> tuple[tuple[float, float, float], list[str], list[str]]:
+    """(RSS, anon, file) MB, the modules (in import order) and shared libraries of the server."""
     cmd = [sys.executable, "-c", _SERVER_CHILD, str(_free_port()), str(_free_port())]
     proc = subprocess.run(
         [*cmd, json.dumps(preload)], capture_output=True, text=True, cwd=ROOT, timeout=180
@@ -185,13 +191,101 @@ def evict(paths: list[str]) -> int:
     return dropped
 
 
+#: Packages of the default path whose exclusive share the last table shows: what the idle
+#: server's imports weigh without them (and without what only they import).
+EXCLUSIVE: list[tuple[str, list[str]]] = [
+    ("numpy (with OpenBLAS)", ["numpy"]),
+    (
+        "pydantic (-core, annotated-types, typing-inspection)",
+        ["pydantic", "pydantic_core", "annotated_types", "typing_inspection"],
+    ),
+    ("rosbags (type system, ROS 2 type store, serde)", ["rosbags"]),
+    ("PyYAML", ["yaml", "_yaml"]),
+    ("websockets", ["websockets"]),
+    ("orjson", ["orjson"]),
+    ("httptools", ["httptools"]),
+]
+
+_IMPORTS_CHILD = r"""
+import ctypes, importlib, json, sys
+
+modules, excluded, own = json.loads(sys.argv[1]), tuple(json.loads(sys.argv[2])), sys.argv[3]
+skipped = ("__main__",) if own == "own" else ("__main__", "simbridge")
+from simbridge.cli import _import_asyncio, _import_hashlib  # as the command imports them
+_import_hashlib()
+_import_asyncio(tls=False)
+for name in modules:
+    if name.startswith(skipped) or name.split(".")[0] in excluded or any(
+        name.startswith(e + ".") or name == e for e in excluded
+    ):
+        continue  # a module an excluded package alone imports is not imported at all
+    try:
+        importlib.import_module(name)
+    except Exception:
+        pass  # e.g. a Cython runtime module that registers itself without a spec
+ctypes.CDLL(None).malloc_trim(0)
+with open("/proc/self/status") as f:
+    kb = {k: int(v.split()[0]) for k, _, v in (ln.partition(":") for ln in f)
+          if k in ("VmRSS", "RssAnon", "RssFile")}
+print(json.dumps([kb["VmRSS"] / 1024, kb["RssAnon"] / 1024, kb["RssFile"] / 1024]))
+"""
+
+
+def imports_only(
+    modules: list[str], excluded: list[str], *, own: bool = False
+) -> tuple[float, float, float]:
+    """(RSS, anon, file) MB of a child importing ``modules`` but ``excluded``.
+
+    simbridge's own modules only with ``own``; nothing runs.
+    """
+    args = [json.dumps(modules), json.dumps(excluded), "own" if own else "others"]
+    proc = subprocess.run(
+        [sys.executable, "-c", _IMPORTS_CHILD, *args],
+        capture_output=True,
+        text=True,
+        cwd=ROOT,
+        timeout=120,
+        check=True,
+    )
+    rss, anon, file = json.loads(proc.stdout)
+    return rss, anon, file
+
+
+def _exclusive_table(modules: list[str], idle: tuple[float, float, float]) -> None:
+    """Print what the idle server weighs by part: each package's exclusive share."""
+    interpreter = groups()[0][1]
+    everything = imports_only(modules, [])
+    with_own = imports_only(modules, [], own=True)
+    print("where the idle server's memory goes: exclusive shares (MB; libraries read from disk)")
+    print(f"{'part':<52} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8}")
+    print(_row("the idle server (median above)", idle))
+    print(_row("  the interpreter alone (python -c)", interpreter, "+"))
+    shared = _minus(everything, interpreter)
+    for label, excluded in EXCLUSIVE:
+        share = _minus(everything, imports_only(modules, excluded))
+        shared = _minus(shared, share)
+        print(_row(f"  {label}", share, "+"))
+    print(_row("  the standard library modules they share", shared, "+"))
+    print(_row("  simbridge's own modules", _minus(with_own, everything), "+"))
+    print(_row("  what simbridge builds at start and runs with", _minus(idle, with_own), "+"))
+
+
+def _minus(
+    a: tuple[float, float, float], b: tuple[float, float, float]
+) -> tuple[float, float, float]:
+    return a[0] - b[0], a[1] - b[1], a[2] - b[2]
+
+
 def _row(label: str, values: tuple[float, float, float], sign: str = "") -> str:
     rss, anon, file = values
     return f"{label:<52} {rss:{sign}8.1f} {anon:{sign}8.1f} {file:{sign}8.1f}"
 
 
-def _idle_table(title: str) -> list[str]:
-    """Run the idle server 3 times as now and as before the cuts; print medians and ratios."""
+def _idle_table(title: str) -> tuple[tuple[float, float, float], list[str], list[str]]:
+    """Run the idle server 3 times as now and as before the cuts; print medians and ratios.
+
+    Returns the median now, the modules it imported (in order) and the libraries mapped.
+    """
     cases = (
         ("before the cuts (cut modules imported first)", [name for name, _ in CUT]),
         ("now", []),
@@ -203,13 +297,14 @@ def _idle_table(title: str) -> list[str]:
     for name, results in runs.items():
         values, modules, _ = sorted(results)[len(results) // 2]
         medians.append(values)
-        print(f"{_row(name, values)} {modules:>8}")
+        print(f"{_row(name, values)} {len(modules):>8}")
     before, now = medians
     print(
         f"{'ratio now / before':<52} {now[0] / before[0]:8.2f} {now[1] / before[1]:8.2f} "
         f"{now[2] / before[2]:8.2f}"
     )
-    return sorted({lib for results in runs.values() for _, _, libs in results for lib in libs})
+    libraries = sorted({lib for results in runs.values() for _, _, libs in results for lib in libs})
+    return now, runs["now"][0][1], libraries
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -230,12 +325,14 @@ def main(argv: list[str] | None = None) -> int:
         print(f"{_row(label, values, '+')}  {when}")
     print()
     print(f"simbridge, default world, both ports, no client (load average {_load()})")
-    libraries = _idle_table("page cache as found")
+    _, _, libraries = _idle_table("page cache as found")
     print()
     dropped = evict(libraries)
     print(f"evicted {dropped} shared libraries from the page cache (read back from disk)")
-    _idle_table("libraries read back from disk (a venv not freshly installed)")
+    idle, modules, _ = _idle_table("libraries read back from disk (a venv not freshly installed)")
     print("target (issue 16): <= 40 MB RSS")
+    print()
+    _exclusive_table(modules, idle)
     return 0
 
 
