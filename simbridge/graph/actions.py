@@ -38,7 +38,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
-from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
+from simbridge.errors import ServiceError
 from simbridge.graph.services import ServiceTable, caller
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
@@ -169,8 +169,6 @@ class ActionTable:
         """Return the graph op handlers of the action ops."""
         return {
             o.CancelActionGoal: self._cancel,
-            o.ActionFeedback: self._feedback,
-            o.ActionResult: self._result,
         }
 
     # -- declaration ------------------------------------------------------------------------
@@ -348,37 +346,14 @@ class ActionTable:
                 )
             )
 
-    def _served_goal(self, peer: Peer, op_id: OpId | None, what: str) -> Goal:
-        goal = self.goals.get(op_id) if isinstance(op_id, str) else None
-        if goal is None or goal.action.provider is not peer:
-            msg = f"{what} for unknown or finished goal id {op_id!r}"
-            raise ProtocolError(msg)
-        return goal
-
-    def _complete(self, goal: Goal, part: int, values: Any, what: str) -> Any:
-        """Check and complete feedback (part 2) or result (part 1) values of a known type."""
-        try:
-            name = self.graph.registry.action(goal.action.type)[part]
-        except TypeNotFoundError:
-            return values
-        try:
-            return self.graph.converter.from_json(name, {} if values is None else values)
-        except ConversionError as err:
-            msg = f"{what} for {goal.action.name}: {err}"
-            raise ProtocolError(msg) from None
-
-    def _feedback(self, peer: Peer, op: o.ActionFeedback, now: float) -> None:
-        goal = self._served_goal(peer, op.id, "action_feedback")
-        goal.feedback(self._complete(goal, 2, op.values, "action_feedback"))
-
-    def _result(self, peer: Peer, op: o.ActionResult, now: float) -> None:
-        goal = self._served_goal(peer, op.id, "action_result")
+    def result(self, goal: Goal, op: o.ActionResult, values: Any) -> None:
+        """End ``goal`` with its server's admitted ``action_result`` (``values`` validated)."""
         if op.result is False:
-            reason = op.values if op.values is not None else "goal aborted by its action server"
+            reason = values if values is not None else "goal aborted by its action server"
             goal.finish(ABORTED, reason, result=False)
             return
         status = op.status if op.status in (SUCCEEDED, CANCELED) else ABORTED
-        goal.finish(status, self._complete(goal, 1, op.values, "action_result"))
+        goal.finish(status, values)
 
     # -- action_msgs/srv/CancelGoal -------------------------------------------------------------
 

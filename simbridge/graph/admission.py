@@ -21,7 +21,11 @@ handler on the graph, which then only carries it out. The checks, in this order:
    ``send_action_goal`` are validated against their types and completed with defaults
    (:class:`~simbridge.msgs.Converter`; ``args`` given as a list are zipped onto the fields in
    declaration order; a type simbridge does not know passes as it is, a message of it must be a
-   JSON object); a call or goal to a service or action that does not exist is refused here.
+   JSON object); a call or goal to a service or action that does not exist is refused here. The
+   answers of a client provider are checked the same way: the ``values`` of a
+   ``service_response`` (read as :mod:`~simbridge.graph.services` says; values that do not fit
+   the response type become a failed answer to the caller) and of an ``action_feedback`` or
+   ``action_result`` (refused), each for a call or goal that this client serves.
 
 Checks 1-4 are access rules. They apply once a :class:`~simbridge.graph.guard.Guard` is
 installed (it authenticates clients and gives each session its scope and rights, and sets
@@ -31,8 +35,9 @@ session's budgets, when the handler takes it; names it may own are counted here 
 scope refusal comes before a budget one.
 
 What :meth:`Admission.admit` returns is what the op's handler carries out: a
-:class:`Publication`, a :class:`Typed` op, a :class:`Call` or a :class:`GoalRequest` (the
-tables receive requests already validated), or the op itself. A refused op raises
+:class:`Publication`, a :class:`Typed` op, a :class:`Call`, a :class:`GoalRequest`, a
+:class:`Response` or a :class:`GoalUpdate` (the tables receive payloads already validated), or
+the op itself. A refused op raises
 :class:`~simbridge.protocol.Refusal` or :class:`ProtocolError`, answered to its sender only by
 the graph (a refused call or goal gets its failed answer, its caller waits for one).
 Admission reads the client's session (its access, what it holds) and changes nothing in it but
@@ -41,14 +46,15 @@ the charge of its publish rate.
 
 from __future__ import annotations
 
+import json
 import logging
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
-from simbridge.graph.actions import Action, ActionTable
-from simbridge.graph.services import Prepare, Service, ServiceTable
+from simbridge.graph.actions import Action, ActionTable, Goal
+from simbridge.graph.services import Finish, PendingCall, Prepare, Service, ServiceTable
 from simbridge.graph.topics import Peer, Topic, TopicTable
 from simbridge.msgs import normalize_type, positional_args
 from simbridge.protocol import (
@@ -67,7 +73,9 @@ __all__ = [
     "Admission",
     "Call",
     "GoalRequest",
+    "GoalUpdate",
     "Publication",
+    "Response",
     "Typed",
     "in_namespace",
 ]
@@ -129,6 +137,28 @@ class GoalRequest:
     op: o.SendActionGoal | None = None
 
 
+@dataclass(frozen=True, slots=True)
+class Response:
+    """An admitted ``service_response``: the call it answers and the answer for its caller."""
+
+    call: PendingCall
+    ok: bool
+    #: The response, validated and completed when the service type is known (``ok``), or why
+    #: the call failed.
+    values: Any
+
+
+@dataclass(frozen=True, slots=True)
+class GoalUpdate:
+    """An admitted ``action_feedback`` or ``action_result`` of a goal the client serves."""
+
+    goal: Goal
+    op: o.ActionFeedback | o.ActionResult
+    #: The feedback or result, validated and completed when the action type is known (a
+    #: failed result's reason as sent).
+    values: Any
+
+
 class Admission:
     """Decides, for every op of a client, whether the graph carries it out."""
 
@@ -139,12 +169,14 @@ class Admission:
         actions: ActionTable,
         *,
         prepare: Prepare | None = None,
+        finish: Finish | None = None,
     ) -> None:
         #: The graph's topics (types of existing topics; payload validation).
         self.topics = topics
         #: Validates and completes the requests of known service types
-        #: (:func:`~simbridge.graph.services.typed_calls`).
+        #: (:func:`~simbridge.graph.services.typed_calls`), and their responses.
         self.prepare = prepare
+        self.finish = finish
         #: The graph's services and actions (a client may not advertise what the server
         #: provides).
         self.services = services
@@ -288,6 +320,23 @@ class Admission:
             raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
         return self.goal(op.name, op.args, op)
 
+    def _service_response(
+        self, peer: Peer, session: Session, op: o.ServiceResponse, now: float
+    ) -> Any:
+        return self.response(peer, op)
+
+    def _action_feedback(
+        self, peer: Peer, session: Session, op: o.ActionFeedback, now: float
+    ) -> Any:
+        goal = self._served_goal(peer, op.id, "action_feedback")
+        return GoalUpdate(goal, op, self._complete(goal, 2, op.values, "action_feedback"))
+
+    def _action_result(self, peer: Peer, session: Session, op: o.ActionResult, now: float) -> Any:
+        goal = self._served_goal(peer, op.id, "action_result")
+        if op.result is False:  # a failure: its reason goes to the caller as it is
+            return GoalUpdate(goal, op, op.values)
+        return GoalUpdate(goal, op, self._complete(goal, 1, op.values, "action_result"))
+
     # -- payloads of calls and goals (also for callers outside the protocol: Zenoh) ----------
 
     def call(self, op: o.CallService) -> Call:
@@ -340,6 +389,53 @@ class Admission:
             msg = f"invalid goal for {action.type}: {err}"
             raise ProtocolError(msg) from None
 
+    def response(self, peer: Peer, op: o.ServiceResponse) -> Response:
+        """Return the answer a provider's ``service_response`` gives its call's caller.
+
+        Read as :mod:`~simbridge.graph.services` says; values of a known response type are
+        validated and completed (values that do not fit are a failed answer, naming why).
+
+        Raises:
+            ProtocolError: no call waits under that id, or ``peer`` does not provide it.
+        """
+        call = self.services.answering(peer, op)
+        values = op.values
+        if isinstance(values, dict) or (op.result is True and values is None):
+            ok, values = True, values if isinstance(values, dict) else {}
+        elif isinstance(values, str) and op.result is False:
+            ok = False
+        elif op.result is False and values is None:
+            ok, values = False, "service provider reported failure"
+        else:
+            ok = False
+            shown = json.dumps(values, default=repr)
+            values = f"service provider sent no result object (values: {shown})"
+        if ok and self.finish is not None:
+            try:
+                values = self.finish(call.service.type, values)
+            except ServiceError as err:
+                ok, values = False, f"service provider sent an invalid response: {err}"
+        return Response(call, ok, values)
+
+    def _served_goal(self, peer: Peer, op_id: Any, what: str) -> Goal:
+        goal = self.actions.goals.get(op_id) if isinstance(op_id, str) else None
+        if goal is None or goal.action.provider is not peer:
+            msg = f"{what} for unknown or finished goal id {op_id!r}"
+            raise ProtocolError(msg)
+        return goal
+
+    def _complete(self, goal: Goal, part: int, values: Any, what: str) -> Any:
+        """Check and complete feedback (part 2) or result (part 1) values of a known type."""
+        try:
+            name = self.topics.registry.action(goal.action.type)[part]
+        except TypeNotFoundError:
+            return values
+        try:
+            return self.topics.converter.from_json(name, {} if values is None else values)
+        except ConversionError as err:
+            msg = f"{what} for {goal.action.name}: {err}"
+            raise ProtocolError(msg) from None
+
     # -- scope -----------------------------------------------------------------------------
 
     def _may_own(self, session: Session, what: str, name: str, new: bool) -> None:
@@ -377,4 +473,7 @@ _CHECKS: dict[type, Callable[[Admission, Peer, Session, Any, float], Any]] = {
     o.AdvertiseAction: Admission._advertise_action,
     o.CallService: Admission._call_service,
     o.SendActionGoal: Admission._send_action_goal,
+    o.ServiceResponse: Admission._service_response,
+    o.ActionFeedback: Admission._action_feedback,
+    o.ActionResult: Admission._action_result,
 }

@@ -43,7 +43,15 @@ from typing import Any
 from simbridge.config import ServerSettings
 from simbridge.errors import ProtocolError, SimbridgeError
 from simbridge.graph.actions import ActionTable
-from simbridge.graph.admission import Admission, Call, GoalRequest, Publication, Typed
+from simbridge.graph.admission import (
+    Admission,
+    Call,
+    GoalRequest,
+    GoalUpdate,
+    Publication,
+    Response,
+    Typed,
+)
 from simbridge.graph.params import ParameterStore
 from simbridge.graph.services import Handler, ServiceTable, service_response, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
@@ -141,7 +149,7 @@ class Graph:
         self.topics.cdr_factory = CdrWriter(self.registry).factory  # cbor-raw
         #: Services.
         self.services = ServiceTable(default_timeout=self.settings.service_timeout)
-        prepare, self.services.finish = typed_calls(self.registry, self.converter)
+        prepare, finish = typed_calls(self.registry, self.converter)
         #: Parameters of the in-process nodes.
         self.params = ParameterStore()
         #: Connected clients.
@@ -162,6 +170,8 @@ class Graph:
             o.AdvertiseAction: self._advertise_action,
             o.UnadvertiseAction: self._unadvertise_action,
             o.SendActionGoal: self._send_action_goal,
+            o.ActionFeedback: self._action_feedback,
+            o.ActionResult: self._action_result,
             o.SetLevel: self._set_level,
         }
         #: How each effect of a session is carried out (see :meth:`apply`).
@@ -182,7 +192,9 @@ class Graph:
         #: Actions (client-served and in-process) and the goals in flight.
         self.actions = ActionTable(self)
         #: Decides whether each op of a client is carried out (the guard sets its access rules).
-        self.admission = Admission(self.topics, self.services, self.actions, prepare=prepare)
+        self.admission = Admission(
+            self.topics, self.services, self.actions, prepare=prepare, finish=finish
+        )
         #: Services that need admin rights (see :mod:`simbridge.graph.guard`).
         self.admin_services = self.admission.admin_services
         self.handlers.update(self.actions.handlers())
@@ -419,10 +431,15 @@ class Graph:
             peer, goal.action, goal.message, op_id=op.id, written=op.action, feedback=op.feedback
         )
 
-    def _service_response(self, peer: Peer, op: o.ServiceResponse, now: float) -> None:
-        error = self.services.respond(peer, op)
-        if error is not None:
-            raise ProtocolError(error)
+    def _action_feedback(self, peer: Peer, update: GoalUpdate, now: float) -> None:
+        update.goal.feedback(update.values)
+
+    def _action_result(self, peer: Peer, update: GoalUpdate, now: float) -> None:
+        assert isinstance(update.op, o.ActionResult)
+        self.actions.result(update.goal, update.op, update.values)
+
+    def _service_response(self, peer: Peer, response: Response, now: float) -> None:
+        self.services.respond(response.call, response.values, ok=response.ok)
 
     def _set_level(self, peer: Peer, op: o.SetLevel, now: float) -> None:
         self.apply(peer, peer.session.set_level(op))

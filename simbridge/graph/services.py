@@ -7,7 +7,8 @@ service, a handler error, a timeout, a provider that unadvertised or disconnecte
 
 Replies from client providers (``service_response``) are routed back by the server-chosen id
 ``service_request:<service>:<n>``. Clients disagree on the reply shape (protocol reference
-section 8, item 14), so simbridge reads it as follows:
+section 8, item 14), so simbridge reads it as follows (:meth:`Admission.response
+<simbridge.graph.admission.Admission.response>`, then :meth:`ServiceTable.respond`):
 
 * ``values`` an object: success, whatever ``result`` says. This is rosbridge's behaviour (its
   ``service_response`` capability builds the ROS response from ``values`` and never reads
@@ -23,14 +24,13 @@ from __future__ import annotations
 
 import heapq
 import itertools
-import json
 import logging
 from collections.abc import Callable
 from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
 
-from simbridge.errors import ConversionError, ServiceError, TypeNotFoundError
+from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, positional_args, short_type
 from simbridge.protocol import Frame, OpId, json_frame, split_frame
@@ -168,8 +168,6 @@ class ServiceTable:
         self._by_caller: dict[Peer, dict[str, PendingCall]] = {}
         self._by_service: dict[Service, dict[str, PendingCall]] = {}
         self._deadlines: list[tuple[float, int, str]] = []
-        #: Validates and completes provider responses of known service types (set by the graph).
-        self.finish: Finish | None = None
         self._counter = itertools.count(1)
         self._fragments = itertools.count(1)
 
@@ -250,34 +248,27 @@ class ServiceTable:
         for piece in split_frame(frame, size, f"service_response:{next(self._fragments)}"):
             peer.send(piece)
 
-    def respond(self, peer: Peer, op: ServiceResponse) -> str | None:
-        """Route a provider's ``service_response`` to its caller; return an error text or None."""
-        if op.id is None or not isinstance(op.id, str) or op.id not in self.pending:
-            return f"service_response for unknown or expired id {op.id!r} on {op.service}"
-        call = self.pending[op.id]
+    def answering(self, peer: Peer, op: ServiceResponse) -> PendingCall:
+        """Return the call a provider's ``service_response`` answers.
+
+        Raises:
+            ProtocolError: no call waits under that id, or ``peer`` does not provide it.
+        """
+        call = self.pending.get(op.id) if isinstance(op.id, str) else None
+        if call is None:
+            msg = f"service_response for unknown or expired id {op.id!r} on {op.service}"
+            raise ProtocolError(msg)
         if call.service.provider is not peer:
-            return f"service_response for {op.id!r} from a client that does not provide it"
+            msg = f"service_response for {op.id!r} from a client that does not provide it"
+            raise ProtocolError(msg)
+        return call
+
+    def respond(self, call: PendingCall, values: Any, *, ok: bool) -> None:
+        """Answer ``call``'s caller with a provider's response (admitted: read and validated)."""
         self._forget(call)
-        values = op.values
-        if isinstance(values, dict) or (op.result is True and values is None):
-            ok, values = True, values if isinstance(values, dict) else {}
-        elif isinstance(values, str) and op.result is False:
-            ok = False
-        elif op.result is False and values is None:
-            ok, values = False, "service provider reported failure"
-        else:
-            ok = False
-            shown = json.dumps(values, default=repr)
-            values = f"service provider sent no result object (values: {shown})"
-        if ok and self.finish is not None:
-            try:
-                values = self.finish(call.service.type, values)
-            except ServiceError as err:
-                ok, values = False, f"service provider sent an invalid response: {err}"
         self.reply(
             call.caller, service_response(call.written, values, result=ok, op_id=call.caller_id)
         )
-        return None
 
     def expire(self, now: float) -> None:
         """Answer every call whose deadline has passed with a timeout failure."""

@@ -36,7 +36,7 @@ from typing import Any
 
 import orjson
 
-from simbridge.errors import ConfigError, ServiceError, SimbridgeError
+from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.estop import connection_rights
 from simbridge.graph.services import caller
@@ -954,9 +954,12 @@ class ZenohLink:
         op = ServiceResponse(
             service=provider.entity.name, id=server_id, values=values, result=ok, has_values=True
         )
-        error = self.graph.services.respond(provider, op)
-        if error is not None:
-            logger.debug("Zenoh: %s", error)
+        try:
+            response = self.graph.admission.response(provider, op)  # read and validated
+        except ProtocolError as err:
+            logger.debug("Zenoh: %s", err)
+            return
+        self.graph.services.respond(response.call, response.values, ok=response.ok)
 
     def _local_publisher(self, name: str) -> str | None:
         """Return the in-process node publishing ``name``, if any."""

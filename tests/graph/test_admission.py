@@ -6,8 +6,9 @@ from typing import Any
 import pytest
 
 from simbridge.config import Params, ServerSettings, load_world
+from simbridge.errors import ProtocolError
 from simbridge.graph import Graph, RobotBridge
-from simbridge.graph.admission import Call, GoalRequest, Publication
+from simbridge.graph.admission import Call, GoalRequest, GoalUpdate, Publication, Response
 from simbridge.graph.guard import Guard
 from simbridge.protocol import Refusal, ops as o
 from simbridge.sim import World
@@ -140,3 +141,42 @@ def test_a_goal_is_admitted_with_its_action_and_its_message_validated() -> None:
     assert answer["op"] == "action_result" and answer["status"] == 0
     assert answer["values"].startswith("invalid goal for example_interfaces/action/Fibonacci")
     assert server.take() == [] and graph.actions.goals == {}
+
+
+def test_a_providers_answers_are_admitted_validated_for_the_calls_and_goals_it_serves() -> None:
+    """service_response, action_feedback and action_result: read and checked before routing."""
+    graph = Graph()
+    provider, caller, other = RecordingPeer(graph), RecordingPeer(graph), RecordingPeer(graph)
+    op(
+        provider,
+        graph,
+        op="advertise_service",
+        service="/add",
+        type="example_interfaces/AddTwoInts",
+    )
+    op(caller, graph, op="call_service", service="/add", args={"a": 1, "b": 2}, id="c")
+    (forwarded,) = provider.take()
+    answer = o.ServiceResponse("/add", values={}, id=forwarded["id"], result=True)
+    with pytest.raises(ProtocolError, match="from a client that does not provide it"):
+        graph.admission.admit(other, answer, 0.0)
+    response = graph.admission.admit(provider, answer, 0.0)
+    assert isinstance(response, Response) and response.ok and response.values == {"sum": 0}
+    bad = o.ServiceResponse("/add", values={"total": 3}, id=forwarded["id"], result=True)
+    response = graph.admission.admit(provider, bad, 0.0)
+    assert isinstance(response, Response) and not response.ok
+    assert response.values.startswith("service provider sent an invalid response")
+    assert caller.take() == [] and len(graph.services.pending) == 1  # nothing routed yet
+
+    fib = {"op": "advertise_action", "action": "fib", "type": "example_interfaces/Fibonacci"}
+    op(provider, graph, **fib)
+    goal = {"op": "send_action_goal", "action": "fib", "action_type": "x/Y", "args": {"order": 2}}
+    op(caller, graph, **goal, id="g")
+    (sent,) = provider.take()
+    feedback = o.ActionFeedback("/fib", values={"sequence": [0]}, id=sent["id"])
+    update = graph.admission.admit(provider, feedback, 0.0)
+    assert isinstance(update, GoalUpdate) and update.values == {"sequence": [0]}
+    wrong = o.ActionFeedback("/fib", values={"order": 1}, id=sent["id"])
+    with pytest.raises(ProtocolError, match="action_feedback for /fib"):
+        graph.admission.admit(provider, wrong, 0.0)
+    with pytest.raises(ProtocolError, match="unknown or finished goal id"):
+        graph.admission.admit(other, feedback, 0.0)
