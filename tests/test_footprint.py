@@ -34,15 +34,15 @@ import pytest
 from tests.helpers import ROOT, TIMEOUT_FACTOR
 
 
-#: Idle RSS ceiling of the default server, MB: measured 50.3 in a venv whose libraries were read
-#: back from disk and 56.5 in a freshly installed one (the page cache's large folios, see above;
-#: 53.4 and 60.7 before OpenSSL's hashes were cut), plus a margin for what the page cache adds
-#: (fresh clones measured up to 3.5 MB apart before): RSS is a coarse guard; the RssAnon ceiling
-#: below is the tight one.
+#: Idle RSS ceiling of the default server, MB: measured 50.3-50.5 in a venv whose libraries were
+#: read back from disk and 51.1-56.5 in freshly installed ones (the page cache's large folios,
+#: see above; 53.4 and 60.7 before OpenSSL's hashes were cut), plus a margin for what the page
+#: cache adds (fresh clones measured up to 3.5 MB apart before): RSS is a coarse guard; the
+#: RssAnon ceiling below is the tight one.
 IDLE_RSS_CEILING_MB = 61.0
 
 #: Idle RssAnon ceiling, MB (the process's own memory; the page cache does not change it):
-#: measured 32.7-32.8 in both venvs (33.1 before OpenSSL's hashes were cut, 34.7 before issue
+#: measured 32.7-32.9 in both venvs (33.1 before OpenSSL's hashes were cut, 34.7 before issue
 #: 16's cuts), plus a margin.
 IDLE_ANON_CEILING_MB = 34.0
 
