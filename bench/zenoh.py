@@ -17,7 +17,10 @@ directly (rmw_zenoh's default topology: the router is not a broker on one host).
   x ``CLIENTS`` clients, each client on one robot's /odom and /scan through the router
   (environment variables; default 2 x 300 and 2 x 300). The clients are ``bench.loadgen``
   processes (``LOADGENS`` per front-end, default 2). Per client: /odom rate, losses (gaps in the
-  header stamps), latency p99. Target: 20 Hz +- 10 %, 0 lost, p99 <= 50 ms.
+  header stamps), latency p99. Target: 20 Hz +- 10 %, 0 lost, p99 <= 50 ms. Where the CPU
+  goes: each process kind's cores (user + system seconds over the run's seconds) against the
+  cores the machine has. ``CPROFILE=DIR`` runs each simbridge process under cProfile (its
+  ``.prof`` file in DIR when it exits; the figures are then those of a profiled run).
 """
 
 from __future__ import annotations
@@ -72,6 +75,12 @@ def _world(directory: Path, prefix: str, count: int, name: str) -> Path:
 
 @contextmanager
 def _router() -> Iterator[str]:
+    with _router_process() as (endpoint, _proc):
+        yield endpoint
+
+
+@contextmanager
+def _router_process() -> Iterator[tuple[str, psutil.Process]]:
     endpoint = f"tcp/127.0.0.1:{free_port()}"
     proc = subprocess.Popen(
         [sys.executable, "-m", "simbridge", "zenohd", "--listen", endpoint],
@@ -82,7 +91,7 @@ def _router() -> Iterator[str]:
     assert proc.stdout is not None
     proc.stdout.readline()
     try:
-        yield endpoint
+        yield endpoint, psutil.Process(proc.pid)
     finally:
         stop(proc)
 
@@ -92,6 +101,10 @@ def _simbridge(
     router: str, *options: str, zenoh: bool = True
 ) -> Iterator[tuple[psutil.Process, int]]:
     cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0", "--no-http"]
+    if os.environ.get("CPROFILE"):  # each simbridge process under cProfile, to that directory
+        kind = "front-end" if "--no-sim" in options else "simulator"
+        out = f"{os.environ['CPROFILE']}/{kind}-{time.monotonic_ns()}.prof"
+        cmd[1:1] = ["-m", "cProfile", "-o", out]
     cmd += ["--log-level", "warning", "--max-clients", "2000"]
     if zenoh:
         cmd += ["--zenoh", "--zenoh-connect", router, "--zenoh-listen", "tcp/127.0.0.1:0"]
@@ -267,7 +280,7 @@ def classroom(seconds: float) -> bool:
     clients = int(os.environ.get("CLIENTS", "300"))
     loadgens = int(os.environ.get("LOADGENS", "2"))  # load-generator processes per front-end
     names = [f"s{s}r{k + 1}" for s in range(sims) for k in range(robots)]
-    with tempfile.TemporaryDirectory() as tmp, _router() as router:
+    with tempfile.TemporaryDirectory() as tmp, _router_process() as (router, router_proc):
         worlds = [_world(Path(tmp), f"s{s}r", robots, f"sim{s}") for s in range(sims)]
         with contextlib.ExitStack() as stack:
             sim_procs = [
@@ -291,10 +304,17 @@ def classroom(seconds: float) -> bool:
                     for robot in (names[(f * clients + c) % len(names)] for c in range(clients))
                 ]
                 procs += start_loadgens(f"ws://127.0.0.1:{port}", specs, loadgens, start, end)
+            kinds = {
+                "simulators": sim_procs,
+                "front-ends": front_procs,
+                "router": [router_proc],
+                "load generators": [psutil.Process(p.pid) for p in procs],
+            }
+            measured = [p for group in kinds.values() for p in group]
             time.sleep(max(0.0, start - time.time()))
-            cpu0 = [cpu_seconds(p) for p in sim_procs + front_procs]
+            cpu0 = [p.cpu_times() for p in measured]
             time.sleep(max(0.0, end - time.time()))
-            cpu1 = [cpu_seconds(p) for p in sim_procs + front_procs]
+            cpu1 = [p.cpu_times() for p in measured]
             load = load_average()
             results = collect(procs, timeout=seconds + 120)
     rates: list[float] = []
@@ -307,19 +327,27 @@ def classroom(seconds: float) -> bool:
         stamps = r["stamps"][odom] if odom is not None else []
         rates.append(len(stamps) / seconds)
         lost += sum(max(0, round((b - a) / 50e6) - 1) for a, b in itertools.pairwise(stamps))
-    cpu = [100 * (b - a) / seconds for a, b in zip(cpu0, cpu1, strict=True)]
+    used = {
+        id(p): (b.user - a.user, b.system - a.system)
+        for p, a, b in zip(measured, cpu0, cpu1, strict=True)
+    }
     low, high = percentile(rates, 0.01), percentile(rates, 0.99)
     p50, p99 = percentile(lat, 0.5) * 1e3, percentile(lat, 0.99) * 1e3
     print(
         f"zenoh classroom: {sims} simulators x {robots} robots, {fronts} front-ends x "
         f"{clients} clients (/odom + /scan each), {seconds:g} s, {load}"
     )
-    print(
-        "CPU % of one core: simulators "
-        + " ".join(f"{c:.0f}" for c in cpu[:sims])
-        + ", front-ends "
-        + " ".join(f"{c:.0f}" for c in cpu[sims:])
-    )
+    print(f"CPU in cores (CPU seconds / wall seconds) of the {os.cpu_count()} this machine has:")
+    print(f"  {'':16}{'cores':>6}{'user':>6}{'system':>8}  each")
+    totals = [0.0, 0.0]
+    for kind, group in kinds.items():
+        user = sum(used[id(p)][0] for p in group) / seconds
+        system = sum(used[id(p)][1] for p in group) / seconds
+        totals[0] += user
+        totals[1] += system
+        each = " ".join(f"{sum(used[id(p)]) / seconds:.2f}" for p in group)
+        print(f"  {kind:16}{user + system:6.2f}{user:6.2f}{system:8.2f}  {each}")
+    print(f"  {'all':16}{sum(totals):6.2f}{totals[0]:6.2f}{totals[1]:8.2f}")
     print(
         f"/odom rate per client: p1 {low:.1f} Hz, p99 {high:.1f} Hz (target 18-22 Hz); "
         f"{len(results)} clients, {len(errors)} errors {errors[:2]}"
