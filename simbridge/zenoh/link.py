@@ -14,10 +14,12 @@
   gone with them) join the graph, so rosapi lists them and rosbridge clients subscribe, publish
   and call. Data is subscribed only while a rosbridge client or an in-process node listens.
 
-Zenoh runs its callbacks on its own threads; they only hand the sample to the event loop
-(``call_soon_threadsafe``). Bad input from the network (a payload that is not CDR of its type,
-an unknown type, a name that clashes, a token that vanishes mid-call) becomes a failed service
-response or one rate-limited log line, never an exception in the loop.
+Data samples wait in one Zenoh ring channel per subscribed topic, which the event loop polls
+(no Python callback, hence no GIL hand-over, per sample); Zenoh runs the other callbacks
+(tokens, queries, replies, latched topics' samples) on its own threads, and they only hand them
+to the event loop (``call_soon_threadsafe``). Bad input from the network (a payload that is not
+CDR of its type, an unknown type, a name that clashes, a token that vanishes mid-call) becomes a
+failed service response or one rate-limited log line, never an exception in the loop.
 """
 
 from __future__ import annotations
@@ -79,6 +81,14 @@ INBOX_LIMIT = 20_000
 DRAIN_BATCH = 500
 #: The interpreter's GIL switch interval while Zenoh runs (seconds; Python's default is 5 ms).
 SWITCH_INTERVAL = 0.0005
+#: Samples one topic's ring channel holds for the event loop (the oldest go past it: 5 s of a
+#: 20 Hz topic).
+RING = 100
+#: Seconds between two polls of the ring channels, at least and at most; in between, the
+#: period grows with the number of channels so that polling an idle channel costs about 1 % of
+#: a core (0.2 us each, ``try_recv`` 0.11 us of it) up to 250 channels, 2.4 % at 600.
+POLL_MIN, POLL_MAX = 0.0005, 0.005
+POLL_PER_CHANNEL = 0.00002
 
 
 def import_zenoh() -> Any:
@@ -203,6 +213,11 @@ class ZenohLink:
         self._marker_ids: set[int] = set()
         #: Inward data subscribers by topic name.
         self._subscribers: dict[str, Any] = {}
+        #: Their ring channels (all but latched topics'), polled by the event loop.
+        self._channels: dict[str, Any] = {}
+        self._channel_list: list[tuple[str, Any]] = []
+        self._poll_next = 0  # where the last poll stopped (a flood is shared out fairly)
+        self._poll_handle: asyncio.Handle | None = None
         #: Calls from ROS 2 waiting for the graph's answer: op id -> (query, type, attachment).
         self._queries: dict[str, tuple[Any, str, Attachment]] = {}
         #: Calls to ROS 2 waiting for a reply: server id -> (provider, response type).
@@ -279,6 +294,7 @@ class ZenohLink:
         for sub in self._subscribers.values():
             _quietly(sub.undeclare)
         self._subscribers.clear()
+        self._set_channels({})
         loop = asyncio.get_running_loop()
         await loop.run_in_executor(None, session.close)
 
@@ -774,8 +790,10 @@ class ZenohLink:
             local = any(id(cb) not in self._marker_ids for _n, cb in topic.internal)
             if local or (topic.subscriptions and name in remote):
                 wanted[name] = (topic.type, topic.latch)
+        channels = dict(self._channels)
         for name in [n for n in self._subscribers if n not in wanted]:
             _quietly(self._subscribers.pop(name).undeclare)
+            channels.pop(name, None)
         for name, (type_name, latched) in wanted.items():
             if name in self._subscribers:
                 continue
@@ -794,12 +812,67 @@ class ZenohLink:
                     )
                 else:
                     sub = self.session.declare_subscriber(
-                        keyexpr, handler, allowed_origin=self.zenoh.Locality.REMOTE
+                        keyexpr,
+                        self.zenoh.handlers.RingChannel(RING),
+                        allowed_origin=self.zenoh.Locality.REMOTE,
                     )
+                    channels[name] = sub.handler
             except Exception as err:
                 self._log(f"sub {name}", f"Zenoh: cannot subscribe to {name}: {err}")
                 continue
             self._subscribers[name] = sub
+        if channels != self._channels:
+            self._set_channels(channels)
+
+    def _set_channels(self, channels: dict[str, Any]) -> None:
+        """Poll these ring channels from now on (none: stop polling)."""
+        self._channels = channels
+        self._channel_list = list(channels.items())
+        self._poll_next = 0
+        if not channels and self._poll_handle is not None:
+            self._poll_handle.cancel()
+            self._poll_handle = None
+        elif channels and self._poll_handle is None and self._loop is not None:
+            self._poll_handle = self._loop.call_soon(self._poll)
+
+    def poll_period(self) -> float:
+        """Seconds between two polls of the ring channels (see :data:`POLL_PER_CHANNEL`)."""
+        return min(POLL_MAX, max(POLL_MIN, len(self._channel_list) * POLL_PER_CHANNEL))
+
+    def _poll(self) -> None:
+        """Hand the samples waiting in the ring channels to the graph (the event loop).
+
+        Polling instead of one Python callback per sample: each callback ran on a thread of its
+        subscriber that took the GIL from the event loop, 54 us of CPU a sample with 300
+        subscribers against 12 us polled (measured with 6,000 samples/s). At most
+        :data:`DRAIN_BATCH` samples per callback: under a flood, the loop's other work (clients,
+        the tick) runs in between, and the next poll goes on from the next channel.
+        """
+        self._poll_handle = None
+        loop = self._loop
+        channels = self._channel_list
+        if loop is None or self.session is None or not channels:
+            return
+        k = self._poll_next % len(channels)
+        budget = DRAIN_BATCH
+        for name, handler in channels[k:] + channels[:k] if k else channels:
+            k += 1
+            sample = handler.try_recv()
+            while sample is not None:
+                self._on_sample(name, bytes(sample.payload.to_bytes()))
+                budget -= 1
+                if not budget:
+                    break
+                sample = handler.try_recv()
+            if not budget:
+                break
+        self._poll_next = k
+        if self._poll_handle is not None or self._loop is None or not self._channel_list:
+            return  # closed, or the channels changed meanwhile and their poll is scheduled
+        if budget:
+            self._poll_handle = loop.call_later(self.poll_period(), self._poll)
+        else:
+            self._poll_handle = loop.call_soon(self._poll)
 
     def _sample_handler(self, name: str) -> Callable[[Any], None]:
         inbox = self._inbox

@@ -364,3 +364,54 @@ async def test_a_flood_of_samples_is_handed_over_in_batches_and_bounded(
     link._drain()  # one batch, then the loop's other work, then the next batch
     assert len(link._inbox) == INBOX_LIMIT - DRAIN_BATCH
     await wait_for(lambda: not link._inbox, timeout=10)
+
+
+async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
+    zapp: App, router: Router
+) -> None:
+    from zenoh_ros2_sdk import ROS2Publisher
+
+    from simbridge.zenoh.link import DRAIN_BATCH, RING
+
+    link = zapp.zenoh
+    assert link is not None
+    pub = await asyncio.to_thread(
+        ROS2Publisher, "/burst", "std_msgs/msg/String", node_name="burster", **sdk_kw(router)
+    )
+    try:
+        await wait_for(lambda: "/burst" in zapp.graph.topics.topics, timeout=8)
+        async with connect(ws_url(zapp)) as conn:
+            await send_json(conn, {"op": "subscribe", "topic": "/burst"})
+            await wait_for(lambda: "/burst" in link._channels, timeout=8)
+            await asyncio.to_thread(pub.publish, data="probe")  # the route is up end to end
+            await recv_until(conn, lambda m: m.get("topic") == "/burst", timeout=8)
+            count = min(RING, DRAIN_BATCH) - 10
+
+            def burst() -> None:
+                for k in range(count):
+                    pub.publish(data=str(k))
+
+            await asyncio.to_thread(burst)  # faster than the loop polls: they wait in the ring
+            got = [
+                (await recv_until(conn, lambda m: m.get("topic") == "/burst", timeout=5))["msg"]
+                for _ in range(count)
+            ]
+            assert got == [{"data": str(k)} for k in range(count)]
+            await send_json(conn, {"op": "unsubscribe", "topic": "/burst"})
+            await wait_for(lambda: "/burst" not in link._channels, timeout=8)
+    finally:
+        pub.close()
+
+
+def test_the_poll_period_grows_with_the_channels_within_its_bounds(zapp: App) -> None:
+    from simbridge.zenoh.link import POLL_MAX, POLL_MIN
+
+    link = zapp.zenoh
+    assert link is not None
+    periods = []
+    for n in (1, 100, 600, 5000):
+        link._channel_list = [(f"/t{k}", None) for k in range(n)]
+        periods.append(link.poll_period())
+    link._channel_list = []
+    assert periods[0] == POLL_MIN and periods[-1] == POLL_MAX
+    assert periods == sorted(periods) and POLL_MIN < periods[1] < POLL_MAX
