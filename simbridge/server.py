@@ -23,6 +23,7 @@ import asyncio
 import contextlib
 import http
 import logging
+import struct
 import weakref
 from collections.abc import Hashable
 from typing import TYPE_CHECKING, Any
@@ -200,15 +201,21 @@ class BridgeServer:
         The same rule as :meth:`Client.send`, applied to a whole group at once; a client with
         queued frames or a full socket buffer gets the frame through its queue.
         """
-        direct = []
+        wire = b""
         for peer, key, limit in entries:
             if type(peer) is Client and not (peer.closed or peer.queue.pending or peer.ws.paused):
-                direct.append(peer.ws)
+                ws = peer.ws
+                protocol = ws.protocol
+                if protocol.state is State.OPEN and not (
+                    ws.send_in_progress or protocol.extensions
+                ):
+                    wire = wire or _wire(frame)
+                    ws.transport.write(wire)  # what broadcast() writes, framed once for all
+                else:
+                    broadcast((ws,), frame.data, text=frame.text)  # closing: it skips it
                 peer.frames_sent += 1
             else:
                 peer.send(frame, key, limit)
-        if direct:
-            broadcast(direct, frame.data, text=frame.text)
 
     @property
     def port(self) -> int:
@@ -449,6 +456,27 @@ class BridgeServer:
             "unauthenticated": sum(1 for c in self.clients if c.unauthenticated),
             "stalled_total": self.stalled_total,
         }
+
+
+def _wire(frame: Frame) -> bytes:
+    """Return ``frame`` as the server writes it (RFC 6455 section 5.2: one final frame, no mask).
+
+    The bytes are the same for every client: the server negotiates no extension (no
+    permessage-deflate, see :meth:`BridgeServer.start`), so a frame is framed once and written
+    as is to each subscriber (websockets' ``broadcast`` framed it again for each connection).
+    """
+    data = frame.data
+    first = 0x81 if frame.text else 0x82  # FIN + text or binary
+    n = len(data)
+    if n < 126:
+        return bytes((first, n)) + data
+    if n < 65536:
+        return _HEAD16.pack(first, 126, n) + data
+    return _HEAD64.pack(first, 127, n) + data
+
+
+_HEAD16 = struct.Struct("!BBH")
+_HEAD64 = struct.Struct("!BBQ")
 
 
 def _read_chunk(ws: ServerConnection) -> None:

@@ -295,3 +295,22 @@ async def test_subscription_changes_apply_to_the_next_message(app: App) -> None:
         assert all(s < stamps["/odom"][-1] for s in stamps["odom"])
         assert len(set(stamps["/odom"])) == len(stamps["/odom"])
     await wait_for(lambda: not app.server.clients)
+
+
+@pytest.mark.parametrize("size", [0, 125, 126, 65535, 65536])
+@pytest.mark.parametrize("text", [True, False])
+def test_a_frame_framed_once_for_all_is_what_websockets_writes(size: int, text: bool) -> None:
+    from websockets.protocol import State
+    from websockets.server import ServerProtocol
+
+    from simbridge.protocol import Frame
+    from simbridge.server import _wire
+
+    data = (b"x" if text else b"\xff") * size
+    protocol = ServerProtocol()
+    protocol.state = State.OPEN
+    if text:
+        protocol.send_text(data)
+    else:
+        protocol.send_binary(data)
+    assert _wire(Frame(data, text)) == b"".join(protocol.data_to_send())
