@@ -32,7 +32,9 @@ async def test_payload_that_is_not_cdr_is_dropped_and_good_ones_still_drive(
         ROS2Publisher, "/cmd_vel", "geometry_msgs/msg/Twist", **sdk_kw(router)
     )
     try:
-        await wait_for(lambda: "/cmd_vel" in zapp.zenoh._subscribers, timeout=8)  # type: ignore[union-attr]
+        # subscribed on the publisher's own key expression (from its token)
+        subs = zapp.zenoh._subscribers
+        await wait_for(lambda: pub.keyexpr in subs.get("/cmd_vel", {}), timeout=8)
         ticks = zapp.stats.ticks
         async with connect(ws_url(zapp)) as conn:
             await send_json(conn, {"op": "subscribe", "topic": "/rosout"})

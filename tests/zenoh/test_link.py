@@ -382,7 +382,7 @@ async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
         await wait_for(lambda: "/burst" in zapp.graph.topics.topics, timeout=8)
         async with connect(ws_url(zapp)) as conn:
             await send_json(conn, {"op": "subscribe", "topic": "/burst"})
-            await wait_for(lambda: "/burst" in link._channels, timeout=8)
+            await wait_for(lambda: "/burst" in link._subscribers, timeout=8)
             await asyncio.to_thread(pub.publish, data="probe")  # the route is up end to end
             await recv_until(conn, lambda m: m.get("topic") == "/burst", timeout=8)
             count = min(RING, DRAIN_BATCH) - 10
@@ -398,7 +398,8 @@ async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
             ]
             assert got == [{"data": str(k)} for k in range(count)]
             await send_json(conn, {"op": "unsubscribe", "topic": "/burst"})
-            await wait_for(lambda: "/burst" not in link._channels, timeout=8)
+            await wait_for(lambda: "/burst" not in link._subscribers, timeout=8)
+            assert all(name != "/burst" for name, _ in link._channel_list)
     finally:
         pub.close()
 
