@@ -230,15 +230,20 @@ class RobotBridge:
         g = self.graph
         sec, nanosec = g.stamp()
         stamp = _stamp(sec, nanosec)
+        tf = self.tf
+        tf_wanted = bool(tf.subscriptions or tf.internal)
         transforms = []
         for rt in self.robots.values():
+            odom_wanted = rt.odom.subscriptions or rt.odom.internal
+            if not (odom_wanted or tf_wanted):
+                continue  # nobody listens to this robot's pose: no message is built
             robot = rt.robot
             s = robot.state
             q = _quaternion(s.theta)
             position = {"x": s.x, "y": s.y, "z": 0.0}
             odom_frame = robot.frame("odom")
             base = robot.frame("base_link")
-            if rt.odom.subscriptions or rt.odom.internal:
+            if odom_wanted:
                 odom = {
                     "header": {"stamp": stamp, "frame_id": odom_frame},
                     "child_frame_id": base,
@@ -255,15 +260,16 @@ class RobotBridge:
                     },
                 }
                 g.publish(rt.odom, odom, now)
-            transforms.append(
-                {
-                    "header": {"stamp": stamp, "frame_id": odom_frame},
-                    "child_frame_id": base,
-                    "transform": {"translation": position, "rotation": q},
-                }
-            )
-        if self.tf.subscriptions or self.tf.internal:
-            g.publish(self.tf, {"transforms": transforms}, now)
+            if tf_wanted:
+                transforms.append(
+                    {
+                        "header": {"stamp": stamp, "frame_id": odom_frame},
+                        "child_frame_id": base,
+                        "transform": {"translation": position, "rotation": q},
+                    }
+                )
+        if tf_wanted:
+            g.publish(tf, {"transforms": transforms}, now)
         self.publish_contacts(now, stamp)
         if self._scan_due():
             self.publish_scans(now, stamp)

@@ -75,7 +75,7 @@ class ZenohLink(Protocol):
     def _decode(self, type_name: str, payload: bytes) -> Any: ...
     def _reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None: ...
     def _fail_query(self, query: Any, text: str) -> None: ...
-    def _put_bytes(self, entry: Any, payload: bytes) -> None: ...
+    def _put_bytes(self, entry: Any, payload: bytes, *, count: bool = False) -> bool: ...
     def _log(self, key: str, text: str) -> None: ...
     def _note(self, key: str, text: str) -> None: ...
     def client_attachment(self, entity: Entity, sequence: int) -> bytes: ...
@@ -370,7 +370,7 @@ class ActionBridge:
             return
         entry = self.link._declared.get(("MP", action.node, action.name + _INFIX + "feedback"))
         if entry is not None:
-            self.link._put_bytes(entry, payload)
+            self.link._put_bytes(entry, payload, count=True)
 
     def publish_status(self, name: str) -> None:
         """Publish ``NAME/_action/status``: every goal in flight and the ROS 2 goals kept."""
@@ -394,7 +394,7 @@ class ActionBridge:
         except SimbridgeError as err:
             self.link._log(f"status {name}", f"Zenoh: {name} status: {err}")
             return
-        self.link._put_bytes(entry, payload)
+        self.link._put_bytes(entry, payload, count=True)
 
     def cancelled(self, service: str) -> None:
         """The graph answered a ``cancel_goal`` call from ROS 2: publish the new statuses."""

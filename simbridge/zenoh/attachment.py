@@ -12,9 +12,14 @@ import struct
 from dataclasses import dataclass
 
 
-__all__ = ["Attachment"]
+__all__ = ["Attachment", "pack_attachment"]
 
 _HEAD = struct.Struct("<qqB")
+
+
+def pack_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
+    """Return the wire bytes of an attachment (what :meth:`Attachment.pack` returns)."""
+    return _HEAD.pack(sequence, timestamp_ns, len(gid)) + gid
 
 
 @dataclass(frozen=True, slots=True)
@@ -27,7 +32,7 @@ class Attachment:
 
     def pack(self) -> bytes:
         """Return the wire bytes."""
-        return _HEAD.pack(self.sequence, self.timestamp_ns, len(self.gid)) + self.gid
+        return pack_attachment(self.sequence, self.timestamp_ns, self.gid)
 
     @classmethod
     def unpack(cls, data: bytes) -> Attachment:

@@ -47,7 +47,7 @@ from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session
 from simbridge.protocol.ops import CallService, ServiceResponse
 from simbridge.zenoh.actions import ActionBridge, split_action
-from simbridge.zenoh.attachment import Attachment
+from simbridge.zenoh.attachment import Attachment, pack_attachment
 from simbridge.zenoh.config import ZenohOptions, session_config
 from simbridge.zenoh.names import (
     ADMIN_SPACE,
@@ -499,7 +499,7 @@ class ZenohLink:
         if topic is not None and topic.latched is not None:
             entry = self._declared.get(("MP", self._first_owner(topic), name))
             if entry is not None:
-                self._put(entry, topic.latched)
+                self.stats["published"] += self._put(entry, topic.latched)
 
     def _first_owner(self, topic: Topic) -> str:
         for owner in topic.publishers:
@@ -522,7 +522,7 @@ class ZenohLink:
             return
         loop = self._loop
         if loop is None:
-            self._put(entry, out)
+            self.stats["published"] += self._put(entry, out)
             return
         # sent together once the current callback (a tick publishes every robot) is done:
         # Zenoh's puts cost half as much back to back as spread between other work
@@ -532,28 +532,39 @@ class ZenohLink:
 
     def _flush(self) -> None:
         outbox, self._outbox = self._outbox, []
+        if self.session is None:
+            return
+        sent = 0
         for entry, out in outbox:
-            if self.session is not None:
-                self._put(entry, out)
+            sent += self._put(entry, out)
+        self.stats["published"] += sent
 
-    def _put(self, entry: _Declared, out: Outgoing) -> None:
+    def _put(self, entry: _Declared, out: Outgoing) -> bool:
+        """Publish a delivery on a declared publisher; return whether it went out."""
         try:
             payload = out.cdr() if out.cdr is not None else None
             if payload is None:
                 payload = self.cdr.serialize(entry.entity.type, out.msg)
         except Exception as err:  # a message the CDR writer cannot encode: skip, say so once
             self._log(f"cdr {entry.entity.name}", f"Zenoh: {entry.entity.name} not sent: {err}")
-            return
-        self._put_bytes(entry, payload)
+            return False
+        return self._put_bytes(entry, payload)
 
-    def _put_bytes(self, entry: _Declared, payload: bytes) -> None:
-        """Publish CDR bytes on a declared publisher, with rmw_zenoh's attachment."""
-        attachment = Attachment(next(entry.sequence), time.time_ns(), entry.gid).pack()
+    def _put_bytes(self, entry: _Declared, payload: bytes, *, count: bool = False) -> bool:
+        """Publish CDR bytes on a declared publisher, with rmw_zenoh's attachment.
+
+        Returns whether it went out; ``count``: add it to the ``published`` counter here (the
+        tick's puts are counted together by :meth:`_flush`).
+        """
+        attachment = pack_attachment(next(entry.sequence), time.time_ns(), entry.gid)
         try:
             entry.handle.put(payload, attachment=attachment)
-            self.stats["published"] += 1
         except Exception as err:
             self._log(f"put {entry.entity.name}", f"Zenoh: put on {entry.entity.name}: {err}")
+            return False
+        if count:
+            self.stats["published"] += 1
+        return True
 
     # -- calls from ROS 2 ---------------------------------------------------------------------
 
