@@ -103,6 +103,9 @@ class Client:
         self.closed = False
         #: Frames written (directly or by the writer task).
         self.frames_sent = 0
+        #: Framed messages for the socket, written together at the end of this turn of the
+        #: event loop (see :meth:`BridgeServer._send_many`).
+        self.corked: list[bytes] = []
         #: The client was told that frames were dropped for it.
         self.told_dropped = False
         #: When the client last made progress (monotonic seconds): the writer completed a
@@ -129,13 +132,22 @@ class Client:
         """Drop the connection at once (the peer reads nothing: no close handshake)."""
         self.closed = True
         self.queue.clear()
+        self.corked.clear()
         self.ws.transport.abort()
+
+    def uncork(self) -> None:
+        """Write the frames corked in this turn of the event loop, in one write."""
+        data, self.corked = self.corked, []
+        if data and not self.closed and self.ws.protocol.state is State.OPEN:
+            self.ws.transport.write(data[0] if len(data) == 1 else b"".join(data))
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         """Write a frame now if the socket keeps up, else queue it (drop-oldest)."""
         if self.closed:
             return
         if not (self.queue.pending or self.ws.paused):
+            if self.corked:
+                self.uncork()  # in order: what was published before goes first
             broadcast((self.ws,), frame.data, text=frame.text)
             self.frames_sent += 1
             return
@@ -193,15 +205,22 @@ class BridgeServer:
         self._watcher: asyncio.Task[None] | None = None
         #: Connections admitted without a token that have not authenticated yet.
         self._unauthenticated: weakref.WeakSet[ServerConnection] = weakref.WeakSet()
+        #: Clients with corked frames, and the callback that writes them.
+        self._corked: list[Client] = []
+        self._uncork_handle: asyncio.Handle | None = None
         graph.topics.send_many = self._send_many
 
     def _send_many(self, frame: Frame, entries: SendEntries) -> None:
-        """Write ``frame`` to many subscribers: one ``broadcast`` for all that keep up.
+        """Write ``frame`` to many subscribers that keep up, framed once for all.
 
         The same rule as :meth:`Client.send`, applied to a whole group at once; a client with
-        queued frames or a full socket buffer gets the frame through its queue.
+        queued frames or a full socket buffer gets the frame through its queue. The frames a
+        client gets in one turn of the event loop (a tick's /odom and /scan, a batch of samples
+        from Zenoh) are corked and written together at its end: one ``send`` system call for
+        the server and one read for the client instead of one per message.
         """
         wire = b""
+        corked = self._corked
         for peer, key, limit in entries:
             if type(peer) is Client and not (peer.closed or peer.queue.pending or peer.ws.paused):
                 ws = peer.ws
@@ -209,13 +228,23 @@ class BridgeServer:
                 if protocol.state is State.OPEN and not (
                     ws.send_in_progress or protocol.extensions
                 ):
-                    wire = wire or _wire(frame)
-                    ws.transport.write(wire)  # what broadcast() writes, framed once for all
+                    wire = wire or _wire(frame)  # what broadcast() writes, framed once for all
+                    if not peer.corked:
+                        corked.append(peer)
+                    peer.corked.append(wire)
                 else:
                     broadcast((ws,), frame.data, text=frame.text)  # closing: it skips it
                 peer.frames_sent += 1
             else:
                 peer.send(frame, key, limit)
+        if corked and self._uncork_handle is None:
+            self._uncork_handle = asyncio.get_running_loop().call_soon(self._uncork)
+
+    def _uncork(self) -> None:
+        self._uncork_handle = None
+        corked, self._corked = self._corked, []
+        for client in corked:
+            client.uncork()
 
     @property
     def port(self) -> int:
@@ -435,6 +464,7 @@ class BridgeServer:
         finally:
             client.closed = True
             client.queue.clear()
+            client.corked.clear()
             self._unauthenticated.discard(ws)
             if client.auth_timer is not None:
                 client.auth_timer.cancel()

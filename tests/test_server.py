@@ -10,6 +10,7 @@ import pytest
 from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 
+from simbridge.protocol import status_frame
 from simbridge.runner import App
 from tests.conftest import AppFactory
 from tests.helpers import recv_json, recv_until, send_json, stalled_client, wait_for, ws_url
@@ -314,3 +315,33 @@ def test_a_frame_framed_once_for_all_is_what_websockets_writes(size: int, text: 
     else:
         protocol.send_binary(data)
     assert _wire(Frame(data, text)) == b"".join(protocol.data_to_send())
+
+
+async def test_messages_of_one_turn_are_written_together_in_the_order_published(app: App) -> None:
+    """What a client gets in one turn of the event loop goes out in one write, in order.
+
+    Three publications on two topics, then a status frame sent to the client alone, all in
+    one synchronous block: the client reads them in that order.
+    """
+    graph = app.graph
+    a = graph.advertise("/corked_a", "std_msgs/msg/String", "/test_node")
+    b = graph.advertise("/corked_b", "std_msgs/msg/String", "/test_node")
+    async with connect(ws_url(app)) as ws:
+        await send_json(ws, {"op": "subscribe", "topic": "/corked_a"})
+        await send_json(ws, {"op": "subscribe", "topic": "/corked_b"})
+        await wait_for(lambda: bool(a.subscriptions and b.subscriptions))
+        (client,) = app.server.clients
+        now = asyncio.get_running_loop().time()
+        graph.publish(a, {"data": "1"}, now)
+        graph.publish(b, {"data": "2"}, now)
+        graph.publish(a, {"data": "3"}, now)
+        assert len(client.corked) == 3  # not written yet: at the end of this turn
+        client.send(status_frame("warning", "4"))  # goes after what was corked before it
+        assert not client.corked
+        got = [json.loads(await ws.recv()) for _ in range(4)]
+    assert [(m["topic"], m["msg"]["data"]) for m in got[:3]] == [
+        ("/corked_a", "1"),
+        ("/corked_b", "2"),
+        ("/corked_a", "3"),
+    ]
+    assert got[3]["op"] == "status" and got[3]["msg"] == "4"
