@@ -16,7 +16,10 @@ directly (rmw_zenoh's default topology: the router is not a broker on one host).
 * ``classroom``: ``SIMS`` simulators x ``ROBOTS`` robots and ``FRONTS`` ``--no-sim`` front-ends
   x ``CLIENTS`` clients, each client on one robot's /odom and /scan through the router
   (environment variables; default 2 x 300 and 2 x 300). The clients are ``bench.loadgen``
-  processes (``LOADGENS`` per front-end, default 2). Per client: /odom rate, losses (gaps in the
+  processes (``LOADGENS`` per front-end, default 1): real rosbridge WebSocket clients (the
+  handshake, ``subscribe`` ops, every message received and its stamp read), kept as cheap as
+  a client can be because here they share the machine with what they measure (in a class,
+  the students' own machines run them). Per client: /odom rate, losses (gaps in the
   header stamps), latency p99. Target: 20 Hz +- 10 %, 0 lost, p99 <= 50 ms. Where the CPU
   goes: each process kind's cores (user + system seconds over the run's seconds) against the
   cores the machine has. ``CPROFILE=DIR`` runs each simbridge process under cProfile (its
@@ -278,7 +281,7 @@ def classroom(seconds: float) -> bool:
     robots = int(os.environ.get("ROBOTS", "300"))
     fronts = int(os.environ.get("FRONTS", "2"))
     clients = int(os.environ.get("CLIENTS", "300"))
-    loadgens = int(os.environ.get("LOADGENS", "2"))  # load-generator processes per front-end
+    loadgens = int(os.environ.get("LOADGENS", "1"))  # load-generator processes per front-end
     names = [f"s{s}r{k + 1}" for s in range(sims) for k in range(robots)]
     with tempfile.TemporaryDirectory() as tmp, _router_process() as (router, router_proc):
         worlds = [_world(Path(tmp), f"s{s}r", robots, f"sim{s}") for s in range(sims)]
