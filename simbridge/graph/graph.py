@@ -303,7 +303,9 @@ class Graph:
             # one text for two kinds of op is two causes: a page that subscribed with the wrong
             # type still hears why its advertise is refused (it waits for that id's answer)
             cause = f"{type(op).__name__}: {cause}"
-        self.apply(peer, peer.session.refused(text, cause, now, op_id))
+        replies = peer.session.refused(text, cause, now, op_id)
+        if replies:  # most refusals of a flood are counted, not told: no call for them
+            self.apply(peer, replies)
 
     def reject(self, peer: Peer, text: str, op_id: Any) -> None:
         """Tell ``peer`` (only) that its op failed, as a ``status`` error (not budgeted)."""
