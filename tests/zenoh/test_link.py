@@ -404,15 +404,22 @@ async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
         pub.close()
 
 
-def test_the_poll_period_grows_with_the_channels_within_its_bounds(zapp: App) -> None:
-    from simbridge.zenoh.link import POLL_MAX, POLL_MIN
+def test_the_poll_period_grows_with_the_channels_and_slows_down_after_a_silence(
+    zapp: App,
+) -> None:
+    from simbridge.zenoh.link import IDLE_AFTER, POLL_IDLE, POLL_MAX, POLL_MIN
 
     link = zapp.zenoh
     assert link is not None
+    channels, last = link._channel_list, link._last_sample
+    now = 100.0
+    link._last_sample = now - IDLE_AFTER / 2  # samples arrive
     periods = []
     for n in (1, 100, 600, 5000):
         link._channel_list = [(f"/t{k}", None) for k in range(n)]
-        periods.append(link.poll_period())
-    link._channel_list = []
+        periods.append(link.poll_period(now))
     assert periods[0] == POLL_MIN and periods[-1] == POLL_MAX
     assert periods == sorted(periods) and POLL_MIN < periods[1] < POLL_MAX
+    link._last_sample = now - IDLE_AFTER  # a silence: slow polls, whatever the channels
+    assert link.poll_period(now) == POLL_IDLE
+    link._channel_list, link._last_sample = channels, last
