@@ -367,11 +367,13 @@ async def test_a_flood_of_samples_is_handed_over_in_batches_and_bounded(
 
 
 async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
-    zapp: App, router: Router
+    zapp: App, router: Router, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     from zenoh_ros2_sdk import ROS2Publisher
 
     from simbridge.zenoh.link import DRAIN_BATCH, RING
+
+    monkeypatch.setattr("simbridge.zenoh.link.CALLBACK_KEYS", 0)  # every key polled
 
     link = zapp.zenoh
     assert link is not None
@@ -420,12 +422,14 @@ def test_the_poll_period_grows_with_the_channels(zapp: App) -> None:
 
 
 async def test_after_a_silence_the_tick_polls_and_the_next_sample_still_arrives(
-    zapp: App, router: Router
+    zapp: App, router: Router, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     """An idle link keeps no timer of its own (each wake-up costs CPU); its tick polls."""
     from zenoh_ros2_sdk import ROS2Publisher
 
     from simbridge.zenoh.link import IDLE_AFTER
+
+    monkeypatch.setattr("simbridge.zenoh.link.CALLBACK_KEYS", 0)  # every key polled
 
     link = zapp.zenoh
     assert link is not None
@@ -447,3 +451,34 @@ async def test_after_a_silence_the_tick_polls_and_the_next_sample_still_arrives(
             assert msg["msg"] == {"data": "after the silence"}
     finally:
         pub.close()
+
+
+async def test_the_first_keys_come_by_callback_and_the_rest_are_polled(
+    zapp: App, router: Router, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from zenoh_ros2_sdk import ROS2Publisher
+
+    link = zapp.zenoh
+    assert link is not None
+    monkeypatch.setattr("simbridge.zenoh.link.CALLBACK_KEYS", len(link._callback_keys) + 1)
+    pubs = [
+        await asyncio.to_thread(
+            ROS2Publisher, name, "std_msgs/msg/String", node_name=f"n{k}", **sdk_kw(router)
+        )
+        for k, name in enumerate(("/first", "/second"))
+    ]
+    try:
+        await wait_for(lambda: "/second" in zapp.graph.topics.topics, timeout=8)
+        async with connect(ws_url(zapp)) as conn:
+            for name, pub in zip(("/first", "/second"), pubs, strict=True):
+                await send_json(conn, {"op": "subscribe", "topic": name})
+                await wait_for(lambda n=name: n in link._subscribers, timeout=8)
+                await asyncio.to_thread(pub.publish, data=name)
+                msg = await recv_until(conn, lambda m, n=name: m.get("topic") == n, timeout=8)
+                assert msg["msg"] == {"data": name}
+        assert {n for n, _key in link._callback_keys} >= {"/first"}
+        assert "/second" not in {n for n, _key in link._callback_keys}
+        assert "/second" in {n for n, _ in link._channel_list}
+    finally:
+        for pub in pubs:
+            pub.close()
