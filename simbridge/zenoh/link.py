@@ -14,8 +14,9 @@
   gone with them) join the graph, so rosapi lists them and rosbridge clients subscribe, publish
   and call. Data is subscribed only while a rosbridge client or an in-process node listens.
 
-Data samples wait in one Zenoh ring channel per subscribed topic, which the event loop polls
-(no Python callback, hence no GIL hand-over, per sample); Zenoh runs the other callbacks
+Data samples of the first :data:`CALLBACK_KEYS` subscribed keys come by a callback through an
+inbox (at once); past those, they wait in one Zenoh ring channel per key, which the event loop
+polls (no Python callback, hence no GIL hand-over, per sample); Zenoh runs the other callbacks
 (tokens, queries, replies, latched topics' samples) on its own threads, and they only hand them
 to the event loop (``call_soon_threadsafe``). Bad input from the network (a payload that is not
 CDR of its type, an unknown type, a name that clashes, a token that vanishes mid-call) becomes a
