@@ -366,6 +366,21 @@ async def test_a_flood_of_samples_is_handed_over_in_batches_and_bounded(
     await wait_for(lambda: not link._inbox, timeout=10)
 
 
+async def _receive_from(zapp: App, conn: Any, pub: Any, name: str) -> dict[str, Any]:
+    """Subscribe ``conn`` to ``name`` and wait until a sample ``pub`` publishes reaches it.
+
+    Returns the message (``{"data": "probe"}``): the route is up end to end.
+    """
+    link = zapp.zenoh
+    assert link is not None
+    await wait_for(lambda: name in zapp.graph.topics.topics, timeout=8)
+    await send_json(conn, {"op": "subscribe", "topic": name})
+    await wait_for(lambda: name in link._subscribers, timeout=8)
+    await asyncio.to_thread(pub.publish, data="probe")
+    msg = await recv_until(conn, lambda m: m.get("topic") == name, timeout=8)
+    return dict(msg["msg"])
+
+
 async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
     zapp: App, router: Router, monkeypatch: pytest.MonkeyPatch
 ) -> None:
@@ -381,12 +396,8 @@ async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
         ROS2Publisher, "/burst", "std_msgs/msg/String", node_name="burster", **sdk_kw(router)
     )
     try:
-        await wait_for(lambda: "/burst" in zapp.graph.topics.topics, timeout=8)
         async with connect(ws_url(zapp)) as conn:
-            await send_json(conn, {"op": "subscribe", "topic": "/burst"})
-            await wait_for(lambda: "/burst" in link._subscribers, timeout=8)
-            await asyncio.to_thread(pub.publish, data="probe")  # the route is up end to end
-            await recv_until(conn, lambda m: m.get("topic") == "/burst", timeout=8)
+            await _receive_from(zapp, conn, pub, "/burst")
             count = min(RING, DRAIN_BATCH) - 10
 
             def burst() -> None:
@@ -437,12 +448,8 @@ async def test_after_a_silence_the_tick_polls_and_the_next_sample_still_arrives(
         ROS2Publisher, "/quiet", "std_msgs/msg/String", node_name="quiet", **sdk_kw(router)
     )
     try:
-        await wait_for(lambda: "/quiet" in zapp.graph.topics.topics, timeout=8)
         async with connect(ws_url(zapp)) as conn:
-            await send_json(conn, {"op": "subscribe", "topic": "/quiet"})
-            await wait_for(lambda: "/quiet" in link._subscribers, timeout=8)
-            await asyncio.to_thread(pub.publish, data="probe")  # the route is up end to end
-            await recv_until(conn, lambda m: m.get("topic") == "/quiet", timeout=8)
+            await _receive_from(zapp, conn, pub, "/quiet")
             assert link._poll_handle is not None  # samples arrive: polled on a timer
             # a silence: the timer stops (the tick polls, see ZenohLink.tick)
             await wait_for(lambda: link._poll_handle is None, timeout=IDLE_AFTER + 5)
@@ -468,14 +475,9 @@ async def test_the_first_keys_come_by_callback_and_the_rest_are_polled(
         for k, name in enumerate(("/first", "/second"))
     ]
     try:
-        await wait_for(lambda: "/second" in zapp.graph.topics.topics, timeout=8)
         async with connect(ws_url(zapp)) as conn:
             for name, pub in zip(("/first", "/second"), pubs, strict=True):
-                await send_json(conn, {"op": "subscribe", "topic": name})
-                await wait_for(lambda n=name: n in link._subscribers, timeout=8)
-                await asyncio.to_thread(pub.publish, data=name)
-                msg = await recv_until(conn, lambda m, n=name: m.get("topic") == n, timeout=8)
-                assert msg["msg"] == {"data": name}
+                assert await _receive_from(zapp, conn, pub, name) == {"data": "probe"}
         assert {n for n, _key in link._callback_keys} >= {"/first"}
         assert "/second" not in {n for n, _key in link._callback_keys}
         assert "/second" in {n for n, _ in link._channel_list}
