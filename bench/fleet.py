@@ -63,9 +63,7 @@ def arena(n: int, seed: int = 0) -> tuple[World, Graph, RobotBridge, SinkPeer]:
         {"center": rng.uniform(-half + 1, half - 1, 2).tolist(), "size": [1.0, 1.0]}
         for _ in range(max(1, n // 10))
     ]
-    world = World(
-        WorldSpec.model_validate({"walls": walls, "boxes": boxes, "robots": []}), Params()
-    )
+    world = World(WorldSpec.parse({"walls": walls, "boxes": boxes, "robots": []}), Params())
     k = 0
     while len(world.robots) < n:
         x, y = rng.uniform(-half + 0.3, half - 0.3, 2)

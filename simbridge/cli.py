@@ -5,8 +5,8 @@
 an environment variable ``SIMBRIDGE_<OPTION>`` (e.g. ``SIMBRIDGE_PORT=9091``), validated with the
 option's own bounds (:class:`~simbridge.config.Environment`): a bad value is refused naming the
 variable, with exit code 2 as a bad option is. The command line wins. ``healthcheck`` reads
-``SIMBRIDGE_PORT`` without pydantic (it runs every few seconds in a container): a bad port is an
-unhealthy probe.
+``SIMBRIDGE_PORT`` without the settings (it runs every few seconds in a container): a bad port is
+an unhealthy probe.
 """
 
 from __future__ import annotations
@@ -30,8 +30,8 @@ from simbridge.errors import ConfigError, SimbridgeError
 if TYPE_CHECKING:
     from simbridge.config import Environment, ServerSettings
 
-# simbridge.config (pydantic, PyYAML) is imported where it is used: `simbridge healthcheck`, a
-# container's HEALTHCHECK every few seconds, then costs a bare interpreter (it matters on a Pi).
+# simbridge.config is imported where it is used: `simbridge healthcheck`, a container's
+# HEALTHCHECK every few seconds, then costs a bare interpreter (it matters on a Pi).
 
 
 __all__ = ["COMMANDS", "main"]
@@ -456,7 +456,7 @@ _BUILTIN_HASHES = ("_md5", "_sha1", "_sha3", "_blake2") + (
 def _import_hashlib() -> None:
     """Import hashlib and hmac with CPython's own hash functions instead of OpenSSL's.
 
-    With ``_hashlib`` importable, ``import hashlib`` (websockets' handshake: SHA-1; pydantic's
+    With ``_hashlib`` importable, ``import hashlib`` (websockets' handshake: SHA-1; its
     ``secrets`` import, rosauth's SHA-512, the page's ETags) loads OpenSSL's libcrypto and
     initialises its digests: 3.5 MB of an idle server's resident memory on x86-64 (issue 16),
     for a few hashes of short strings that CPython's built-in modules compute alike (the same
@@ -496,7 +496,7 @@ def _release_startup_memory() -> None:
 
 
 def _cmd_run(argv: Sequence[str]) -> int:
-    _import_hashlib()  # before simbridge.config: pydantic imports hashlib (through secrets)
+    _import_hashlib()  # before anything imports hashlib (websockets, through secrets too)
     from simbridge.config import load_params, load_world, server_settings
 
     try:

@@ -1,38 +1,34 @@
 """Settings of simbridge: robot and LiDAR parameters, world files, server options.
 
-Everything is validated once, at startup, by pydantic models. A bad file fails fast with a
+Everything is validated once, at startup, by the settings records of :mod:`simbridge.schema`
+(declared fields with bounds and descriptions). A bad file fails fast with a
 :class:`~simbridge.errors.ConfigError` whose text names the file, the key and the fix, e.g.
-``params file 'pi.yaml': robot.mass: must be greater than 0 (got -1.0)``.
+``params file 'pi.yaml': robot.mass: must be greater than 0 (got -1)``; a record made in code
+(``RobotParams(mass=-1)``) raises :class:`ValidationError` (a ``ValueError``) naming the field.
 
-Files are read with ``yaml.safe_load`` (YAML 1.1: quote ``"off"``/``"no"`` in shipped files).
+Files are read with ``yaml.safe_load`` (YAML 1.1: quote ``"off"``/``"no"`` in shipped files);
+PyYAML is imported only when a file is read: the defaults (:func:`load_params` and
+:func:`load_world` without a path) are built from :data:`DEFAULT_WORLD` and the records' own
+defaults, which tests/test_config.py keeps equal to the bundled files.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Mapping, Sequence
+from collections.abc import Mapping, Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Annotated, Any, Literal, TypeGuard
 
-import yaml
-from pydantic import (
-    BaseModel,
-    ConfigDict,
-    Field,
-    TypeAdapter,
-    ValidationError,
-    field_validator,
-)
-
 from simbridge.errors import ConfigError
+from simbridge.schema import Bounds, Record, ValidationError, converter, setting
 
 
 __all__ = [
+    "DEFAULT_WORLD",
     "Count",
     "Environment",
-    "FiniteFloat",
     "LidarParams",
     "NamedRobotSpec",
     "Params",
@@ -44,6 +40,7 @@ __all__ = [
     "Seconds",
     "ServerSettings",
     "SimParams",
+    "ValidationError",
     "WorldSpec",
     "default_params_path",
     "default_world_path",
@@ -93,105 +90,105 @@ def finite_number(value: object) -> TypeGuard[int | float]:
         return False
 
 
-#: A float that is neither NaN nor infinite (pydantic's own check).
-FiniteFloat = Annotated[float, Field(allow_inf_nan=False)]
-
-
-class _Strict(BaseModel):
-    """Base of every settings model: unknown keys are errors, values are checked on assignment."""
-
-    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
-
-
-class RobotParams(_Strict):
+class RobotParams(Record):
     """Differential-drive robot: the course's Raspberry Pi 4B platform defaults."""
 
-    mass: float = Field(1.5, gt=0, le=1000, description="chassis mass, kg")
-    wheel_radius: float = Field(
-        0.033, gt=0, le=1, description="wheel radius, m (not the 0.066 m diameter)"
+    mass: float = setting(default=1.5, gt=0, le=1000, description="chassis mass, kg")
+    wheel_radius: float = setting(
+        default=0.033, gt=0, le=1, description="wheel radius, m (not the 0.066 m diameter)"
     )
-    wheelbase: float = Field(0.160, gt=0, le=5, description="distance between drive wheels, m")
-    inertia: float = Field(
-        0.0075, gt=0, le=1000, description="moment of inertia about the vertical axis, kg m^2"
+    wheelbase: float = setting(
+        default=0.160, gt=0, le=5, description="distance between drive wheels, m"
     )
-    max_linear_velocity: float = Field(
-        0.5, gt=0, le=20, description="linear-velocity limit on /cmd_vel, m/s"
+    inertia: float = setting(
+        default=0.0075,
+        gt=0,
+        le=1000,
+        description="moment of inertia about the vertical axis, kg m^2",
     )
-    max_angular_velocity: float = Field(
-        2.5, gt=0, le=50, description="angular-velocity limit on /cmd_vel, rad/s"
+    max_linear_velocity: float = setting(
+        default=0.5, gt=0, le=20, description="linear-velocity limit on /cmd_vel, m/s"
     )
-    radius: float = Field(0.105, gt=0, le=5, description="footprint radius for drawing, m")
-    max_wheel_torque: float = Field(
-        0.05, gt=0, le=100, description="dynamic model: torque limit of each wheel motor, N m"
+    max_angular_velocity: float = setting(
+        default=2.5, gt=0, le=50, description="angular-velocity limit on /cmd_vel, rad/s"
     )
-    velocity_gain: float = Field(
-        0.25,
+    radius: float = setting(
+        default=0.105, gt=0, le=5, description="footprint radius for drawing, m"
+    )
+    max_wheel_torque: float = setting(
+        default=0.05,
+        gt=0,
+        le=100,
+        description="dynamic model: torque limit of each wheel motor, N m",
+    )
+    velocity_gain: float = setting(
+        default=0.25,
         gt=0,
         le=1000,
         description="dynamic model: wheel velocity-loop gain, N m per m/s of wheel-speed error",
     )
-    cmd_vel_stamped: bool = Field(
-        False,
+    cmd_vel_stamped: bool = setting(
+        default=False,
         description="cmd_vel is geometry_msgs/msg/TwistStamped instead of Twist (as "
         "diff_drive_controller expects since Jazzy); startup only: set it in the params file",
     )
 
 
-class LidarParams(_Strict):
+class LidarParams(Record):
     """A 2D LiDAR like the RPLIDAR A1 (REP-117 ranges)."""
 
-    rays: int = Field(360, ge=1, le=8192, description="rays per revolution")
-    range_min: float = Field(0.12, ge=0, description="minimum range, m")
-    range_max: float = Field(3.5, gt=0, le=1000, description="maximum range, m")
-    rate: float = Field(10.0, gt=0, le=100, description="scans per second, Hz")
-    mount: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = Field(
-        (0.0, 0.0, 0.0), description="x, y, yaw of frame 'laser' in 'base_link'"
+    rays: int = setting(default=360, ge=1, le=8192, description="rays per revolution")
+    range_min: float = setting(default=0.12, ge=0, description="minimum range, m")
+    range_max: float = setting(default=3.5, gt=0, le=1000, description="maximum range, m")
+    rate: float = setting(default=10.0, gt=0, le=100, description="scans per second, Hz")
+    mount: tuple[float, float, float] = setting(
+        default=(0.0, 0.0, 0.0), description="x, y, yaw of frame 'laser' in 'base_link'"
     )
-    noise_stddev: float = Field(
-        0.0, ge=0, le=1, description="Gaussian range noise, m (0 = exact ranges)"
+    noise_stddev: float = setting(
+        default=0.0, ge=0, le=1, description="Gaussian range noise, m (0 = exact ranges)"
     )
 
-    def model_post_init(self, context: Any, /) -> None:
-        """Check relations between fields."""
+    def check(self) -> None:
+        """Check that the minimum range is below the maximum."""
         if self.range_min >= self.range_max:
             msg = f"range_min ({self.range_min}) must be below range_max ({self.range_max})"
             raise ValueError(msg)
 
 
-class SimParams(_Strict):
+class SimParams(Record):
     """Simulation loop settings."""
 
-    rate: float = Field(20.0, gt=0, le=1000, description="kinematics and /odom rate, Hz")
+    rate: float = setting(default=20.0, gt=0, le=1000, description="kinematics and /odom rate, Hz")
 
 
-class SafetyParams(_Strict):
+class SafetyParams(Record):
     """Server-side safety of the robots (``config/classroom_params.yaml`` turns it on)."""
 
-    cmd_vel_timeout: float = Field(
-        0.0,
+    cmd_vel_timeout: float = setting(
+        default=0.0,
         ge=0,
         le=3600,
         description="stop a robot after this many seconds without /cmd_vel (0 = off: the "
         "robot keeps its last command, as the course describes)",
     )
-    stop_on_disconnect: bool = Field(
-        False, description="stop a robot when the client that last commanded it disconnects"
+    stop_on_disconnect: bool = setting(
+        default=False, description="stop a robot when the client that last commanded it disconnects"
     )
 
 
-class Params(_Strict):
+class Params(Record):
     """The whole parameter file (``config/pi4b_params.yaml``)."""
 
-    robot: RobotParams = Field(default_factory=RobotParams)
-    lidar: LidarParams = Field(default_factory=LidarParams)
-    sim: SimParams = Field(default_factory=SimParams)
-    safety: SafetyParams = Field(default_factory=SafetyParams)
+    robot: RobotParams = setting(default_factory=RobotParams)
+    lidar: LidarParams = setting(default_factory=LidarParams)
+    sim: SimParams = setting(default_factory=SimParams)
+    safety: SafetyParams = setting(default_factory=SafetyParams)
 
     def flat(self) -> dict[str, Any]:
         """Return every setting under its dotted name (``robot.mass``): ROS 2 parameters."""
         out: dict[str, Any] = {}
-        for section in type(self).model_fields:
-            for key, value in getattr(self, section).model_dump().items():
+        for section in type(self).settings():
+            for key, value in getattr(self, section).as_dict().items():
                 out[f"{section}.{key}"] = list(value) if isinstance(value, tuple) else value
         return out
 
@@ -200,33 +197,47 @@ class Params(_Strict):
         """Build and validate settings from dotted names (the inverse of :meth:`flat`).
 
         Raises:
-            ValueError: a value is out of range or the combination is invalid.
+            ValidationError: a value is out of range or the combination is invalid (a
+                ``ValueError``; the text names each dotted setting and why).
         """
         nested: dict[str, dict[str, Any]] = {}
         for name, value in flat.items():
             section, _, key = name.partition(".")
             nested.setdefault(section, {})[key] = value
-        try:
-            return cls.model_validate(nested)
-        except ValidationError as err:
-            raise ValueError(_format_errors(err)) from None
+        return cls.parse(nested)
+
+    @classmethod
+    def sections(cls) -> dict[str, type[Record]]:
+        """Return the record class of each section (``robot`` -> :class:`RobotParams`)."""
+        out: dict[str, type[Record]] = {}
+        for section, spec in cls.settings().items():
+            assert isinstance(spec.kind, type) and issubclass(spec.kind, Record)
+            out[section] = spec.kind
+        return out
 
     @classmethod
     def describe(cls) -> dict[str, str]:
-        """Return a one-line description of every dotted setting."""
-        out: dict[str, str] = {}
-        for section, info in cls.model_fields.items():
-            model = info.annotation
-            assert isinstance(model, type) and issubclass(model, BaseModel)
-            for key, finfo in model.model_fields.items():
-                out[f"{section}.{key}"] = finfo.description or ""
-        return out
+        """Return a one-line description of every dotted setting (from its declaration)."""
+        return {
+            f"{section}.{key}": spec.description
+            for section, record in cls.sections().items()
+            for key, spec in record.settings().items()
+        }
+
+    @classmethod
+    def bounds(cls) -> dict[str, Bounds]:
+        """Return the declared bounds of every dotted setting (empty ones for the unbounded)."""
+        return {
+            f"{section}.{key}": spec.bounds
+            for section, record in cls.sections().items()
+            for key, spec in record.settings().items()
+        }
 
 
-class RobotSpec(_Strict):
+class RobotSpec(Record):
     """A robot of a world file: its start pose (x, y, theta), used at start and by /reset."""
 
-    pose: tuple[FiniteFloat, FiniteFloat, FiniteFloat] = (0.0, 0.0, 0.0)
+    pose: tuple[float, float, float] = setting(default=(0.0, 0.0, 0.0), description="x, y, theta")
 
 
 #: A robot name usable as a ROS namespace: ``r1``, ``alice``, ``team_3``.
@@ -251,12 +262,7 @@ def check_robot_name(name: object) -> str:
 class NamedRobotSpec(RobotSpec):
     """A robot of a ``robots:`` list: its name (its topic namespace) and start pose."""
 
-    name: str
-
-    @field_validator("name")
-    @classmethod
-    def _name(cls, v: str) -> str:
-        return check_robot_name(v)
+    name: str = setting(before=check_robot_name, description="the robot's topic namespace")
 
 
 def _check_numbers(value: Any, count: int, what: str) -> list[float]:
@@ -273,7 +279,41 @@ def _check_numbers(value: Any, count: int, what: str) -> list[float]:
     return out
 
 
-class Box(_Strict):
+def _frame_pose(value: Any) -> list[float]:
+    count = len(value) if isinstance(value, list) else 0
+    return _check_numbers(
+        value, 6 if count == 6 else 3, "[x, y, yaw] or [x, y, z, roll, pitch, yaw]"
+    )
+
+
+def _walls(value: Any) -> Any:
+    if not isinstance(value, list):
+        msg = "must be a list of segments [x1, y1, x2, y2]"
+        raise ValueError(msg)
+    for i, seg in enumerate(value):
+        try:
+            _check_numbers(seg, 4, "[x1, y1, x2, y2]")
+        except ValueError as err:
+            raise ValidationError.one(str(err), f"[{i}]") from None
+    return value
+
+
+def _polygons(value: Any) -> Any:
+    if not isinstance(value, list):
+        msg = "must be a list of polygons, each a list of [x, y] points"
+        raise ValueError(msg)
+    for i, poly in enumerate(value):
+        if not isinstance(poly, list) or len(poly) < 2:
+            raise ValidationError.one("needs at least 2 points [x, y]", f"[{i}]")
+        for j, pt in enumerate(poly):
+            try:
+                _check_numbers(pt, 2, "[x, y]")
+            except ValueError as err:
+                raise ValidationError.one(str(err), f"[{i}][{j}]") from None
+    return value
+
+
+class Box(Record):
     """An axis-aligned (or rotated) rectangular obstacle."""
 
     center: tuple[float, float]
@@ -281,32 +321,24 @@ class Box(_Strict):
     yaw: float = 0.0
 
 
-class Circle(_Strict):
+class Circle(Record):
     """A round obstacle (a pillar), approximated by a regular polygon for raycasting."""
 
     center: tuple[float, float]
-    radius: float = Field(gt=0)
-    segments: int = Field(24, ge=6, le=256)
+    radius: float = setting(gt=0)
+    segments: int = setting(default=24, ge=6, le=256)
 
 
-class StaticFrame(_Strict):
+class StaticFrame(Record):
     """A fixed transform ``parent -> child`` published on ``/tf_static`` (REP-105 frame names).
 
     ``pose`` is ``[x, y, yaw]`` (metres, radians: the 2D case) or ``[x, y, z, roll, pitch,
     yaw]`` as ``static_transform_publisher`` takes them.
     """
 
-    parent: str = Field(min_length=1, max_length=200)
-    child: str = Field(min_length=1, max_length=200)
-    pose: list[float] = Field(default_factory=lambda: [0.0, 0.0, 0.0])
-
-    @field_validator("pose", mode="before")
-    @classmethod
-    def _pose(cls, v: Any) -> Any:
-        count = len(v) if isinstance(v, list) else 0
-        return _check_numbers(
-            v, 6 if count == 6 else 3, "[x, y, yaw] or [x, y, z, roll, pitch, yaw]"
-        )
+    parent: str = setting(min_length=1, max_length=200)
+    child: str = setting(min_length=1, max_length=200)
+    pose: list[float] = setting(default_factory=lambda: [0.0, 0.0, 0.0], before=_frame_pose)
 
     def xyz_rpy(self) -> tuple[float, float, float, float, float, float]:
         """Return the pose as (x, y, z, roll, pitch, yaw)."""
@@ -316,7 +348,7 @@ class StaticFrame(_Strict):
         return (p[0], p[1], p[2], p[3], p[4], p[5])
 
 
-class WorldSpec(_Strict):
+class WorldSpec(Record):
     """A world file: walls and obstacles as line segments, and the robot's start pose.
 
     The minimal form is ``walls: [[x1, y1, x2, y2], ...]`` plus ``robot: {pose: [x, y, th]}``.
@@ -324,21 +356,21 @@ class WorldSpec(_Strict):
     """
 
     name: str = "world"
-    walls: list[tuple[float, float, float, float]] = Field(default_factory=list)
-    boxes: list[Box] = Field(default_factory=list)
-    circles: list[Circle] = Field(default_factory=list)
-    polygons: list[list[tuple[float, float]]] = Field(default_factory=list)
-    robot: RobotSpec = Field(default_factory=RobotSpec)
+    walls: list[tuple[float, float, float, float]] = setting(default_factory=list, before=_walls)
+    boxes: list[Box] = setting(default_factory=list)
+    circles: list[Circle] = setting(default_factory=list)
+    polygons: list[list[tuple[float, float]]] = setting(default_factory=list, before=_polygons)
+    robot: RobotSpec = setting(default_factory=RobotSpec)
     #: Named robots (``/r1/odom``...); ``None`` means the single un-namespaced ``robot``.
     robots: list[NamedRobotSpec] | None = None
     #: Fixed frames published on /tf_static (``{parent: world, child: turtle1, pose: [...]}``).
-    frames: list[StaticFrame] = Field(default_factory=list, max_length=1000)
+    frames: list[StaticFrame] = setting(default_factory=list, max_length=1000)
     #: Start the ROS tutorial nodes (talker, listener, add_two_ints, fibonacci), as
     #: ``--demo-nodes`` does.
     demo_nodes: bool = False
 
-    def model_post_init(self, context: Any, /) -> None:
-        """Check that ``robot`` and ``robots`` are not both given and names are unique."""
+    def check(self) -> None:
+        """Check frames (one parent each), robots (``robot`` or ``robots``, unique names)."""
         children: set[str] = set()
         for i, f in enumerate(self.frames):
             child = f.child.lstrip("/")
@@ -351,7 +383,7 @@ class WorldSpec(_Strict):
             children.add(child)
         if self.robots is None:
             return
-        if "robot" in self.model_fields_set:
+        if "robot" in self.given:
             msg = (
                 "give either 'robot:' (one robot, un-namespaced topics) or 'robots:' "
                 "(named robots, /NAME/odom...), not both"
@@ -370,37 +402,10 @@ class WorldSpec(_Strict):
             return {"": self.robot.pose}
         return {r.name: r.pose for r in self.robots}
 
-    @field_validator("walls", mode="before")
-    @classmethod
-    def _walls(cls, v: Any) -> Any:
-        if not isinstance(v, list):
-            msg = "must be a list of segments [x1, y1, x2, y2]"
-            raise ValueError(msg)
-        for i, seg in enumerate(v):
-            try:
-                _check_numbers(seg, 4, "[x1, y1, x2, y2]")
-            except ValueError as err:
-                msg = f"walls[{i}] {err}"
-                raise ValueError(msg) from None
-        return v
-
-    @field_validator("polygons", mode="before")
-    @classmethod
-    def _polygons(cls, v: Any) -> Any:
-        if not isinstance(v, list):
-            msg = "must be a list of polygons, each a list of [x, y] points"
-            raise ValueError(msg)
-        for i, poly in enumerate(v):
-            if not isinstance(poly, list) or len(poly) < 2:
-                msg = f"polygons[{i}] needs at least 2 points [x, y]"
-                raise ValueError(msg)
-            for j, pt in enumerate(poly):
-                try:
-                    _check_numbers(pt, 2, "[x, y]")
-                except ValueError as err:
-                    msg = f"polygons[{i}][{j}] {err}"
-                    raise ValueError(msg) from None
-        return v
+    def without_robots(self) -> WorldSpec:
+        """Return this world with no robot at all (``--no-sim``: the bridge alone)."""
+        kept = {name: getattr(self, name) for name in self.given if name != "robot"}
+        return WorldSpec(**{**kept, "robots": []})
 
     def segments(self) -> list[tuple[float, float, float, float]]:
         """Return every wall and obstacle edge as a segment ``(x1, y1, x2, y2)``."""
@@ -429,28 +434,51 @@ class WorldSpec(_Strict):
         return segs
 
 
+#: The default world, as ``config/worlds/default.yaml`` has it (comments there): a 6 m x 4 m
+#: room with a few obstacles and a corridor leading east out of it.
+DEFAULT_WORLD: dict[str, Any] = {
+    "name": "default",
+    "walls": [
+        [-3.0, -2.0, 3.0, -2.0],
+        [-3.0, -2.0, -3.0, 2.0],
+        [-3.0, 2.0, 3.0, 2.0],
+        [3.0, 2.0, 3.0, 0.5],
+        [3.0, -0.5, 3.0, -2.0],
+        [3.0, 0.5, 6.0, 0.5],
+        [3.0, -0.5, 6.0, -0.5],
+        [6.0, -0.5, 6.0, 0.5],
+        [0.5, -2.0, 0.5, -1.0],
+    ],
+    "boxes": [
+        {"center": [1.5, 1.0], "size": [0.6, 0.4]},
+        {"center": [-1.2, 1.2], "size": [0.4, 0.8], "yaw": 0.3},
+    ],
+    "circles": [{"center": [-1.5, -1.0], "radius": 0.3}],
+    "robot": {"pose": [0.0, 0.0, 0.0]},
+}
+
+
 def _ring(points: list[tuple[float, float]]) -> list[tuple[float, float, float, float]]:
     return [(*points[k], *points[(k + 1) % len(points)]) for k in range(len(points))]
 
 
 #: Value types of the server settings. Each bound is written once, here, and holds alike for
 #: ``ServerSettings(...)``, the command line and the ``SIMBRIDGE_*`` environment variables.
-Port = Annotated[int, Field(ge=0, le=65535, description="TCP port; 0 picks a free one")]
-Count = Annotated[int, Field(gt=0)]
-Seconds = Annotated[float, Field(gt=0, allow_inf_nan=False)]
-Rate = Annotated[float, Field(gt=0, allow_inf_nan=False)]
+#: A TCP port; 0 picks a free one.
+Port = Annotated[int, Bounds(ge=0, le=65535)]
+Count = Annotated[int, Bounds(gt=0)]
+Seconds = Annotated[float, Bounds(gt=0)]
+Rate = Annotated[float, Bounds(gt=0)]
 LogLevel = Literal["debug", "info", "warning", "error"]
 
 
-class ServerSettings(BaseModel):
+class ServerSettings(Record, frozen=True):
     """Network and limit settings of one simbridge process (command-line options).
 
-    Validated like the files: ``ServerSettings(stall_timeout=-5)`` raises a pydantic
-    ``ValidationError`` naming the field; :func:`server_settings` turns it into a
-    :class:`~simbridge.errors.ConfigError`.
+    Validated like the files: ``ServerSettings(stall_timeout=-5)`` raises
+    :class:`ValidationError` naming the field; :func:`server_settings` says they are settings.
+    Frozen: validated once, never changed.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     host: str = "0.0.0.0"
     port: Port = 9090
@@ -512,7 +540,7 @@ class ServerSettings(BaseModel):
     #: ``status`` refusals per client per second (one per cause per second); the rest counted.
     statuses_per_second: Count = 10
     #: Share of the loop's time one client's incoming frames may take (0.25: a quarter).
-    client_work_share: Annotated[float, Field(gt=0, le=1)] = 0.25
+    client_work_share: float = setting(default=0.25, gt=0, le=1)
     #: Sustained ``publish`` ops per second per client, and the burst allowed above it.
     publish_rate: Rate = 200.0
     publish_burst: Count = 400
@@ -537,7 +565,7 @@ class ServerSettings(BaseModel):
     tf_max_timeout: Seconds = 60.0
     #: Client tokens (query parameter ``?token=``): token -> scope. A scope is ``"*"`` (any
     #: topic) or a robot name (publish only under ``/<name>/``). Empty: no client tokens.
-    client_tokens: dict[str, str] = Field(default_factory=dict)
+    client_tokens: dict[str, str] = setting(default_factory=dict)
     #: rosauth shared secret for the ``auth`` op (None: the op is refused).
     auth_secret: str | None = None
     #: Seconds of clock difference an ``auth`` op's ``t`` may have (rosauth's allowed_time_delta).
@@ -559,38 +587,31 @@ def server_settings(**values: Any) -> ServerSettings:
 
     Raises:
         ConfigError: a value is out of its bounds or of the wrong type, or a name is unknown;
-            the text names each (``settings: stall_timeout: Input should be greater than 0``).
+            the text names each (``settings: stall_timeout: must be greater than 0 (got -5)``).
     """
     try:
         return ServerSettings(**values)
     except ValidationError as err:
-        raise ConfigError(f"settings: {_format_errors(err)}") from None
+        raise ConfigError(f"settings: {err}") from None
 
 
 def parse_value(kind: Any, text: str) -> Any:
     """Return ``text`` as a value of ``kind`` (:data:`Port`, :data:`Count`, :data:`Seconds`...).
 
     Raises:
-        ValueError: the text is not such a value; the message says why, in the words of the
-            settings' own errors (``Input should be greater than 0 (got '-5')``).
+        ValidationError: the text is not such a value (a ``ValueError``); the message says why,
+            in the words of the settings' own errors (``must be greater than 0 (got '-5')``).
     """
-    try:
-        return TypeAdapter(kind).validate_python(text)
-    except ValidationError as err:
-        raise ValueError(
-            _format_errors(err, lambda loc: loc).removeprefix("(top level): ")
-        ) from None
+    return converter(kind)(text)
 
 
-class Environment(BaseModel):
+class Environment(Record, frozen=True):
     """The ``SIMBRIDGE_*`` environment variables of the ``simbridge`` command, validated.
 
     Each field is the variable without its prefix, lower-cased (``SIMBRIDGE_MAX_CLIENTS`` ->
     ``max_clients``); unset or empty variables are None (the option's default applies). The
     command line wins over the environment.
     """
-
-    model_config = ConfigDict(extra="forbid", frozen=True)
 
     host: str | None = None
     port: Port | None = None
@@ -621,37 +642,24 @@ class Environment(BaseModel):
 
         Raises:
             ConfigError: a variable's value is invalid; the text names the variable, the value
-                and the bound, e.g. ``environment variable SIMBRIDGE_STALL_TIMEOUT: Input
-                should be greater than 0 (got '-5')``.
+                and the bound, e.g. ``environment variable SIMBRIDGE_STALL_TIMEOUT: must be
+                greater than 0 (got '-5')``.
         """
         values = {
             name: environ[f"SIMBRIDGE_{name.upper()}"]
-            for name in cls.model_fields
+            for name in cls.settings()
             if environ.get(f"SIMBRIDGE_{name.upper()}", "").strip()
         }
         try:
-            return cls(**values)
+            return cls.parse(values)
         except ValidationError as err:
-            text = _format_errors(err, lambda loc: f"environment variable SIMBRIDGE_{loc.upper()}")
+            text = err.describe(lambda loc: f"environment variable SIMBRIDGE_{loc.upper()}")
             raise ConfigError(text) from None
 
 
-def _format_errors(err: ValidationError, name: Callable[[str], str] = str) -> str:
-    parts = []
-    for e in err.errors():
-        loc = ".".join(str(p) for p in e["loc"])
-        loc = name(loc) if loc else "(top level)"
-        text = e["msg"]
-        if e["type"] == "extra_forbidden":
-            text = "unknown key (check its spelling and nesting)"
-        elif "input" in e and e["type"] not in ("missing", "value_error"):
-            text = f"{text} (got {e['input']!r})"
-        text = text.removeprefix("Value error, ")
-        parts.append(f"{loc}: {text}")
-    return "; ".join(parts)
-
-
 def _read_yaml(path: Path, kind: str) -> dict[str, Any]:
+    import yaml  # here, not at the top: a run without a file does not load PyYAML (issue 16)
+
     try:
         text = path.read_text(encoding="utf-8")
     except OSError as err:
@@ -673,34 +681,42 @@ def _read_yaml(path: Path, kind: str) -> dict[str, Any]:
 
 
 def load_params(path: Path | str | None = None) -> Params:
-    """Load and validate a parameter file; ``None`` loads the bundled Pi 4B defaults.
+    """Load and validate a parameter file; ``None``: the Pi 4B platform defaults.
+
+    The defaults are :class:`Params`' own, the values of the bundled ``pi4b_params.yaml``
+    (tests/test_config.py keeps them equal), so they need no YAML parser.
 
     Raises:
         ConfigError: the file is missing, not YAML, or a key or value is invalid.
     """
-    p = Path(path) if path is not None else default_params_path()
+    if path is None:
+        return Params()
+    p = Path(path)
     data = _read_yaml(p, "params")
     try:
-        return Params.model_validate(data)
+        return Params.parse(data)
     except ValidationError as err:
-        msg = f"params file '{p}': {_format_errors(err)}"
-        raise ConfigError(msg) from None
+        raise ConfigError(f"params file '{p}': {err}") from None
 
 
 def load_world(path: Path | str | None = None) -> WorldSpec:
-    """Load and validate a world file; ``None`` loads the bundled default world.
+    """Load and validate a world file; ``None``: the default world (:data:`DEFAULT_WORLD`).
+
+    The default world is the bundled ``worlds/default.yaml`` (tests/test_config.py keeps them
+    equal), built without a YAML parser.
 
     Raises:
         ConfigError: the file is missing, not YAML, or a key or value is invalid.
     """
-    p = Path(path) if path is not None else default_world_path()
+    if path is None:
+        return WorldSpec.parse(DEFAULT_WORLD)
+    p = Path(path)
     data = _read_yaml(p, "world")
     data.setdefault("name", p.stem)
     try:
-        return WorldSpec.model_validate(data)
+        return WorldSpec.parse(data)
     except ValidationError as err:
-        msg = f"world file '{p}': {_format_errors(err)}"
-        raise ConfigError(msg) from None
+        raise ConfigError(f"world file '{p}': {err}") from None
 
 
 def load_client_tokens(path: Path | str) -> dict[str, str]:

@@ -133,7 +133,7 @@ class App:
         #: rosbridge in front of the ROS 2 graph).
         self.no_sim = no_sim
         if no_sim:
-            spec = spec.model_copy(update={"robots": []})
+            spec = spec.without_robots()
         prm = params if isinstance(params, Params) else load_params(params)
         #: The simulation.
         self.world = World(spec, prm, seed=seed)

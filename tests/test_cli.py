@@ -267,7 +267,7 @@ def test_bad_option_is_refused_like_the_environment(
         main([option, value])
     assert exc.value.code == 2
     err = capsys.readouterr().err
-    assert f"argument {option}: Input should be" in err
+    assert f"argument {option}: must be" in err
     assert why in err
 
 

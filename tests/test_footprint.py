@@ -7,13 +7,13 @@ port answers and the resident set has settled, reports ``sys.modules``, VmRSS an
 (RssAnon: this process's own memory; RssFile: pages of mapped files, the shared libraries), and
 stops the server with SIGINT (the normal shutdown).
 
-RssFile depends on the page cache, not only on the code: on Linux 6.16+ with ext4 (large folios)
-a freshly written file, e.g. a shared library pip has just installed, sits in the cache as large
-folios, and a page fault maps a whole folio; the same library read back from disk later is cached
-in small folios and the same run maps less of it. The same commit measured 56.2 MB in an old
-venv and 62.7 MB in a fresh clone's venv (CI's case), the whole difference in RssFile (numpy's
-and pydantic-core's libraries); evicting the fresh venv's libraries from the cache
-(``posix_fadvise(DONTNEED)``) brought it to 56.2 MB. So RSS has a ceiling that a fresh clone
+RssFile depends on the page cache, not only on the code: on Linux 6.16+ with ext4 (large folios) a
+freshly written file, e.g. a shared library pip has just installed, sits in the cache as large
+folios, and a page fault maps a whole folio; the same library read back from disk later is cached in
+small folios and the same run maps less of it. The same commit measured 56.2 MB in an old venv and
+62.7 MB in a fresh clone's venv (CI's case), the whole difference in RssFile (numpy's and
+pydantic-core's libraries, then on the default path); evicting the fresh venv's libraries from the
+cache (``posix_fadvise(DONTNEED)``) brought it to 56.2 MB. So RSS has a ceiling that a fresh clone
 meets, and RssAnon, which the page cache does not change, a tight one.
 
 Where the memory goes: ``python -m bench memory`` (the share of each import group), and
@@ -48,9 +48,17 @@ IDLE_ANON_CEILING_MB = 34.0
 
 #: Modules a default run has no use for: tools, bag writing, optional transports, test libraries;
 #: and those it needs only when asked for: ssl (--certfile), numpy.random (LiDAR noise), cbor2
-#: (a client subscribing with compression cbor or cbor-raw), the tutorial nodes (--demo-nodes);
-#: OpenSSL's hashes (``_hashlib``, libcrypto: CPython's own compute the same digests).
+#: (a client subscribing with compression cbor or cbor-raw), the tutorial nodes (--demo-nodes),
+#: PyYAML (a --world, --params or --client-tokens file: the defaults are built without it);
+#: OpenSSL's hashes (``_hashlib``, libcrypto: CPython's own compute the same digests); pydantic
+#: and what it alone imports (the settings are simbridge.schema's records: 6.2 MB, issue 16).
 NOT_ON_THE_DEFAULT_PATH = (
+    "pydantic",
+    "pydantic_core",
+    "annotated_types",
+    "typing_inspection",
+    "yaml",
+    "_yaml",
     "ssl",
     "_ssl",
     "_hashlib",

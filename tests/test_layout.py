@@ -148,4 +148,6 @@ def test_top_level_holds_the_parts_and_the_entry_points() -> None:
     top = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem not in ("__init__", "__main__"))
     packages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
     assert packages == ["graph", "msgs", "protocol", "sim", "tools", "web", "zenoh"]
-    assert top == ["cli", "config", "errors", "headless", "runner", "server"]
+    # schema: the typed settings records config.py declares its settings with (issue 16: no
+    # pydantic); not inside config, whose name the bundled config/ folder takes in the wheel
+    assert top == ["cli", "config", "errors", "headless", "runner", "schema", "server"]

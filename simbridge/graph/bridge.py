@@ -114,6 +114,7 @@ class RobotBridge:
             read=lambda: self.world.params.flat(),
             write=self._write_params,
             descriptions=Params.describe(),
+            bounds=Params.bounds(),
             read_only=STARTUP_ONLY,
         )
         self.params.on_change.append(self._params_changed)

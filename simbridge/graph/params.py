@@ -15,6 +15,7 @@ from typing import Any
 
 from simbridge.config import finite_number
 from simbridge.errors import ServiceError
+from simbridge.schema import Bounds
 
 
 __all__ = ["ParamNode", "ParameterStore", "param_type"]
@@ -88,6 +89,8 @@ class ParamNode:
         write: validates and applies a complete new flat mapping; raises ``ValueError`` with
             a reason when the combination is invalid (nothing applied then).
         descriptions: one line per parameter, shown by ``describe_parameters``.
+        bounds: the declared bounds of numeric parameters (``describe_parameters`` shows them
+            as ROS 2 ranges and constraints).
         read_only: names that cannot be changed at run time.
     """
 
@@ -95,6 +98,7 @@ class ParamNode:
     read: Callable[[], dict[str, Any]]
     write: Callable[[dict[str, Any]], None]
     descriptions: dict[str, str] = field(default_factory=dict)
+    bounds: dict[str, Bounds] = field(default_factory=dict)
     read_only: frozenset[str] = frozenset()
     #: Called with the changed names after every applied change.
     on_change: list[Callable[[list[str]], None]] = field(default_factory=list)

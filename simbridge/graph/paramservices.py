@@ -31,6 +31,7 @@ from simbridge.graph.params import (
 
 if TYPE_CHECKING:
     from simbridge.graph.graph import Graph
+    from simbridge.schema import Bounds
 
 __all__ = ["from_parameter_value", "install_parameter_services", "to_parameter_value"]
 
@@ -76,6 +77,28 @@ def from_parameter_value(value: dict[str, Any]) -> Any:
     if isinstance(found, bytes):
         return list(found)
     return found
+
+
+def _describe_bounds(descriptor: dict[str, Any], bounds: Bounds | None) -> None:
+    """Fill a ParameterDescriptor's constraints from a parameter's declared bounds.
+
+    ``additional_constraints`` says them in words (``> 0 and <= 1000``); a range
+    (``floating_point_range`` or ``integer_range``: inclusive at both ends, as rcl_interfaces
+    defines it) only where both bounds are inclusive, so that it never admits a refused value.
+    """
+    if bounds is None or not bounds.text():
+        return
+    descriptor["additional_constraints"] = bounds.text()
+    if bounds.ge is None or bounds.le is None:
+        return
+    if descriptor["type"] == PARAMETER_INTEGER:
+        low, high = int(bounds.ge), int(bounds.le)
+        descriptor["integer_range"] = [{"from_value": low, "to_value": high, "step": 0}]
+    elif descriptor["type"] == PARAMETER_DOUBLE:
+        low_f, high_f = float(bounds.ge), float(bounds.le)
+        descriptor["floating_point_range"] = [
+            {"from_value": low_f, "to_value": high_f, "step": 0.0}
+        ]
 
 
 def install_parameter_services(graph: Graph) -> None:
@@ -136,6 +159,7 @@ def _install(graph: Graph, node: ParamNode) -> None:
                 d["type"] = param_type(values[name])
                 d["description"] = node.descriptions.get(name, "")
                 d["read_only"] = name in node.read_only
+                _describe_bounds(d, node.bounds.get(name))
             out.append(d)
         return {"descriptors": out}
 

@@ -14,7 +14,7 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from simbridge.config import Params, RobotParams, WorldSpec, check_robot_name
+from simbridge.config import Params, RobotParams, ValidationError, WorldSpec, check_robot_name
 from simbridge.sim.collision import Contact, pose_clear, resolve_moves
 from simbridge.sim.kinematics import RobotState, clamp_command, integrate, wrap_angle
 from simbridge.sim.lidar import FloatArray, beam_angles, raycast_batch, segments_array
@@ -88,7 +88,7 @@ class Robot:
         if not self.overrides:
             return shared
         if self.cached is None or self.cached[0] is not shared:
-            own = RobotParams.model_validate({**shared.model_dump(), **self.overrides})
+            own = shared.replace(**self.overrides)
             self.cached = (shared, own)
         return self.cached[1]
 
@@ -366,7 +366,10 @@ class World:
             raise ValueError(msg)
         overrides = {**robot.overrides, **changes}
         kept = {k: v for k, v in overrides.items() if v is not None}
-        own = RobotParams.model_validate({**self.params.robot.model_dump(), **kept})
+        try:
+            own = self.params.robot.replace(**kept)
+        except ValidationError as err:
+            raise err.within("robot") from None
         robot.overrides = {k: getattr(own, k) for k in kept}
         robot.cached = (self.params.robot, own) if kept else None
         return own

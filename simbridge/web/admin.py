@@ -134,8 +134,6 @@ def token_from_headers(headers: Mapping[str, str]) -> str | None:
 
 def _first_line(err: Exception) -> str:
     lines = [line.strip() for line in str(err).splitlines() if line.strip()]
-    if len(lines) >= 3 and "validation error" in lines[0]:
-        return f"{lines[1]}: {lines[2].split(' [')[0]}"  # pydantic: field, then the reason
     return lines[0] if lines else type(err).__name__
 
 

@@ -12,7 +12,7 @@ from tests.helpers import wait_for, ws_url
 
 pytestmark = pytest.mark.e2e
 
-WORLD = WorldSpec.model_validate(
+WORLD = WorldSpec.parse(
     {
         "walls": [[-3, -2, 3, -2], [3, -2, 3, 2], [3, 2, -3, 2], [-3, 2, -3, -2]],
         "robots": [{"name": "r1", "pose": [0, 0, 0]}],

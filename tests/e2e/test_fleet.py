@@ -11,7 +11,7 @@ from tests.helpers import ws_url
 
 pytestmark = pytest.mark.e2e
 
-WORLD = WorldSpec.model_validate(
+WORLD = WorldSpec.parse(
     {
         "walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]],
         "robots": [{"name": "r1", "pose": [-1, 0, 0]}, {"name": "r2", "pose": [1, 0, 0]}],

@@ -15,7 +15,7 @@ from tests.helpers import ws_url
 pytestmark = pytest.mark.e2e
 
 #: A world file with the turtlesim tutorial's static frame, and the tutorial nodes on.
-WORLD = WorldSpec.model_validate(
+WORLD = WorldSpec.parse(
     {
         "demo_nodes": True,
         "frames": [{"parent": "world", "child": "turtle1", "pose": [1.0, 2.0, math.pi / 2]}],

@@ -18,7 +18,7 @@ BOX = {"walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]]
 @pytest.fixture
 def setup() -> tuple[Graph, World, RobotBridge]:
     graph = Graph(wall_clock_ns=lambda: 42_000_000_007)
-    spec = WorldSpec.model_validate(
+    spec = WorldSpec.parse(
         {**BOX, "robots": [{"name": "r1", "pose": [-1, 0, 0]}, {"name": "r2", "pose": [1, 0, 0]}]}
     )
     world = World(spec, Params())

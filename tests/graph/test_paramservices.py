@@ -61,3 +61,17 @@ def test_list_and_describe_parameters(graph: Graph) -> None:
         "descriptors"
     ]
     assert d["type"] == 2 and d["description"]
+    assert d["integer_range"] == [{"from_value": 1, "to_value": 8192, "step": 0}]
+    assert d["additional_constraints"] == ">= 1 and <= 8192"
+
+
+def test_describe_parameters_gives_the_declared_bounds(graph: Graph) -> None:
+    """Constraints from the parameters' declarations; a ROS range only where it is inclusive."""
+    names = ["robot.mass", "lidar.noise_stddev", "lidar.mount", "safety.stop_on_disconnect"]
+    mass, noise, mount, flag = call(graph, "/virtual_robot/describe_parameters", {"names": names})[
+        "descriptors"
+    ]
+    assert (mass["additional_constraints"], mass["floating_point_range"]) == ("> 0 and <= 1000", [])
+    assert mass["description"] == Params.describe()["robot.mass"]
+    assert noise["floating_point_range"] == [{"from_value": 0.0, "to_value": 1.0, "step": 0.0}]
+    assert mount["additional_constraints"] == flag["additional_constraints"] == ""

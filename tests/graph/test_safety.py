@@ -81,7 +81,7 @@ def test_disconnect_leaves_the_robot_moving_when_the_option_is_off() -> None:
 
 def test_a_removed_robot_is_forgotten_and_its_topic_can_go() -> None:
     graph = Graph()
-    spec = WorldSpec.model_validate(
+    spec = WorldSpec.parse(
         {"robots": [{"name": "r1", "pose": [0, 0, 0]}, {"name": "r2", "pose": [1, 0, 0]}]}
     )
     world = World(spec, Params(safety=SafetyParams(cmd_vel_timeout=0.5)))

@@ -21,7 +21,7 @@ def test_torque_limited_acceleration_is_2_tau_over_r_m() -> None:
     p = RobotParams()
     a = 2 * p.max_wheel_torque / (p.wheel_radius * p.mass)
     assert run(p, 0.5, 0.0, 1).v == pytest.approx(a * 0.05)
-    heavy = p.model_copy(update={"mass": 2 * p.mass})
+    heavy = p.replace(mass=2 * p.mass)
     assert run(heavy, 0.5, 0.0, 1).v == pytest.approx(a * 0.05 / 2)
 
 

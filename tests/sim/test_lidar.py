@@ -9,7 +9,7 @@ from simbridge.config import WorldSpec
 from simbridge.sim.lidar import beam_angles, raycast, raycast_batch, segments_array
 
 
-SQUARE = WorldSpec.model_validate(
+SQUARE = WorldSpec.parse(
     {
         "walls": [
             [-2.0, -2.0, 2.0, -2.0],

@@ -55,7 +55,7 @@ def test_limits_changed_at_run_time_apply_at_the_next_step() -> None:
 
 def test_reset_returns_every_robot_to_its_start_pose_stopped() -> None:
     """reset(): start pose, zero velocity, no pending command, time back to 0."""
-    spec = WorldSpec.model_validate({"robot": {"pose": [1.0, 2.0, 0.5]}})
+    spec = WorldSpec.parse({"robot": {"pose": [1.0, 2.0, 0.5]}})
     world = World(spec, Params())
     world.command("", 0.3, 0.3)
     for _ in range(5):
@@ -69,7 +69,7 @@ def test_reset_returns_every_robot_to_its_start_pose_stopped() -> None:
 
 def test_scan_comes_from_the_laser_mount_pose() -> None:
     """A laser mounted 0.1 m ahead sees the wall in front 0.1 m closer."""
-    spec = WorldSpec.model_validate({"walls": [[1.0, -1.0, 1.0, 1.0]]})
+    spec = WorldSpec.parse({"walls": [[1.0, -1.0, 1.0, 1.0]]})
     plain = World(spec, Params())
     mounted = World(spec, Params.from_flat({**Params().flat(), "lidar.mount": [0.1, 0.0, 0.0]}))
     assert plain.scan("")[0] == pytest.approx(1.0)
@@ -78,7 +78,7 @@ def test_scan_comes_from_the_laser_mount_pose() -> None:
 
 def test_scan_is_float32_and_clipped_to_the_sensor_range() -> None:
     """Ranges are float32 within [range_min, range_max]; a wall closer than range_min saturates."""
-    spec = WorldSpec.model_validate({"walls": [[0.05, -1.0, 0.05, 1.0]]})
+    spec = WorldSpec.parse({"walls": [[0.05, -1.0, 0.05, 1.0]]})
     ranges = World(spec, Params()).scan("")
     assert ranges.dtype == np.float32
     assert ranges[0] == pytest.approx(0.12)
@@ -142,7 +142,7 @@ BOX = {"walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]]
 
 
 def fleet(*robots: tuple[str, float, float, float]) -> World:
-    spec = WorldSpec.model_validate(
+    spec = WorldSpec.parse(
         {**BOX, "robots": [{"name": n, "pose": [x, y, t]} for n, x, y, t in robots]}
     )
     return World(spec, Params())

@@ -1,0 +1,272 @@
+from __future__ import annotations
+
+import copy
+import pickle
+from typing import Annotated, Any, Literal
+
+import numpy as np
+import pytest
+
+from simbridge.config import (
+    Count,
+    Params,
+    Port,
+    RobotParams,
+    ServerSettings,
+    WorldSpec,
+    parse_value,
+)
+from simbridge.errors import ConfigError
+from simbridge.schema import Bounds, Record, ValidationError, converter, setting
+
+
+class Inner(Record):
+    """A nested record with a relation between its fields."""
+
+    low: float = setting(default=0.0, ge=0)
+    high: float = setting(default=1.0, le=10)
+
+    def check(self) -> None:
+        if self.low >= self.high:
+            msg = f"low ({self.low}) must be below high ({self.high})"
+            raise ValueError(msg)
+
+
+class Sample(Record):
+    """One field of each kind the settings use."""
+
+    count: int = setting(default=1, ge=1, le=8)
+    ratio: float = setting(default=0.5, gt=0, lt=1, description="a share")
+    flag: bool = False
+    label: str = setting(default="x", min_length=1, max_length=5)
+    level: Literal["debug", "info"] = "info"
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    names: tuple[str, ...] | None = None
+    points: list[tuple[float, float]] = setting(default_factory=list, max_length=3)
+    tokens: dict[str, str] = setting(default_factory=dict)
+    port: Port | None = None
+    inner: Inner = setting(default_factory=Inner)
+    items: list[Inner] = setting(default_factory=list)
+    needed: str = setting(before=str.strip)
+
+
+class Frozen(Record, frozen=True):
+    value: int = 0
+
+
+def refusal(**values: Any) -> str:
+    with pytest.raises(ValidationError) as err:
+        Sample(needed="n", **values)
+    return str(err.value)
+
+
+@pytest.mark.parametrize(
+    ("values", "text"),
+    [
+        ({"count": 0}, "count: must be greater than or equal to 1 (got 0)"),
+        ({"count": 9}, "count: must be less than or equal to 8 (got 9)"),
+        ({"ratio": 0}, "ratio: must be greater than 0 (got 0)"),
+        ({"ratio": 1.0}, "ratio: must be less than 1 (got 1.0)"),
+        ({"label": ""}, "label: must not be empty (got '')"),
+        ({"label": "toolong"}, "label: must have at most 5 characters (got 7)"),
+        ({"points": [[0, 0]] * 4}, "points: must have at most 3 items (got 4)"),
+        ({"level": "loud"}, "level: must be 'debug' or 'info' (got 'loud')"),
+        ({"port": 70000}, "port: must be less than or equal to 65535 (got 70000)"),
+        ({"inner": {"low": -1}}, "inner.low: must be greater than or equal to 0 (got -1)"),
+        ({"inner": {"low": 5, "high": 2}}, "inner: low (5.0) must be below high (2.0)"),
+        ({"items": [{}, {"high": 11}]}, "items[1].high: must be less than or equal to 10 (got 11)"),
+        ({"inner": []}, "inner: must be a mapping of keys (got [])"),
+        ({"inner": {"hihg": 2}}, "inner.hihg: unknown key (check its spelling and nesting)"),
+    ],
+)
+def test_out_of_bounds_values_are_refused_naming_the_path_and_the_bound(
+    values: dict[str, Any], text: str
+) -> None:
+    assert refusal(**values) == text
+
+
+@pytest.mark.parametrize(
+    ("values", "text"),
+    [
+        ({"count": True}, "count: must be an integer, not a boolean (got True)"),
+        ({"ratio": False}, "ratio: must be a number, not a boolean (got False)"),
+        ({"ratio": np.bool_(True)}, "ratio: must be a number, not a boolean"),
+        ({"count": 1.5}, "count: must be a valid integer (got 1.5)"),
+        ({"count": "two"}, "count: must be a valid integer (got 'two')"),
+        ({"ratio": "half"}, "ratio: must be a number (got 'half')"),
+        ({"ratio": None}, "ratio: must be a number (got None)"),
+        ({"ratio": float("nan")}, "ratio: must be a finite number (got nan)"),
+        ({"ratio": "inf"}, "ratio: must be a finite number (got 'inf')"),
+        ({"pose": [0, 0, 10**400]}, "pose[2]: must be a finite number"),
+        ({"flag": 2}, "flag: must be a valid boolean: true/false, yes/no, on/off or 1/0 (got 2)"),
+        ({"flag": "maybe"}, "flag: must be a valid boolean"),
+        ({"label": 5}, "label: must be a string (got 5)"),
+        ({"pose": [0, 0]}, "pose: must have 3 items (got 2: [0, 0])"),
+        ({"pose": "abc"}, "pose: must be a list of 3 items (got 'abc')"),
+        ({"pose": [0, "x", None]}, "pose[1]: must be a number (got 'x'); pose[2]: must be a"),
+        ({"names": "ab"}, "names: must be a list (got 'ab')"),
+        ({"tokens": {"a": 1}}, "tokens['a']: must be a string (got 1)"),
+        ({"tokens": [("a", "b")]}, "tokens: must be a mapping"),
+        ({"colour": "red"}, "colour: unknown key (check its spelling and nesting)"),
+    ],
+)
+def test_values_of_the_wrong_kind_are_refused_and_bools_are_not_numbers(
+    values: dict[str, Any], text: str
+) -> None:
+    assert refusal(**values).startswith(text)
+
+
+def test_every_refusal_of_a_record_is_reported_at_once() -> None:
+    """Two bad fields and a missing one: one error listing all three, each with its path."""
+    with pytest.raises(ValidationError) as err:
+        Sample(count=0, label="")
+    assert err.value.errors == [
+        ("count", "must be greater than or equal to 1 (got 0)"),
+        ("label", "must not be empty (got '')"),
+        ("needed", "required, but missing"),
+    ]
+
+
+def test_coercions_that_files_and_the_environment_rely_on() -> None:
+    """Ints for floats, lists for tuples, numeric and boolean text, numpy's scalars."""
+    s = Sample(
+        needed="  n  ",
+        count="3",
+        ratio=" 0.25 ",
+        flag="Yes",
+        pose=[1, np.float64(2.5), np.int64(3)],
+        names=["a", "b"],
+        points=[(0, 1)],
+        port="8080",
+        inner={"low": 1, "high": "2"},
+    )
+    assert (s.count, s.ratio, s.flag, s.needed) == (3, 0.25, True, "n")
+    assert s.pose == (1.0, 2.5, 3.0) and all(type(v) is float for v in s.pose)
+    assert (s.names, s.points, s.port) == (("a", "b"), [(0.0, 1.0)], 8080)
+    assert s.inner == Inner(low=1.0, high=2.0)
+    assert Sample(needed="n", count=2.0, flag=0).count == 2
+    assert Sample(needed="n", flag="off").flag is False
+    assert Sample(needed="n", count=np.int64(4)).count == 4
+
+
+def test_a_record_validates_assignment_and_its_relations_and_keeps_the_old_value() -> None:
+    inner = Inner()
+    inner.high = 5
+    assert inner.high == 5.0 and inner.given == {"high"}
+    with pytest.raises(ValidationError, match=r"^high: must be less than or equal to 10"):
+        inner.high = 11
+    with pytest.raises(ValidationError, match=r"^low \(6\.0\) must be below high"):
+        inner.low = 6
+    assert (inner.low, inner.high) == (0.0, 5.0)
+    with pytest.raises(ValidationError, match="Inner has no setting 'middle'"):
+        inner.middle = 1  # type: ignore[attr-defined]
+
+
+def test_a_frozen_record_refuses_every_change() -> None:
+    frozen = Frozen(value=2)
+    with pytest.raises(ValidationError, match="value: cannot be changed"):
+        frozen.value = 3  # type: ignore[misc]
+    assert frozen.value == 2
+    with pytest.raises(ValidationError, match=r"^max_clients: cannot be changed"):
+        ServerSettings().max_clients = 5  # type: ignore[misc]
+
+
+def test_parse_replace_as_dict_and_given() -> None:
+    """Records parse a mapping, replace validates, as_dict gives plain data back."""
+    s = Sample.parse({"needed": "n", "inner": {"high": 3}})
+    assert s.given == {"needed", "inner"} and s.inner.given == {"high"}
+    t = s.replace(count=4)
+    assert (t.count, t.inner, s.count) == (4, s.inner, 1)
+    with pytest.raises(ValidationError, match=r"^count: must be less than or equal to 8"):
+        s.replace(count=80)
+    data = s.as_dict()
+    assert data["inner"] == {"low": 0.0, "high": 3.0} and data["pose"] == (0.0, 0.0, 0.0)
+    assert Sample.parse(data) == s
+    with pytest.raises(ValidationError, match=r"^must be a mapping of keys \(got \[1\]\)"):
+        Sample.parse([1])  # type: ignore[arg-type]
+    with pytest.raises(ValidationError, match=r"^1: keys must be names"):
+        Sample.parse({1: "x"})
+
+
+def test_records_copy_pickle_compare_and_show_their_values() -> None:
+    p = Params()
+    assert copy.deepcopy(p) == p and pickle.loads(pickle.dumps(p)) == p
+    assert p != Params(robot=RobotParams(mass=2))
+    assert repr(RobotParams()).startswith("RobotParams(mass=1.5, wheel_radius=0.033, ")
+
+
+def test_validation_error_is_a_value_error_and_a_config_error_with_paths() -> None:
+    err = ValidationError([("mass", "must be greater than 0 (got -1)"), ("", "bad pair")])
+    assert isinstance(err, ValueError) and isinstance(err, ConfigError)
+    assert str(err) == "mass: must be greater than 0 (got -1); bad pair"
+    assert (
+        str(err.within("robot")) == "robot.mass: must be greater than 0 (got -1); robot: bad pair"
+    )
+    assert err.within("walls").within("world").errors[0][0] == "world.walls.mass"
+    assert ValidationError.one("x", "[2]").within("walls").errors == [("walls[2]", "x")]
+    assert err.describe(str.upper) == "MASS: must be greater than 0 (got -1); bad pair"
+
+
+def test_text_values_are_read_as_the_settings_read_them() -> None:
+    """parse_value: the command line's check, in the settings' own words."""
+    assert parse_value(Port, "9091") == 9091 and parse_value(Count, "7") == 7
+    with pytest.raises(ValueError, match=r"^must be greater than 0 \(got '0'\)$"):
+        parse_value(Count, "0")
+    bounded = converter(Annotated[float, Bounds(ge=1), Bounds(le=2)])
+    assert bounded("1.5") == 1.5
+    with pytest.raises(ValidationError, match="less than or equal to 2"):
+        bounded(3)
+    with pytest.raises(TypeError, match="cannot hold values of type"):
+        converter(set[int])
+
+
+def test_every_declared_bound_of_the_parameters_is_enforced_with_its_dotted_name() -> None:
+    """For each bounded parameter, a value just past each bound is refused naming it."""
+    flat = Params().flat()
+    checked = 0
+    for name, bounds in Params.bounds().items():
+        for bad, words in (
+            (bounds.gt, "greater than"),
+            (bounds.ge - 1 if bounds.ge is not None else None, "greater than or equal to"),
+            (bounds.lt, "less than"),
+            (bounds.le + 1 if bounds.le is not None else None, "less than or equal to"),
+        ):
+            if bad is None:
+                continue
+            with pytest.raises(ValidationError) as err:
+                Params.from_flat({**flat, name: bad})
+            assert str(err.value).startswith(f"{name}: must be {words} "), err.value
+            checked += 1
+    assert checked >= 30
+
+
+def test_descriptions_and_bounds_come_from_the_declarations() -> None:
+    """What parameter services and the admin page show is what the records declare."""
+    assert Params.describe()["robot.mass"] == "chassis mass, kg"
+    assert Params.bounds()["robot.mass"].text() == "> 0 and <= 1000"
+    assert Params.bounds()["lidar.range_min"].text() == ">= 0"
+    assert not Params.bounds()["lidar.mount"]
+    assert Sample.settings()["ratio"].description == "a share"
+
+
+def test_a_world_refuses_what_pydantic_refused_with_readable_paths() -> None:
+    for data, text in [
+        ({"boxes": [{"center": [0, 0]}]}, "boxes[0].size: required, but missing"),
+        ({"circles": [{"center": [0, 0], "radius": 0}]}, "circles[0].radius: must be greater"),
+        ({"circles": [{"center": [0, 0], "radius": 1, "segments": 5}]}, "circles[0].segments"),
+        ({"walls": [[0, 0, 1, 1], [0, 0, 1]]}, "walls[1]: has 3 numbers, expected [x1, y1,"),
+        ({"polygons": [[[0, 0], [1, "x"]]]}, "polygons[0][1]: 'x' is not a finite number"),
+        ({"frames": [{"parent": "", "child": "a"}]}, "frames[0].parent: must not be empty"),
+        ({"robots": [{"name": 5}]}, "robots[0].name: robot name 5 is not a valid ROS name"),
+        ({"frames": [{"parent": "a", "child": "b"}] * 1001}, "frames: must have at most 1000"),
+    ]:
+        with pytest.raises(ValidationError) as err:
+            WorldSpec.parse(data)
+        assert str(err.value).startswith(text), err.value
+
+
+def test_a_world_without_robots_keeps_the_rest() -> None:
+    """--no-sim: no robot, the same walls (the single robot: key is not kept)."""
+    world = WorldSpec.parse({"walls": [[0, 0, 1, 0]], "robot": {"pose": [1, 2, 3]}})
+    bare = world.without_robots()
+    assert bare.robots == [] and bare.start_poses() == {} and bare.walls == world.walls
