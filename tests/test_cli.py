@@ -58,6 +58,19 @@ def test_bad_world_file_fails_fast_with_the_file_and_the_key(tmp_path: Path) -> 
     assert "bad.yaml" in result.stderr and "walls[0]" in result.stderr
 
 
+def test_bad_params_file_fails_fast_with_one_line_naming_file_field_and_reason(
+    tmp_path: Path,
+) -> None:
+    """A wheel radius of -1 stops the server before it binds: one line, no traceback."""
+    bad = tmp_path / "pi.yaml"
+    bad.write_text("robot:\n  wheel_radius: -1\n")
+    result = run("--params", str(bad), "--port", "0", "--http-port", "0")
+    assert result.returncode == 2
+    assert result.stderr == (
+        f"simbridge: params file '{bad}': robot.wheel_radius: must be greater than 0 (got -1)\n"
+    )
+
+
 async def start_server(
     *extra: str, env: dict[str, str] | None = None
 ) -> tuple[asyncio.subprocess.Process, int, int]:

@@ -15,7 +15,7 @@ from typing import Any
 
 from simbridge.config import finite_number
 from simbridge.errors import ServiceError
-from simbridge.schema import Bounds
+from simbridge.schema import Bounds, ValidationError
 
 
 __all__ = ["ParamNode", "ParameterStore", "param_type"]
@@ -169,6 +169,8 @@ class ParameterStore:
             new[name] = _coerce(name, current[name], value)
         try:
             target.write(new)
+        except ValidationError as err:  # it names each refused parameter itself
+            raise ServiceError(f"invalid value: {err}") from None
         except ValueError as err:
             msg = f"invalid value for {', '.join(sorted(changes))}: {err}"
             raise ServiceError(msg) from None
