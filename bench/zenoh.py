@@ -38,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import urllib.request
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -286,9 +287,10 @@ def classroom(seconds: float) -> bool:
     with tempfile.TemporaryDirectory() as tmp, _router_process() as (router, router_proc):
         worlds = [_world(Path(tmp), f"s{s}r", robots, f"sim{s}") for s in range(sims)]
         with contextlib.ExitStack() as stack:
-            sim_procs = [
-                stack.enter_context(_simbridge(router, "--world", str(w)))[0] for w in worlds
+            sim_started = [
+                stack.enter_context(_simbridge(router, "--world", str(w))) for w in worlds
             ]
+            sim_procs = [proc for proc, _ in sim_started]
             started = [stack.enter_context(_simbridge(router, "--no-sim")) for _ in range(fronts)]
             front_procs = [proc for proc, _ in started]
             for _, port in started:
@@ -316,8 +318,12 @@ def classroom(seconds: float) -> bool:
             measured = [p for group in kinds.values() for p in group]
             time.sleep(max(0.0, start - time.time()))
             cpu0 = [p.cpu_times() for p in measured]
+            health0 = _healths(sim_started, started)
+            steal0 = _steal()
             time.sleep(max(0.0, end - time.time()))
             cpu1 = [p.cpu_times() for p in measured]
+            steal = _steal() - steal0
+            health1 = _healths(sim_started, started)
             load = load_average()
             results = collect(procs, timeout=seconds + 120)
     rates: list[float] = []
@@ -351,6 +357,7 @@ def classroom(seconds: float) -> bool:
         each = " ".join(f"{sum(used[id(p)]) / seconds:.2f}" for p in group)
         print(f"  {kind:16}{user + system:6.2f}{user:6.2f}{system:8.2f}  {each}")
     print(f"  {'all':16}{sum(totals):6.2f}{totals[0]:6.2f}{totals[1]:8.2f}")
+    print(f"  {'stolen (VM host)':16}{steal / seconds:6.2f}")
     print(
         f"/odom rate per client: p1 {low:.1f} Hz, p99 {high:.1f} Hz (target 18-22 Hz); "
         f"{len(results)} clients, {len(errors)} errors {errors[:2]}"
@@ -359,9 +366,72 @@ def classroom(seconds: float) -> bool:
         f"/odom lost (stamp gaps): {lost} (target 0); latency p50 {p50:.1f} ms, "
         f"p99 {p99:.1f} ms (target <= 50), {len(lat)} messages"
     )
+    _print_health(health0, health1)
     ok = low >= 18.0 and high <= 22.0 and lost == 0 and p99 <= 50.0 and not errors
     print(f"targets: {'met' if ok else 'NOT met'}")
     return ok
+
+
+def _steal() -> float:
+    """Seconds of CPU the hypervisor took from this machine so far (``/proc/stat``: steal)."""
+    try:
+        with open("/proc/stat") as f:
+            fields = f.readline().split()
+    except OSError:
+        return 0.0
+    return int(fields[8]) / os.sysconf("SC_CLK_TCK") if len(fields) > 8 else 0.0
+
+
+def _health(port: int) -> dict[str, Any]:
+    with urllib.request.urlopen(f"http://127.0.0.1:{port}/healthz", timeout=10) as answer:
+        body: dict[str, Any] = json.loads(answer.read())
+    return body
+
+
+def _healths(
+    sims: list[tuple[psutil.Process, int]], fronts: list[tuple[psutil.Process, int]]
+) -> dict[str, list[dict[str, Any]]]:
+    return {
+        "simulators": [_health(port) for _, port in sims],
+        "front-ends": [_health(port) for _, port in fronts],
+    }
+
+
+def _print_health(
+    before: dict[str, list[dict[str, Any]]], after: dict[str, list[dict[str, Any]]]
+) -> None:
+    """Print what each simbridge process counted in the window (its /healthz, differenced).
+
+    Where messages can be lost or wait: a simulator's skipped and late ticks (a tick skipped is
+    a stamp missing for every client), the ring channels and inbox of a front-end's Zenoh link
+    (samples dropped, sequence gaps seen in rmw_zenoh's attachments), its per-client send
+    queues (frames dropped for a slow client).
+    """
+    print("per process, over the window (/healthz):")
+    for kind, rows in after.items():
+        for k, (a, b) in enumerate(zip(before[kind], rows, strict=True)):
+            loop_a, loop_b = a["loop"], b["loop"]
+            zenoh_a, zenoh_b = a.get("zenoh", {}), b.get("zenoh", {})
+
+            def diff(x: dict[str, Any], y: dict[str, Any], key: str) -> int:
+                return int(y.get(key, 0)) - int(x.get(key, 0))
+
+            counts = {
+                "ticks": diff(loop_a, loop_b, "ticks"),
+                "late": diff(loop_a, loop_b, "late_ticks"),
+                "skipped": diff(loop_a, loop_b, "skipped_ticks"),
+                "published": diff(zenoh_a, zenoh_b, "published"),
+                "received": diff(zenoh_a, zenoh_b, "received"),
+                "missed": diff(zenoh_a, zenoh_b, "samples_missed"),
+                "inbox dropped": diff(zenoh_a, zenoh_b, "samples_dropped"),
+                "send dropped": diff(a, b, "dropped_frames"),
+                "full passes": diff(zenoh_a, zenoh_b, "reconciles"),
+            }
+            shown = " ".join(f"{name} {v}" for name, v in counts.items() if v or name == "ticks")
+            print(
+                f"  {kind[:-1]} {k}: {shown}; tick lateness p99 {loop_b['lateness_ms_p99']} ms "
+                f"max {loop_b['lateness_ms_max']} ms, work p99 {loop_b['work_ms_p99']} ms"
+            )
 
 
 def main(argv: list[str] | None = None) -> int:
