@@ -161,6 +161,8 @@ class ServiceTable:
         self.default_timeout = default_timeout
         #: Services by absolute name.
         self.services: dict[str, Service] = {}
+        #: Bumped by every service added, replaced or removed (see ``TopicTable.changes``).
+        self.changes = 0
         #: Calls forwarded to providers, by server id.
         self.pending: dict[str, PendingCall] = {}
         # the same calls by caller and by service, and their deadlines in a heap: answering,
@@ -175,6 +177,7 @@ class ServiceTable:
         """Register an in-process service (replacing any previous one of that name)."""
         service = Service(name, type_name, node, handler=handler)
         self.services[name] = service
+        self.changes += 1
         return service
 
     def advertise(self, peer: Peer, name: str, type_name: str, written: str = "") -> Service:
@@ -189,6 +192,7 @@ class ServiceTable:
                 old.provider.session.disown("service", name)
         service = Service(name, type_name, BRIDGE_NODE, provider=peer, written=written or name)
         self.services[name] = service
+        self.changes += 1
         return service
 
     def unadvertise(self, peer: Peer, name: str) -> bool:
@@ -197,6 +201,7 @@ class ServiceTable:
         if service is None or service.provider is not peer:
             return False
         del self.services[name]
+        self.changes += 1
         self._fail_pending(service, f"service {name} was unadvertised by its provider")
         return True
 

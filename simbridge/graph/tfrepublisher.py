@@ -235,6 +235,7 @@ class TfRepublisher:
             else:
                 topic = self.graph.topics.topics[name]
                 topic.internal = [(n, c) for n, c in topic.internal if c != self._on_tf]
+                self.graph.topics.changes += 1
 
     def _add(self, request: _Request) -> None:
         self.requests.append(request)

@@ -121,6 +121,10 @@ class TopicTable:
         self.cdr_factory: Callable[[str, Any], Callable[[], bytes]] | None = None
         #: Bumped by every subscription change: the delivery plans of topics are rebuilt.
         self.generation = 0
+        #: Bumped by every change of a topic's type, publishers or subscribers (clients and
+        #: in-process): what mirrors the table elsewhere (the Zenoh link) compares it instead
+        #: of walking every topic.
+        self.changes = 0
         #: Called with ``(topic, message, sending peer or None)`` before each delivery
         #: (extensions: the Zenoh link forwards messages to ROS 2 subscribers).
         self.taps: list[Callable[[Topic, Outgoing, Peer | None], None]] = []
@@ -144,6 +148,7 @@ class TopicTable:
         """Fix or check the type of ``topic``."""
         canonical = _canonical(type_name, topic)
         if topic.type is None:
+            self.changes += 1
             topic.type = canonical
             topic.known = self.registry.known(canonical)
 
@@ -164,6 +169,7 @@ class TopicTable:
         topic = self.topics.get(name) or Topic(name)
         self._typed(topic, type_name)  # raises before anything is registered
         self.topics[name] = topic
+        self.changes += 1
         topic.publishers.setdefault(owner, set()).add(op_id)
         topic.latch = topic.latch or latch
         return topic
@@ -173,6 +179,7 @@ class TopicTable:
         topic = self.topics.get(name)
         if topic is None or owner not in topic.publishers:
             return
+        self.changes += 1
         ids = topic.publishers[owner]
         if op_id is None:
             ids.clear()
@@ -202,11 +209,13 @@ class TopicTable:
         self.topics[sub.resolved] = topic
         topic.subscriptions[(peer, sub.topic)] = sub
         self.generation += 1  # the options may have changed: plans are rebuilt
+        self.changes += 1
         return topic
 
     def unsubscribed(self, peer: Peer, sub: Subscription, gone: bool) -> None:
         """A subscribe id of ``sub`` went; ``gone``: ``peer`` no longer receives the topic."""
         self.generation += 1
+        self.changes += 1
         if not gone:
             return
         topic = self.topics.get(sub.resolved)
@@ -222,6 +231,7 @@ class TopicTable:
         topic = self.topics.get(name) or Topic(name)
         self._typed(topic, type_name)
         self.topics[name] = topic
+        self.changes += 1
         topic.internal.append((node, callback))
         return topic
 
@@ -230,6 +240,7 @@ class TopicTable:
         topic = self.topics.get(name)
         if topic is None:
             return
+        self.changes += 1
         topic.internal = [(n, cb) for n, cb in topic.internal if cb is not callback]
         self._forget_if_unused(topic)
 
