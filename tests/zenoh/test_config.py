@@ -7,7 +7,12 @@ import json
 import pytest
 
 from simbridge.errors import ConfigError
-from simbridge.zenoh.config import ZenohOptions, parse_override, session_config
+from simbridge.zenoh.config import (
+    DATA_QUEUE_BATCHES,
+    ZenohOptions,
+    parse_override,
+    session_config,
+)
 
 
 zenoh = pytest.importorskip("zenoh")
@@ -20,6 +25,15 @@ def test_defaults_are_rmw_zenohs_domain_0_jazzy() -> None:
     assert config["mode"] == "peer"
     assert config["connect"]["endpoints"] == ["tcp/localhost:7447"]
     assert config["scouting"]["multicast"]["enabled"] is False
+
+
+def test_a_tick_of_samples_fits_the_data_queue_unless_overridden() -> None:
+    config = json.loads(str(session_config(zenoh, ZenohOptions.from_env({}))))
+    assert config["transport"]["link"]["tx"]["queue"]["size"]["data"] == DATA_QUEUE_BATCHES
+    assert config["transport"]["link"]["tx"]["queue"]["size"]["data_low"] == 2  # Zenoh's
+    env = {"ZENOH_CONFIG_OVERRIDE": "transport/link/tx/queue/size/data=2"}
+    config = json.loads(str(session_config(zenoh, ZenohOptions.from_env(env))))
+    assert config["transport"]["link"]["tx"]["queue"]["size"]["data"] == 2
 
 
 def test_environment_sets_domain_distro_and_overrides() -> None:
