@@ -1,6 +1,6 @@
 """Where an idle default server's memory goes: each import group's share, and what was cut.
 
-``python -m bench memory`` (about a minute): four tables, each from fresh child processes.
+``python -m bench memory`` (about a minute): five tables, each from fresh child processes.
 
 1. **Import groups**, in the order ``simbridge`` imports them, in one child: VmRSS and its two
    parts after each group (RssAnon: the process's own memory; RssFile: the mapped pages of
@@ -21,6 +21,11 @@
    without what only that package imports): the difference is what that package alone costs,
    where the first table charges a shared module to whichever imports it first. The idle
    server minus that child is simbridge's own code and what it builds at start.
+5. **With a client**: the same server idle, then with a page's session (subscribed to /odom,
+   /scan and /tf, publishing /cmd_vel, its first rosapi call made), settled, connected; and
+   which of rosbags' modules it has imported by then (none: the definitions are shipped; rosbags'
+   type store is made only for a type only rosbags serializes, a text not shipped parsed,
+   ``--zenoh`` or a bag).
 
 RssFile depends on the page cache: a library pip has just written is cached in large folios
 (Linux 6.16+ ext4), and a fault maps a whole folio, so a fresh venv shows several MB more RssFile
@@ -31,12 +36,17 @@ memory pressure). RssAnon does not depend on it.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import socket
 import subprocess
 import sys
+import tempfile
+import threading
+import time
 from pathlib import Path
+from typing import Any
 
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -49,9 +59,8 @@ GROUPS: list[tuple[str, list[str]]] = [
     ("importlib.metadata (websockets' version lookup)", ["importlib.metadata"]),
     ("asyncio (no ssl)", ["@asyncio"]),
     ("numpy", ["numpy"]),
-    ("rosbags (typesys, serde), simbridge.msgs", ["simbridge.msgs"]),
-    ("rosbags' ROS 2 type store (made at start)", ["rosbags.typesys.stores.ros2_kilted"]),
-    ("simbridge.protocol (orjson)", ["simbridge.protocol"]),
+    ("simbridge.msgs (orjson, the shipped definitions)", ["simbridge.msgs", "@definitions"]),
+    ("simbridge.protocol", ["simbridge.protocol"]),
     ("simbridge.sim", ["simbridge.sim"]),
     ("simbridge.graph", ["simbridge.graph", "simbridge.graph.assembly"]),
     ("websockets", ["websockets.asyncio.server"]),
@@ -69,6 +78,14 @@ CUT: list[tuple[str, str]] = [
     (
         "pydantic",
         "never (the settings are simbridge.schema's records; it also imported importlib.metadata)",
+    ),
+    (
+        "rosbags.typesys",
+        "only to parse a .msg text not shipped parsed, or with the store (rosbags' parser, serde)",
+    ),
+    (
+        "rosbags.typesys.stores.ros2_kilted",
+        "only for a type only rosbags serializes (wstring to cbor-raw), --zenoh, bags (the store)",
     ),
 ]
 
@@ -90,6 +107,9 @@ for label, modules in json.loads(sys.argv[1]):
         elif name == "@hashlib":
             from simbridge.cli import _import_hashlib
             _import_hashlib()
+        elif name == "@definitions":  # loaded by the first registry, at start
+            from simbridge.msgs.definitions import standard
+            standard()
         else:
             importlib.import_module(name)
     rows.append((label, status()))
@@ -207,7 +227,6 @@ def evict(paths: list[str]) -> int:
 #: server's imports weigh without them (and without what only they import).
 EXCLUSIVE: list[tuple[str, list[str]]] = [
     ("numpy (with OpenBLAS)", ["numpy"]),
-    ("rosbags (type system, ROS 2 type store, serde)", ["rosbags"]),
     ("websockets", ["websockets"]),
     ("orjson", ["orjson"]),
     ("httptools", ["httptools"]),
@@ -277,6 +296,134 @@ def _exclusive_table(modules: list[str], idle: tuple[float, float, float]) -> No
     print(_row("  what simbridge builds at start and runs with", _minus(idle, with_own), "+"))
 
 
+_SESSION_CHILD = r"""
+import json, os, signal, sys, threading, time
+
+port, http_port, work = int(sys.argv[1]), sys.argv[2], sys.argv[3]
+
+
+def status():
+    with open("/proc/self/status") as f:
+        kb = {k: int(v.split()[0]) for k, _, v in (ln.partition(":") for ln in f)
+              if k in ("VmRSS", "RssAnon", "RssFile")}
+    return kb["VmRSS"] / 1024, kb["RssAnon"] / 1024, kb["RssFile"] / 1024
+
+
+def settled():
+    last = status()[0]
+    for _ in range(60):
+        time.sleep(0.5)
+        now = status()[0]
+        if abs(now - last) < 0.1:
+            break
+        last = now
+    return status()
+
+
+def serve():  # report-N.json when ask-N appears; stop at "stop"
+    deadline, n = time.monotonic() + 300, 0
+    while time.monotonic() < deadline and not os.path.exists(os.path.join(work, "stop")):
+        if os.path.exists(os.path.join(work, f"ask-{n}")):
+            values = settled()
+            rosbags = sorted(m for m in sys.modules if m.startswith("rosbags"))
+            with open(os.path.join(work, f"report-{n}.tmp"), "w") as out:
+                json.dump([values, rosbags], out)
+            os.rename(os.path.join(work, f"report-{n}.tmp"), os.path.join(work, f"report-{n}.json"))
+            n += 1
+        time.sleep(0.02)
+    os.kill(os.getpid(), signal.SIGINT)
+
+
+threading.Thread(target=serve, daemon=True).start()
+from simbridge.cli import main
+
+sys.exit(main(["--host", "127.0.0.1", "--port", str(port), "--http-port", http_port]))
+"""
+
+
+def _ask(work: Path, n: int) -> tuple[tuple[float, float, float], list[str]]:
+    """Ask the session child for report ``n``; wait for it."""
+    (work / f"ask-{n}").touch()
+    path = work / f"report-{n}.json"
+    deadline = time.monotonic() + 60
+    while not path.exists():
+        if time.monotonic() > deadline:
+            raise RuntimeError("the server did not report")
+        time.sleep(0.05)
+    (rss, anon, file), rosbags = json.loads(path.read_text())
+    return (rss, anon, file), rosbags
+
+
+def _session(port: int, work: Path) -> tuple[tuple[float, float, float], list[str]]:
+    """A page's session on the default world; the server's report while it is connected."""
+    from websockets.sync.client import connect
+
+    def until(conn: Any, wanted: Any) -> None:
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            value = json.loads(conn.recv(timeout=deadline - time.monotonic()))
+            if wanted(value):
+                return
+        raise RuntimeError("no answer")
+
+    with connect(f"ws://127.0.0.1:{port}", max_size=None) as page:
+        page.send(json.dumps({"op": "call_service", "id": "t", "service": "/rosapi/topics"}))
+        until(page, lambda m: m.get("op") == "service_response")
+        for topic in ("/odom", "/scan", "/tf"):
+            page.send(json.dumps({"op": "subscribe", "topic": topic}))
+            until(page, lambda m, t=topic: m.get("topic") == t)
+        twist = {"linear": {"x": 0.2}, "angular": {"z": 0.5}}
+        page.send(
+            json.dumps({"op": "advertise", "topic": "/cmd_vel", "type": "geometry_msgs/Twist"})
+        )
+        for _ in range(20):
+            page.send(json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": twist}))
+            until(page, lambda m: m.get("topic") == "/odom")
+
+        def drain() -> None:  # the page keeps reading while the server settles
+            with contextlib.suppress(Exception):
+                while True:
+                    page.recv()
+
+        reader = threading.Thread(target=drain, daemon=True)
+        reader.start()
+        report = _ask(work, 1)
+    reader.join(timeout=10)
+    return report
+
+
+def client_session() -> list[tuple[str, tuple[float, float, float], list[str]]]:
+    """The server idle, then with a page connected: (RSS, anon, file) MB, rosbags modules."""
+    with tempfile.TemporaryDirectory() as tmp:
+        work, port = Path(tmp), _free_port()
+        cmd = [sys.executable, "-c", _SESSION_CHILD, str(port), str(_free_port()), tmp]
+        proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.DEVNULL)
+        try:
+            deadline = time.monotonic() + 120
+            while True:
+                try:
+                    socket.create_connection(("127.0.0.1", port), timeout=1).close()
+                    break
+                except OSError:
+                    if time.monotonic() > deadline or proc.poll() is not None:
+                        raise RuntimeError("the server did not start") from None
+                    time.sleep(0.05)
+            idle = _ask(work, 0)
+            session = _session(port, work)
+        finally:
+            (work / "stop").touch()
+            proc.wait(timeout=60)
+    return [("idle", *idle), ("a page connected (its session done)", *session)]
+
+
+def _client_table() -> None:
+    print("the server with a client: a page subscribed to /odom, /scan, /tf, publishing /cmd_vel")
+    print(f"{'case':<52} {'RSS':>8} {'RssAnon':>8} {'RssFile':>8}  rosbags modules imported")
+    for label, values, rosbags in client_session():
+        store = "the ROS 2 store" if any(".stores.ros2" in m for m in rosbags) else "no store"
+        print(f"{_row(label, values)}  {len(rosbags)} ({store})")
+
+
 def _minus(
     a: tuple[float, float, float], b: tuple[float, float, float]
 ) -> tuple[float, float, float]:
@@ -340,6 +487,8 @@ def main(argv: list[str] | None = None) -> int:
     print("target (issue 16): <= 40 MB RSS")
     print()
     _exclusive_table(modules, idle)
+    print()
+    _client_table()
     return 0
 
 

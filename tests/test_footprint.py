@@ -19,19 +19,32 @@ meets, and RssAnon, which the page cache does not change, a tight one.
 Where the memory goes: ``python -m bench memory`` (the share of each import group), and
 docs/deploy.md. A module that a run does not use, imported on the default path, fails
 :func:`test_default_server_imports_nothing_it_does_not_use` by name.
+
+rosbags' ROS 2 type store (a chain of modules, 2.5 MB, and its parser and serializers, 1.8 MB)
+is not imported by the idle server, nor by a student's session (a page subscribed to /odom,
+/scan and /tf, driving /cmd_vel, calling /reset and rosapi; another client's exotic standard
+type, in JSON and cbor-raw): the definitions are shipped (``simbridge.msgs.definitions``). A
+type registered from a text not shipped is parsed by rosbags then, and works end to end
+(tests/msgs/test_definitions.py).
 """
 
 from __future__ import annotations
 
+import asyncio
 import json
 import socket
 import subprocess
 import sys
+from collections.abc import AsyncIterator
+from pathlib import Path
 from typing import Any
 
+import cbor2
 import pytest
+from rosbags.typesys import Stores, get_typestore
+from websockets.asyncio.client import ClientConnection, connect
 
-from tests.helpers import ROOT, TIMEOUT_FACTOR
+from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, wait_for
 
 
 #: Idle RSS ceiling of the default server, MB: measured 50.3-50.5 in a venv whose libraries were
@@ -46,12 +59,18 @@ IDLE_RSS_CEILING_MB = 61.0
 #: 16's cuts), plus a margin.
 IDLE_ANON_CEILING_MB = 34.0
 
+#: rosbags' ROS 2 type store (``rosbags.typesys.stores.ros2_kilted`` and the chain of modules it is
+#: built on) and rosbags' type system: the definitions a run uses are shipped with simbridge.
+ROSBAGS_STORE = "rosbags.typesys.stores.ros2_kilted"
+
 #: Modules a default run has no use for: tools, bag writing, optional transports, test libraries;
 #: and those it needs only when asked for: ssl (--certfile), numpy.random (LiDAR noise), cbor2
 #: (a client subscribing with compression cbor or cbor-raw), the tutorial nodes (--demo-nodes),
 #: PyYAML (a --world, --params or --client-tokens file: the defaults are built without it);
-#: OpenSSL's hashes (``_hashlib``, libcrypto: CPython's own compute the same digests); pydantic
-#: and what it alone imports (the settings are simbridge.schema's records: 6.2 MB, issue 16).
+#: rosbags (a type only rosbags serializes, a text simbridge does not ship parsed, --zenoh,
+#: bags); OpenSSL's hashes (``_hashlib``, libcrypto: CPython's own compute the same digests);
+#: pydantic and what it alone imports (the settings are simbridge.schema's records: 6.2 MB,
+#: issue 16).
 NOT_ON_THE_DEFAULT_PATH = (
     "pydantic",
     "pydantic_core",
@@ -69,7 +88,7 @@ NOT_ON_THE_DEFAULT_PATH = (
     "http.client",
     "zenoh",
     "mcap",
-    "rosbags.rosbag2",
+    "rosbags",
     "simbridge.tools",
     "simbridge.record",
     "simbridge.bag",
@@ -178,3 +197,170 @@ def test_default_server_idle_anonymous_memory_stays_under_the_ceiling(
     """Its own memory (RssAnon, whatever the page cache holds) stays under IDLE_ANON_CEILING_MB."""
     anon = float(idle_server["anon_mb"])
     assert anon <= IDLE_ANON_CEILING_MB, f"idle RssAnon {anon:.1f} MB > {IDLE_ANON_CEILING_MB} MB"
+
+
+def test_default_server_imports_no_rosbags_type_store(idle_server: dict[str, Any]) -> None:
+    """Neither rosbags' ROS 2 store nor its type system: the definitions are shipped."""
+    assert ROSBAGS_STORE not in idle_server["modules"]
+    assert [m for m in idle_server["modules"] if m.startswith("rosbags")] == []
+
+
+#: A default server whose thread reports on request: ``ask-N`` appears in the directory, the
+#: report (RSS, modules) is written to ``report-N.json``; ``stop`` stops the server.
+ON_REQUEST = r"""
+import json, os, signal, sys, threading, time
+
+port, http_port, work, timeout = int(sys.argv[1]), sys.argv[2], sys.argv[3], float(sys.argv[4])
+
+
+def report(n):
+    with open("/proc/self/status") as status:
+        kb = {k: int(v.split()[0]) for k, _, v in (ln.partition(":") for ln in status)
+              if k in ("VmRSS", "RssAnon", "RssFile")}
+    data = {"rss_mb": kb["VmRSS"] / 1024, "anon_mb": kb["RssAnon"] / 1024,
+            "modules": sorted(sys.modules)}
+    with open(os.path.join(work, f"report-{n}.tmp"), "w") as out:
+        json.dump(data, out)
+    os.rename(os.path.join(work, f"report-{n}.tmp"), os.path.join(work, f"report-{n}.json"))
+
+
+def serve():
+    deadline, n = time.monotonic() + timeout, 0
+    while time.monotonic() < deadline and not os.path.exists(os.path.join(work, "stop")):
+        if os.path.exists(os.path.join(work, f"ask-{n}")):
+            report(n)
+            n += 1
+        time.sleep(0.02)
+    os.kill(os.getpid(), signal.SIGINT)
+
+
+threading.Thread(target=serve, daemon=True).start()
+from simbridge.cli import main
+
+sys.exit(main(["--host", "127.0.0.1", "--port", str(port), "--http-port", http_port]))
+"""
+
+
+class ServerOnRequest:
+    """The default server in a child process, reporting its RSS and modules when asked."""
+
+    def __init__(self, work: Path) -> None:
+        self.work = work
+        self.port = free_port()
+        self.asked = 0
+        self.proc: asyncio.subprocess.Process | None = None
+
+    async def start(self) -> None:
+        timeout = 120 * TIMEOUT_FACTOR
+        args = [str(self.port), str(free_port()), str(self.work), str(timeout)]
+        self.proc = await asyncio.create_subprocess_exec(
+            sys.executable, "-c", ON_REQUEST, *args, cwd=ROOT, stderr=asyncio.subprocess.PIPE
+        )
+
+        async def answers() -> bool:
+            try:
+                _reader, writer = await asyncio.open_connection("127.0.0.1", self.port)
+            except OSError:
+                return False
+            writer.close()
+            return True
+
+        loop = asyncio.get_running_loop()
+        deadline = loop.time() + 60 * TIMEOUT_FACTOR
+        while not await answers():
+            assert self.proc.returncode is None, "the server stopped"
+            assert loop.time() < deadline, "the server did not answer"
+            await asyncio.sleep(0.05)
+
+    async def report(self) -> dict[str, Any]:
+        """The server's RSS and modules now."""
+        n, self.asked = self.asked, self.asked + 1
+        (self.work / f"ask-{n}").touch()
+        path = self.work / f"report-{n}.json"
+        await wait_for(path.exists, timeout=10)
+        result: dict[str, Any] = json.loads(path.read_text())
+        return result
+
+    async def stop(self) -> None:
+        (self.work / "stop").touch()
+        assert self.proc is not None
+        _out, err = await asyncio.wait_for(self.proc.communicate(), 30 * TIMEOUT_FACTOR)
+        assert self.proc.returncode == 0, err.decode()[-3000:]
+
+
+@pytest.fixture
+async def server(tmp_path: Path) -> AsyncIterator[ServerOnRequest]:
+    served = ServerOnRequest(tmp_path)
+    await served.start()
+    try:
+        yield served
+    finally:
+        if served.proc is not None and served.proc.returncode is None:
+            await served.stop()
+
+
+async def _call(conn: ClientConnection, service: str, args: Any = None) -> Any:
+    await send_json(conn, {"op": "call_service", "id": service, "service": service, "args": args})
+    reply = await recv_until(
+        conn, lambda m: m.get("op") == "service_response" and m.get("id") == service, 10
+    )
+    assert reply["result"] is True, reply
+    return reply["values"]
+
+
+async def _raw(conn: ClientConnection, topic: str) -> bytes:
+    """The CDR bytes of the next cbor-raw message on ``topic``."""
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + 10 * TIMEOUT_FACTOR
+    while True:
+        frame = await asyncio.wait_for(conn.recv(), deadline - loop.time())
+        if isinstance(frame, bytes):
+            value = cbor2.loads(frame)
+            if value.get("topic") == topic:
+                body: bytes = value["msg"]["bytes"]
+                return body
+
+
+async def test_a_students_session_loads_no_rosbags(server: ServerOnRequest) -> None:
+    """A page on the default world, another client's exotic type: rosbags is never imported.
+
+    The page subscribes to /odom, /scan and /tf, drives /cmd_vel, calls /reset and rosapi (a
+    typedef, the raw definitions Lichtblick asks for); another client's standard type the
+    default graph does not use arrives in JSON and cbor-raw: the shipped definitions serve all.
+    """
+    url = f"ws://127.0.0.1:{server.port}"
+    async with connect(url) as page, connect(url) as raw, connect(url) as other:
+        topics = await _call(page, "/rosapi/topics")
+        assert "/odom" in topics["topics"]
+        for topic in ("/odom", "/scan", "/tf"):
+            await send_json(page, {"op": "subscribe", "topic": topic})
+            await recv_until(page, lambda m, t=topic: m.get("topic") == t, 10)
+        await send_json(
+            page, {"op": "advertise", "topic": "/cmd_vel", "type": "geometry_msgs/Twist"}
+        )
+        twist = {"linear": {"x": 0.2, "y": 0, "z": 0}, "angular": {"x": 0, "y": 0, "z": 0.5}}
+        await send_json(page, {"op": "publish", "topic": "/cmd_vel", "msg": twist})
+        await _call(page, "/reset")
+        details = await _call(page, "/rosapi/message_details", {"type": "nav_msgs/Odometry"})
+        assert details["typedefs"][0]["fieldnames"][:2] == ["header", "child_frame_id"]
+        listed = await _call(page, "/rosapi/topics_and_raw_types")
+        assert any("MSG: geometry_msgs/Twist" in text for text in listed["typedefs_full_text"])
+
+        marker = "visualization_msgs/msg/MarkerArray"
+        await send_json(other, {"op": "advertise", "topic": "/markers", "type": marker})
+        await send_json(page, {"op": "subscribe", "topic": "/markers", "type": marker})
+        await send_json(raw, {"op": "subscribe", "topic": "/markers", "compression": "cbor-raw"})
+        for conn in (other, page, raw):  # each one's op is carried out before the publication
+            await _call(conn, "/rosapi/topics")
+        shown = {"markers": [{"ns": "goal", "id": 7, "pose": {"position": {"x": 1.5}}}]}
+        await send_json(other, {"op": "publish", "topic": "/markers", "msg": shown})
+        arrived = await recv_until(page, lambda m: m.get("topic") == "/markers", 10)
+        assert arrived["msg"]["markers"][0]["ns"] == "goal"
+        data = await _raw(raw, "/markers")
+        details = await _call(page, "/rosapi/message_details", {"type": marker})
+        assert details["typedefs"][1]["type"] == "visualization_msgs/Marker"
+        report = await server.report()
+    decoded = get_typestore(Stores.LATEST).deserialize_cdr(data, marker)
+    assert (decoded.markers[0].ns, decoded.markers[0].id) == ("goal", 7)
+    assert decoded.markers[0].pose.position.x == 1.5
+    assert [m for m in report["modules"] if m.startswith("rosbags")] == []

@@ -1,7 +1,8 @@
 """ROS 2 interface types for simbridge: the registry, validation and conversion of payloads.
 
-Built on rosbags, which carries the definition of every standard ROS 2 message; type names are
-accepted as ``pkg/Type`` and ``pkg/msg/Type``.
+Built on rosbags' definition of every standard ROS 2 message, shipped as data made from it
+(:mod:`simbridge.msgs.definitions`: a run imports rosbags only for what it alone does); type
+names are accepted as ``pkg/Type`` and ``pkg/msg/Type``.
 """
 
 from __future__ import annotations

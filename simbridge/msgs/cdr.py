@@ -1,9 +1,11 @@
-"""ROS 2 CDR serialization of canonical messages, made by rosbags (``cbor-raw``, bags).
+"""ROS 2 CDR serialization of canonical messages (``cbor-raw``, ROS 2 over Zenoh, bags).
 
 The bytes are what an rclpy raw subscription delivers: the 4-byte encapsulation header
-(``00 01 00 00``, little-endian CDR) followed by the CDR body. The canonical ``dict`` form
-(see :mod:`simbridge.msgs.convert`) is turned into rosbags message objects by a builder compiled
-once per type.
+(``00 01 00 00``, little-endian CDR) followed by the CDR body. Each type is written and read by
+code compiled from its definition (:mod:`simbridge.msgs.cdrcodec`), which needs no rosbags; a
+type it does not compile (``wstring``) goes through rosbags: the canonical ``dict`` form (see
+:mod:`simbridge.msgs.convert`) is turned into rosbags message objects by a builder compiled once
+per type, and the registry's rosbags type store is made for it.
 """
 
 from __future__ import annotations
@@ -64,7 +66,7 @@ class CdrWriter:
         return self._builder(normalize_type(typename))(msg)
 
     def _writer(self, typename: str) -> Writer | None:
-        fielddefs = self.registry.store.fielddefs
+        fielddefs = self.registry.fielddefs
         if typename not in fielddefs:
             self.registry.spec(typename)  # raises TypeNotFoundError with the name
         try:
@@ -222,9 +224,7 @@ class CdrReader:
 
     def _compiled_reader(self, typename: str) -> Reader | None:
         try:
-            reader: Reader | None = compile_reader(
-                self.registry.store.fielddefs, typename, self._nested
-            )
+            reader: Reader | None = compile_reader(self.registry.fielddefs, typename, self._nested)
         except Unsupported:
             reader = None
         self._compiled[typename] = reader

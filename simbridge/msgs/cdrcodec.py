@@ -24,7 +24,7 @@ import numpy as np
 
 __all__ = ["Unsupported", "compile_reader", "compile_writer"]
 
-#: ``(fielddefs of the store)``: name -> (constants, [(field, (nodetype, detail))]).
+#: A registry's ``fielddefs``: name -> (constants, [(field, (nodetype, detail))]), as rosbags'.
 FieldDefs = Any
 Writer = Callable[[Any, bytearray], None]
 Reader = Callable[[bytes, int], tuple[Any, int]]

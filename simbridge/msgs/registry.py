@@ -1,9 +1,13 @@
-"""The ROS 2 interface-type registry, built on the rosbags type store.
+"""The ROS 2 interface-type registry: rosbags' definitions, its type store only when needed.
 
 Type names are accepted as ``pkg/Type`` and ``pkg/msg/Type`` (rosbridge accepts both; rosapi
-answers with ``pkg/msg/Type``). Definitions come from rosbags (every standard ROS 2 message);
-nothing here hand-writes a message definition. Further interface definitions (services, actions,
-simbridge's own) are registered from ``.msg``/``.srv`` text with :meth:`TypeRegistry.register_msg`.
+answers with ``pkg/msg/Type``). Definitions are rosbags' (every standard ROS 2 message), shipped
+as data generated from it (:mod:`simbridge.msgs.definitions`); nothing here hand-writes a message
+definition. Further interface definitions (services, actions, simbridge's own) are registered
+from ``.msg``/``.srv`` text with :meth:`TypeRegistry.register_msg`, parsed by rosbags unless the
+same text's parse is shipped. rosbags' type store itself (its message classes, CDR by rosbags,
+bags, type hashes) is made on first use of :attr:`TypeRegistry.store`: a run that serves the
+standard and simbridge's own types never imports it (issue 16).
 """
 
 from __future__ import annotations
@@ -12,14 +16,25 @@ import functools
 import gc
 import re
 import threading
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Literal
-
-from rosbags.typesys import Stores, get_typestore
-from rosbags.typesys.msg import get_types_from_msg
-from rosbags.typesys.store import Typestore
+from typing import TYPE_CHECKING, Any, Literal
 
 from simbridge.errors import TypeNotFoundError
+from simbridge.msgs.definitions import (
+    ARRAY,
+    BASE,
+    NAME,
+    PLACEHOLDER,
+    Definition,
+    frozen,
+    parsed,
+    standard,
+)
+
+
+if TYPE_CHECKING:
+    from rosbags.typesys.store import Typestore
 
 
 __all__ = [
@@ -53,8 +68,6 @@ PRIMITIVES: frozenset[str] = frozenset(
     }
 )
 
-#: The uint8 member rosbags gives an empty message (CDR needs one); not a ROS field.
-_EMPTY_FIELD = "structure_needs_at_least_one_member"
 _PKG = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -127,20 +140,23 @@ class MessageSpec:
 class TypeRegistry:
     """Every interface type simbridge knows, looked up by any accepted spelling."""
 
-    def __init__(self, store: Stores = Stores.LATEST, *, interfaces: bool = True) -> None:
-        self._store = get_typestore(store)
+    def __init__(self, *, interfaces: bool = True) -> None:
+        #: Every message definition by canonical name: rosbags' standard messages (shipped,
+        #: shared by every registry of the process), then those registered here.
+        self._defs: dict[str, Definition] = dict(standard())
+        #: rosbags' type store with every type of ``_defs``, made by the first use of ``store``.
+        self._store: Typestore | None = None
         #: Compiled specs by canonical name, filled lazily.
         self._specs: dict[str, MessageSpec] = {}
         self._services: dict[str, tuple[str, str]] = {}
         self._actions: dict[str, tuple[str, str, str]] = {}
         #: The .msg text each registered (non-rosbags) message was defined with.
         self.texts: dict[str, str] = {}
-        self._batch: dict[str, Any] | None = None
+        self._batch: dict[str, Definition] | None = None
         #: definition_text results (rosapi topics_and_raw_types is polled every 3 s by Lichtblick).
         self._full_texts: dict[str, str] = {}
         # simbridge's service/action interfaces (simbridge.msgs.interfaces) are added by the first
-        # lookup that needs one of them or a full listing: an idle server never does, and their
-        # generated classes are 2.9 MB of its resident memory.
+        # lookup that needs one of them or a full listing: an idle server never does.
         self._interfaces_pending = interfaces
         if interfaces:
             # the few ROS 1 actionlib messages are needed at start-up (the in-process actionlib
@@ -148,9 +164,30 @@ class TypeRegistry:
             self._add_generated(_actionlib())
 
     @property
-    def store(self) -> Typestore:
-        """The rosbags type store: definitions, CDR serializers, message classes (all of them)."""
+    def fielddefs(self) -> Mapping[str, Definition]:
+        """Every message definition, in rosbags' ``fielddefs`` layout (interfaces included)."""
         self._need()
+        return self._defs
+
+    @property
+    def store(self) -> Typestore:
+        """The rosbags type store with every type here: its message classes, CDR, hashes, bags.
+
+        Made on first use: rosbags' latest ROS 2 store (2.5 MB of modules, 90 ms to import, more
+        on a Pi) and a class generated for each registered type. Lookups, validation, rosapi and
+        simbridge's own CDR codec need only the definitions, which the registry holds without it.
+        """
+        self._need()
+        if self._store is None:
+            from rosbags.typesys import Stores, get_typestore
+
+            store = get_typestore(Stores.LATEST)
+            added: dict[str, Any] = {
+                name: d for name, d in self._defs.items() if name not in store.fielddefs
+            }
+            if added:
+                store.register(added)
+            self._store = store
         return self._store
 
     @property
@@ -172,18 +209,34 @@ class TypeRegistry:
             self._add_interfaces()
 
     def _add_interfaces(self) -> None:
-        """Add simbridge's service/action interfaces (generated once per process, then copied)."""
+        """Add simbridge's service/action interfaces (made once per process, then copied)."""
         self._add_generated(_interfaces())
 
     def _add_generated(self, generated: Any) -> None:
-        """Copy definitions generated once per process into this registry's store."""
-        fielddefs, types, services, actions, texts = generated
-        for name in fielddefs.keys() - self._store.fielddefs.keys():
-            self._store.fielddefs[name] = fielddefs[name]
-            self._store.types[name] = types[name]
+        """Copy definitions made once per process into this registry."""
+        defs, services, actions, texts = generated
+        self._install({name: d for name, d in defs.items() if name not in self._defs})
         self._services.update(services)
         self._actions.update(actions)
         self.texts.update(texts)
+
+    def _install(self, defs: dict[str, Definition]) -> None:
+        """Add definitions (those of names already here are kept, as rosbags' store does).
+
+        Raises:
+            TypesysError: a name here has different fields (rosbags' error, as its store raises).
+        """
+        for name, (_consts, fields) in defs.items():
+            have = self._defs.get(name)
+            if have is not None and _lowered(have[1]) != _lowered(fields):
+                from rosbags.typesys import TypesysError
+
+                msg = f"Type {name!r} is already present with different definition."
+                raise TypesysError(msg)
+        added: dict[str, Any] = {name: d for name, d in defs.items() if name not in self._defs}
+        self._defs.update(added)
+        if self._store is not None and added:
+            self._store.register(added)
 
     # -- lookup -----------------------------------------------------------------------------
 
@@ -194,7 +247,7 @@ class TypeRegistry:
         except TypeNotFoundError:
             return False
         self._need(canonical)
-        return canonical in self._store.fielddefs
+        return canonical in self._defs
 
     def spec(self, name: str) -> MessageSpec:
         """Return the compiled spec of a message type.
@@ -211,13 +264,13 @@ class TypeRegistry:
             return cached
         self._need(canonical)
         try:
-            consts, fields = self._store.fielddefs[canonical]
+            consts, fields = self._defs[canonical]
         except KeyError:
             msg = f"unknown message type '{name}'"
             raise TypeNotFoundError(msg) from None
         spec = MessageSpec(
             canonical,
-            tuple(_field_spec(fname, desc) for fname, desc in fields if fname != _EMPTY_FIELD),
+            tuple(_field_spec(fname, desc) for fname, desc in fields if fname != PLACEHOLDER),
             tuple((c[0], c[1], c[2]) for c in consts),
         )
         self._specs[canonical] = spec
@@ -226,16 +279,14 @@ class TypeRegistry:
     def types(self) -> list[str]:
         """Return every known message type name, sorted."""
         self._need()
-        return sorted(self._store.fielddefs)
+        return sorted(self._defs)
 
     def interface_names(self) -> list[str]:
         """Return every message, service and action type name, sorted (rosapi's interfaces).
 
-        The pending service/action interfaces are listed by name, not generated: generating
-        them takes 80 ms here (0.4 s on a Pi 4B) in one go, a gap in every client's /odom at
-        the first ``/rosapi/interfaces`` call.
+        The pending service/action interfaces are listed by name, not added.
         """
-        names = self._store.fielddefs.keys() | self._services.keys() | self._actions.keys()
+        names = self._defs.keys() | self._services.keys() | self._actions.keys()
         if self._interfaces_pending:
             names |= _interface_names()
         return sorted(names)
@@ -244,14 +295,51 @@ class TypeRegistry:
         """Return the full ``.msg`` text with each dependency in a ``MSG: pkg/Type`` section.
 
         This is the layout of rosapi's ``typedefs_full_text`` (and ROS 1 ``gendeps --cat``)
-        that Foxglove and Lichtblick parse.
+        that Foxglove and Lichtblick parse: the type's constants (``type NAME=value``) and
+        fields, then each message it refers to, directly or not, once, in the order of first
+        reference, after a line of 80 ``=`` and ``MSG: pkg/Type``; the text rosbags'
+        ``generate_msgdef`` gives for ROS 2 (tests/msgs/test_definitions.py compares them).
         """
         canonical = self.spec(name).name
         cached = self._full_texts.get(canonical)
         if cached is None:
-            text, _digest = self._store.generate_msgdef(canonical, ros_version=2)
-            cached = self._full_texts[canonical] = str(text)
+            sections: dict[str, str] = {}
+            first = self._own_text(canonical, sections)
+            cached = "".join(
+                [first, *(f"{'=' * 80}\nMSG: {short_type(k)}\n{v}" for k, v in sections.items())]
+            )
+            self._full_texts[canonical] = cached
         return cached
+
+    def _own_text(self, name: str, sections: dict[str, str]) -> str:
+        """Return the lines of one type; add each message it refers to, once, to ``sections``."""
+        try:
+            consts, fields = self._defs[name]
+        except KeyError:
+            msg = f"unknown message type '{name}'"
+            raise TypeNotFoundError(msg) from None
+        lines = [f"{ctype} {cname}={value}" for cname, ctype, value in consts]
+        for fname, (kind, detail) in fields:
+            if fname == PLACEHOLDER:
+                continue
+            if kind in (BASE, NAME):
+                lines.append(f"{self._element_text(kind, detail, sections)} {fname}")
+                continue
+            (inner_kind, inner_detail), count = detail
+            size = "" if count == 0 else str(count) if kind == ARRAY else f"<={count}"
+            element = self._element_text(inner_kind, inner_detail, sections)
+            lines.append(f"{element}[{size}] {fname}")
+        lines.append("")
+        return "\n".join(lines)
+
+    def _element_text(self, kind: int, detail: Any, sections: dict[str, str]) -> str:
+        if kind == BASE:
+            base, bound = detail
+            return f"string<={bound}" if base == "string" and bound else str(base)
+        if detail not in sections:
+            sections[detail] = ""  # its place: first referred to, before what it refers to
+            sections[detail] = self._own_text(detail, sections)
+        return short_type(detail)
 
     def service(self, name: str) -> tuple[str, str]:
         """Return the (request, response) message names of a service type.
@@ -297,29 +385,35 @@ class TypeRegistry:
         """Register a message type from ``.msg`` text; return its canonical name.
 
         Service and action parts are registered as messages named ``pkg/srv/Foo_Request`` etc.
+
+        Raises:
+            TypesysError: the text does not parse, or the name is known with other fields
+                (rosbags' errors).
         """
         parts = name.split("/")
         if len(parts) != 3:
             msg = f"register_msg needs 'pkg/kind/Type', got '{name}'"
             raise TypeNotFoundError(msg)
         key = f"{parts[0]}/msg/{parts[2]}"
-        parsed = _PARSED.get((key, text))
-        if parsed is None:
-            parsed = _PARSED[(key, text)] = get_types_from_msg(text or "\n", key)
-        renamed = {}
-        for k, value in parsed.items():
-            renamed[name if k == key else k] = value
+        shipped = parsed(name, text)
+        if shipped is not None:
+            renamed = {name: shipped}
+        else:
+            found = _PARSED.get((key, text))
+            if found is None:
+                found = _PARSED[(key, text)] = _parse(text, key)
+            renamed = {name if k == key else k: value for k, value in found.items()}
         if self._batch is not None:
             self._batch.update(renamed)
         else:
-            self._store.register(renamed)
+            self._install(renamed)
         self._specs.pop(name, None)
         self._full_texts.clear()
         self.texts[name] = text
         return name
 
     def register_many(self, definitions: list[tuple[str, str, str]]) -> None:
-        """Register many ``(kind, name, text)`` definitions at once (one code generation)."""
+        """Register many ``(kind, name, text)`` definitions at once (in the store, if made, too)."""
         self._batch = {}
         try:
             for kind, name, text in definitions:
@@ -332,7 +426,7 @@ class TypeRegistry:
             batch = self._batch
         finally:
             self._batch = None
-        self._store.register(batch)
+        self._install(batch)
         self._specs.clear()
         self._full_texts.clear()
 
@@ -378,7 +472,7 @@ class TypeRegistry:
         goal, result, feedback = self.action(canonical)
         send_goal, get_result = f"{canonical}_SendGoal", f"{canonical}_GetResult"
         message = f"{canonical}_FeedbackMessage"
-        if message not in self._store.fielddefs:
+        if message not in self._defs:
             uuid = "unique_identifier_msgs/UUID goal_id"
             self.register_many(
                 [
@@ -398,28 +492,46 @@ class TypeRegistry:
         return send_goal, get_result, message
 
 
+def _lowered(fields: Any) -> list[tuple[str, Any]]:
+    """Fields as rosbags' store compares them (names without case)."""
+    return [(fname.lower(), frozen(desc)) for fname, desc in fields]
+
+
+def _parse(text: str, key: str) -> dict[str, Definition]:
+    """Parse ``.msg`` text with rosbags, into the definitions its store would register.
+
+    rosbags' code generation gives an empty message its one ``uint8`` placeholder field.
+    """
+    from rosbags.typesys.msg import get_types_from_msg
+
+    placeholder: Any = (PLACEHOLDER, (BASE, ("uint8", 0)))
+    return {
+        name: frozen((consts, fields or [placeholder]))
+        for name, (consts, fields) in get_types_from_msg(text or "\n", key).items()
+    }
+
+
 _INTERFACES: Any = None
 _ACTIONLIB: Any = None
-#: Held while the interfaces are generated (by :func:`generate_interfaces_soon`'s thread or the
-#: first lookup that needs them): a lookup waits for a generation under way, never repeats it.
+#: Held while the interfaces are made (by :func:`generate_interfaces_soon`'s thread or the first
+#: lookup that needs them): a lookup waits for one under way, never repeats it.
 _GENERATING = threading.Lock()
 _WARMUP: threading.Thread | None = None
-#: Definitions generated at once (one compiled module each).
-_BATCH = 16
 
 
 def generate_interfaces_soon() -> None:
-    """Generate simbridge's service/action interfaces in a background thread, once per process.
+    """Make simbridge's service/action interfaces in a background thread, once per process.
 
-    Generated on the loop by a client's first rosapi call (``/rosapi/topics`` is roslibjs's first
-    call), they took 80-300 ms in one go on a shared x86 core (a Pi 4B core is ~5x slower): a
-    gap in every client's /odom. The thread gives up the GIL every switch interval (5 ms), so
-    the loop keeps its ticks meanwhile. The server calls this when its first client connects:
-    an idle server keeps its footprint (``tests/test_footprint.py``).
+    Their definitions are shipped (:mod:`simbridge.msgs.definitions`): made from them, they take
+    a few ms. A text edited since the file was made is parsed by rosbags (80-300 ms for all of
+    them on a shared x86 core, a Pi 4B core is ~5x slower), which on the loop, at a client's
+    first rosapi call, is a gap in every client's /odom; in this thread, which gives up the GIL
+    every switch interval (5 ms), the loop keeps its ticks meanwhile. The server calls this
+    when its first client connects: an idle server keeps its footprint
+    (``tests/test_footprint.py``).
 
-    The garbage collector is paused while they are made (else a full collection ran mid-way,
-    in the thread but holding the GIL: 40-70 ms), and what they are made of (47,000 objects
-    that live as long as the process) is frozen afterwards, as the startup objects are
+    The garbage collector is paused while they are made, and what they are made of (objects that
+    live as long as the process) is frozen afterwards, as the startup objects are
     (``simbridge.cli``), so that no full collection walks them again.
     """
     global _WARMUP
@@ -440,27 +552,20 @@ def generate_interfaces_soon() -> None:
 
 
 def _interfaces() -> Any:
-    """Return simbridge's service/action interfaces, generating them on the first call."""
+    """Return simbridge's service/action interfaces, making them on the first call."""
     global _INTERFACES
     with _GENERATING:
         if _INTERFACES is None:
             from simbridge.msgs.interfaces import ACTIONS, MESSAGES, SERVICES
 
             fresh = TypeRegistry(interfaces=False)
-            before = set(fresh._store.fielddefs)
-            definitions = (
+            fresh.register_many(
                 [("msg", n, t) for n, t in MESSAGES.items()]
                 + [("srv", n, t) for n, t in SERVICES.items()]
                 + [("action", n, t) for n, t in ACTIONS.items()]
             )
-            # in a few batches (messages before the services that use them): each batch's
-            # generated code is compiled in one C call that holds the GIL
-            for i in range(0, len(definitions), _BATCH):
-                fresh.register_many(definitions[i : i + _BATCH])
-            added = set(fresh._store.fielddefs) - before
             _INTERFACES = (
-                {k: fresh._store.fielddefs[k] for k in added},
-                {k: fresh._store.types[k] for k in added},
+                {k: v for k, v in fresh._defs.items() if k not in standard()},
                 fresh._services,
                 fresh._actions,
                 fresh.texts,
@@ -469,18 +574,15 @@ def _interfaces() -> Any:
 
 
 def _actionlib() -> Any:
-    """Return the ROS 1 actionlib messages, generated once per process (as ``_INTERFACES``)."""
+    """Return the ROS 1 actionlib messages, made once per process (as ``_INTERFACES``)."""
     global _ACTIONLIB
     if _ACTIONLIB is None:
         from simbridge.msgs.interfaces import ACTIONLIB_MESSAGES
 
         fresh = TypeRegistry(interfaces=False)
-        before = set(fresh._store.fielddefs)
         fresh.register_many([("msg", n, t) for n, t in ACTIONLIB_MESSAGES.items()])
-        added = set(fresh._store.fielddefs) - before
         _ACTIONLIB = (
-            {k: fresh._store.fielddefs[k] for k in added},
-            {k: fresh._store.types[k] for k in added},
+            {k: v for k, v in fresh._defs.items() if k not in standard()},
             {},
             {},
             fresh.texts,
@@ -499,8 +601,8 @@ def _interface_names() -> frozenset[str]:
     return frozenset(names)
 
 
-#: Parsed .msg texts, shared by every registry of the process (parsing is the slow part).
-_PARSED: dict[tuple[str, str], Any] = {}
+#: .msg texts parsed by rosbags, shared by every registry of the process (parsing is slow).
+_PARSED: dict[tuple[str, str], dict[str, Definition]] = {}
 
 
 def _sections(text: str, count: int, name: str) -> list[str]:

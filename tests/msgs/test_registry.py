@@ -103,7 +103,7 @@ def test_interfaces_are_generated_only_when_a_lookup_needs_one() -> None:
     registry = TypeRegistry()
     assert registry.known("nav_msgs/Odometry")
     assert registry.has_service("std_srvs/srv/Trigger")
-    assert "std_srvs/srv/Trigger_Request" not in registry._store.fielddefs
+    assert "std_srvs/srv/Trigger_Request" not in registry._defs
     assert registry.service("std_srvs/Trigger") == (
         "std_srvs/srv/Trigger_Request",
         "std_srvs/srv/Trigger_Response",
@@ -136,7 +136,7 @@ def test_the_interfaces_listing_does_not_generate_them() -> None:
     """Rosapi's interfaces listing names the pending interfaces without generating them."""
     registry = TypeRegistry()
     listed = registry.interface_names()
-    assert "std_srvs/srv/SetBool_Request" not in registry._store.fielddefs  # still pending
+    assert "std_srvs/srv/SetBool_Request" not in registry._defs  # still pending
     assert "std_srvs/srv/SetBool" in listed and "std_srvs/srv/SetBool_Request" in listed
     assert listed == sorted([*registry.types(), *registry.services, *registry.actions])
     assert registry.interface_names() == listed
