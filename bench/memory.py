@@ -79,6 +79,7 @@ CUT: list[tuple[str, str]] = [
         "pydantic",
         "never (the settings are simbridge.schema's records; it also imported importlib.metadata)",
     ),
+    ("simbridge.msgs.cdr", "only with a cbor-raw subscription, --zenoh or a bag (the CDR codec)"),
     (
         "rosbags.typesys",
         "only to parse a .msg text not shipped parsed, or with the store (rosbags' parser, serde)",
@@ -397,7 +398,7 @@ def client_session() -> list[tuple[str, tuple[float, float, float], list[str]]]:
     with tempfile.TemporaryDirectory() as tmp:
         work, port = Path(tmp), _free_port()
         cmd = [sys.executable, "-c", _SESSION_CHILD, str(port), str(_free_port()), tmp]
-        proc = subprocess.Popen(cmd, cwd=ROOT, stderr=subprocess.DEVNULL)
+        proc = subprocess.Popen(cmd, cwd=ROOT, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
         try:
             deadline = time.monotonic() + 120
             while True:

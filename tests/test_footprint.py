@@ -66,11 +66,11 @@ ROSBAGS_STORE = "rosbags.typesys.stores.ros2_kilted"
 #: Modules a default run has no use for: tools, bag writing, optional transports, test libraries;
 #: and those it needs only when asked for: ssl (--certfile), numpy.random (LiDAR noise), cbor2
 #: (a client subscribing with compression cbor or cbor-raw), the tutorial nodes (--demo-nodes),
-#: PyYAML (a --world, --params or --client-tokens file: the defaults are built without it);
+#: PyYAML (a --world, --params or --client-tokens file: the defaults are built without it),
 #: rosbags (a type only rosbags serializes, a text simbridge does not ship parsed, --zenoh,
-#: bags); OpenSSL's hashes (``_hashlib``, libcrypto: CPython's own compute the same digests);
-#: pydantic and what it alone imports (the settings are simbridge.schema's records: 6.2 MB,
-#: issue 16).
+#: bags), simbridge's CDR codec (a cbor-raw subscription, --zenoh, bags); OpenSSL's hashes
+#: (``_hashlib``, libcrypto: CPython's own compute the same digests); pydantic and what it
+#: alone imports (the settings are simbridge.schema's records: 6.2 MB, issue 16).
 NOT_ON_THE_DEFAULT_PATH = (
     "pydantic",
     "pydantic_core",
@@ -84,6 +84,7 @@ NOT_ON_THE_DEFAULT_PATH = (
     "numpy.random",
     "cbor2",
     "simbridge.graph.tutorials",
+    "simbridge.msgs.cdr",
     "urllib.request",
     "http.client",
     "zenoh",

@@ -38,7 +38,7 @@ import itertools
 import logging
 import time
 from collections.abc import Callable, Iterable
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from simbridge.config import ServerSettings
 from simbridge.errors import ProtocolError, SimbridgeError
@@ -56,7 +56,6 @@ from simbridge.graph.params import ParameterStore
 from simbridge.graph.services import Handler, ServiceTable, service_response, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
 from simbridge.msgs import Converter, TypeRegistry
-from simbridge.msgs.cdr import CdrWriter
 from simbridge.protocol import (
     Advertised,
     ClientId,
@@ -75,6 +74,10 @@ from simbridge.protocol import (
     Withdrawn,
     ops as o,
 )
+
+
+if TYPE_CHECKING:
+    from simbridge.msgs.cdr import CdrWriter
 
 
 __all__ = ["ROSOUT", "Graph", "budgets"]
@@ -146,7 +149,8 @@ class Graph:
             self.converter,
             default_queue_length=self.settings.default_queue_length,
         )
-        self.topics.cdr_factory = CdrWriter(self.registry).factory  # cbor-raw
+        self.topics.cdr_factory = self._cdr  # cbor-raw
+        self._cdr_writer: CdrWriter | None = None
         #: Services.
         self.services = ServiceTable(default_timeout=self.settings.service_timeout)
         prepare, finish = typed_calls(self.registry, self.converter)
@@ -343,6 +347,27 @@ class Graph:
         """Declare an in-process service."""
         self.nodes.setdefault(node, "")
         self.services.add(name, type_name, node, handler)
+
+    def _cdr(self, type_name: str, msg: Any) -> Callable[[], bytes]:
+        """Return a function computing the CDR bytes of ``msg`` when first needed (then kept).
+
+        Every consumer of one message (``cbor-raw`` subscribers) shares the one serialization.
+        The writer (:mod:`simbridge.msgs.cdr`, its codec compiled per type) is made by the first
+        message a consumer asks for: a run without one does not import it (issue 16: 0.3 MB).
+        """
+        kept: list[bytes] = []
+
+        def cdr() -> bytes:
+            if not kept:
+                writer = self._cdr_writer
+                if writer is None:
+                    from simbridge.msgs.cdr import CdrWriter
+
+                    writer = self._cdr_writer = CdrWriter(self.registry)
+                kept.append(writer.serialize(type_name, msg))
+            return kept[0]
+
+        return cdr
 
     def publish(self, topic: Topic, msg: Any, now: float) -> None:
         """Publish a canonical message from in process (no validation: the caller is trusted)."""
