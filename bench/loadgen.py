@@ -115,6 +115,8 @@ class _Client(asyncio.Protocol):
         self.stamps: dict[str, list[int]] = {t: [] for t in spec["subscribe"]}
         self.arrivals: dict[str, list[float]] = {t: [] for t in spec["subscribe"]}
         self.latencies: list[float] = []
+        #: Reads of the socket inside the window (each a system call, and its CPU).
+        self.reads = 0
         #: Topics that delivered a message stamped after the window (frames arrive in order).
         self.done: set[str] = set()
         self.finished = asyncio.get_running_loop().create_future()
@@ -134,6 +136,8 @@ class _Client(asyncio.Protocol):
 
     def data_received(self, data: bytes) -> None:
         now = time.time()
+        if self.start <= now < self.end:
+            self.reads += 1
         if self.frames is not None:
             self._frames_received(self.frames.feed(data), now)
             return
@@ -262,6 +266,7 @@ async def _one(url: str, spec: dict[str, Any], start: float, end: float) -> dict
     finally:
         client.close()
         transport.close()
+    result["reads"] = client.reads
     return result
 
 

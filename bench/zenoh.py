@@ -358,6 +358,11 @@ def classroom(seconds: float) -> bool:
         print(f"  {kind:16}{user + system:6.2f}{user:6.2f}{system:8.2f}  {each}")
     print(f"  {'all':16}{sum(totals):6.2f}{totals[0]:6.2f}{totals[1]:8.2f}")
     print(f"  {'stolen (VM host)':16}{steal / seconds:6.2f}")
+    reads = sum(r.get("reads", 0) for r in results)
+    print(
+        f"client reads: {reads / seconds / max(1, len(results)):.1f} per client per second, "
+        f"{len(lat) / max(1, reads):.2f} messages per read"
+    )
     print(
         f"/odom rate per client: p1 {low:.1f} Hz, p99 {high:.1f} Hz (target 18-22 Hz); "
         f"{len(results)} clients, {len(errors)} errors {errors[:2]}"
