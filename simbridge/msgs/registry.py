@@ -16,9 +16,10 @@ import functools
 import gc
 import re
 import threading
+from collections import ChainMap
 from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, Literal
+from typing import TYPE_CHECKING, Any, Literal, cast
 
 from simbridge.errors import TypeNotFoundError
 from simbridge.msgs.definitions import (
@@ -141,9 +142,10 @@ class TypeRegistry:
     """Every interface type simbridge knows, looked up by any accepted spelling."""
 
     def __init__(self, *, interfaces: bool = True) -> None:
-        #: Every message definition by canonical name: rosbags' standard messages (shipped,
-        #: shared by every registry of the process), then those registered here.
-        self._defs: dict[str, Definition] = dict(standard())
+        #: Every message definition by canonical name: those registered here, then rosbags'
+        #: standard messages (shipped, shared by every registry of the process).
+        self._registered: dict[str, Definition] = {}
+        self._defs = ChainMap(self._registered, cast("dict[str, Definition]", standard()))
         #: rosbags' type store with every type of ``_defs``, made by the first use of ``store``.
         self._store: Typestore | None = None
         #: Compiled specs by canonical name, filled lazily.
@@ -183,7 +185,7 @@ class TypeRegistry:
 
             store = get_typestore(Stores.LATEST)
             added: dict[str, Any] = {
-                name: d for name, d in self._defs.items() if name not in store.fielddefs
+                name: d for name, d in self._registered.items() if name not in store.fielddefs
             }
             if added:
                 store.register(added)
@@ -234,7 +236,7 @@ class TypeRegistry:
                 msg = f"Type {name!r} is already present with different definition."
                 raise TypesysError(msg)
         added: dict[str, Any] = {name: d for name, d in defs.items() if name not in self._defs}
-        self._defs.update(added)
+        self._registered.update(added)
         if self._store is not None and added:
             self._store.register(added)
 
@@ -565,7 +567,7 @@ def _interfaces() -> Any:
                 + [("action", n, t) for n, t in ACTIONS.items()]
             )
             _INTERFACES = (
-                {k: v for k, v in fresh._defs.items() if k not in standard()},
+                fresh._registered,
                 fresh._services,
                 fresh._actions,
                 fresh.texts,
@@ -582,7 +584,7 @@ def _actionlib() -> Any:
         fresh = TypeRegistry(interfaces=False)
         fresh.register_many([("msg", n, t) for n, t in ACTIONLIB_MESSAGES.items()])
         _ACTIONLIB = (
-            {k: v for k, v in fresh._defs.items() if k not in standard()},
+            fresh._registered,
             {},
             {},
             fresh.texts,
