@@ -246,7 +246,7 @@ def _to_float(value: Any) -> float:
             out = float(value)  # also numpy's scalars and Decimal
         else:
             raise ValueError
-    except ValueError:
+    except (ValueError, TypeError):  # TypeError: e.g. a numpy array of several numbers
         raise ValidationError.one(f"must be a number (got {value!r})") from None
     except OverflowError:  # an int past float range
         out = math.inf
@@ -261,7 +261,10 @@ def _to_int(value: Any) -> int:
     if isinstance(value, int):
         return value
     if hasattr(type(value), "__index__"):  # numpy's integers
-        return operator.index(value)
+        try:
+            return operator.index(value)
+        except TypeError:  # e.g. a numpy array of several integers
+            raise ValidationError.one(f"must be a valid integer (got {value!r})") from None
     if isinstance(value, str):
         try:
             return int(value)
@@ -521,7 +524,7 @@ class Record:
             raise ValidationError([(repr(k), "keys must be names (strings)") for k in bad])
         return cls(**data)
 
-    def __init__(self, **values: Any) -> None:
+    def __init__(self, /, **values: Any) -> None:  # positional-only: a key may be ``self``
         settings = type(self).settings()
         errors = [
             (name, "unknown key (check its spelling and nesting)")
@@ -579,14 +582,15 @@ class Record:
             new = convert(value)
         except ValidationError as err:
             raise err.within(name) from None
-        old = self.__dict__[name]
+        old, given = self.__dict__[name], self.given
         self.__dict__[name] = new
+        self.__dict__["_given"] = given | {name}  # before the check: it may ask what was given
         try:
             self._check()
         except ValidationError:
             self.__dict__[name] = old
+            self.__dict__["_given"] = given
             raise
-        self.__dict__["_given"] = self.given | {name}
 
     def __delattr__(self, name: str) -> None:
         raise ValidationError.one("cannot be deleted", name)

@@ -162,6 +162,24 @@ def test_a_record_validates_assignment_and_its_relations_and_keeps_the_old_value
         inner.middle = 1  # type: ignore[attr-defined]
 
 
+def test_a_key_named_self_and_numpy_arrays_are_refused_not_crashes() -> None:
+    """Any key of a file is refused by name, even ``self``; an array is not a number."""
+    with pytest.raises(ValidationError, match=r"^robot\.self: unknown key"):
+        Params.parse({"robot": {"self": 1}})
+    with pytest.raises(ValidationError, match=r"^mass: must be a number \(got array"):
+        RobotParams(mass=np.array([1.0, 2.0]))
+    with pytest.raises(ValidationError, match=r"^count: must be a valid integer \(got array"):
+        Sample(needed="n", count=np.array([1, 2]))
+
+
+def test_an_assignment_is_checked_with_itself_counted_as_given() -> None:
+    """A relation that asks which fields were given sees the one being assigned."""
+    world = WorldSpec(robots=[{"name": "a"}])
+    with pytest.raises(ValidationError, match="give either 'robot:'"):
+        world.robot = {"pose": [1, 2, 3]}  # type: ignore[assignment]
+    assert world.given == {"robots"} and world.robot == WorldSpec().robot
+
+
 def test_a_frozen_record_refuses_every_change() -> None:
     frozen = Frozen(value=2)
     with pytest.raises(ValidationError, match="value: cannot be changed"):
