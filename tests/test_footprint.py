@@ -47,17 +47,16 @@ from websockets.asyncio.client import ClientConnection, connect
 from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, wait_for
 
 
-#: Idle RSS ceiling of the default server, MB: measured 50.3-50.5 in a venv whose libraries were
-#: read back from disk and 51.1-56.5 in freshly installed ones (the page cache's large folios,
-#: see above; 53.4 and 60.7 before OpenSSL's hashes were cut), plus a margin for what the page
-#: cache adds (fresh clones measured up to 3.5 MB apart before): RSS is a coarse guard; the
-#: RssAnon ceiling below is the tight one.
-IDLE_RSS_CEILING_MB = 61.0
+#: Idle RSS ceiling of the default server, MB: measured 37.3-37.6 in a venv whose libraries were
+#: read back from disk (50.5 before pydantic, PyYAML and rosbags left the default path; 58.3
+#: before OpenSSL's hashes did), and up to 6 MB more in a freshly installed one (the page cache's
+#: large folios, see above): RSS is a coarse guard; the RssAnon ceiling below is the tight one.
+IDLE_RSS_CEILING_MB = 46.0
 
 #: Idle RssAnon ceiling, MB (the process's own memory; the page cache does not change it):
-#: measured 32.7-32.9 in both venvs (33.1 before OpenSSL's hashes were cut, 34.7 before issue
-#: 16's cuts), plus a margin.
-IDLE_ANON_CEILING_MB = 34.0
+#: measured 23.3-23.6 (32.9 before pydantic, PyYAML and rosbags left the default path), plus a
+#: margin.
+IDLE_ANON_CEILING_MB = 25.0
 
 #: rosbags' ROS 2 type store (``rosbags.typesys.stores.ros2_kilted`` and the chain of modules it is
 #: built on) and rosbags' type system: the definitions a run uses are shipped with simbridge.
