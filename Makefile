@@ -25,8 +25,8 @@ deps: $(BIN)/python
 	scripts/setup-test-deps.sh
 
 lint:
-	$(BIN)/ruff format --check simbridge tests bench examples
-	$(BIN)/ruff check simbridge tests bench examples
+	$(BIN)/ruff format --check simbridge tests bench examples scripts
+	$(BIN)/ruff check simbridge tests bench examples scripts
 
 typecheck:
 	$(BIN)/mypy
@@ -44,8 +44,8 @@ test-arm64: deps
 	$(BIN)/pytest -q tests/deploy/test_arm64.py
 
 format:
-	$(BIN)/ruff format simbridge tests bench examples
-	$(BIN)/ruff check --fix simbridge tests bench examples
+	$(BIN)/ruff format simbridge tests bench examples scripts
+	$(BIN)/ruff check --fix simbridge tests bench examples scripts
 
 bench: deps
 	$(BIN)/pip install --quiet -e '.[test,bench]'

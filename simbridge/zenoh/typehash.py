@@ -4,7 +4,9 @@ Jazzy and later put the RIHS01 hash of the type description (REP-2011) in every 
 and token; Humble's rmw_zenoh has no type hashes and writes ``TypeHashNotSupported``. A
 subscriber matches the data key exactly, so a wrong hash means silence, not an error.
 
-Messages are hashed by rosbags (``Typestore.hash_rihs01``). A service's hash covers a type with
+Messages are hashed by rosbags' ``Typestore.hash_rihs01`` over the registry's definitions
+(:attr:`TypeRegistry.fielddefs`: the shipped ones and simbridge's own), so a ``--zenoh`` run does
+not build rosbags' type store for it. A service's hash covers a type with
 three fields, ``request_message``, ``response_message`` and ``event_message``, the last of type
 ``pkg/srv/Foo_Event`` (``service_msgs/ServiceEventInfo info``, ``Foo_Request[<=1] request``,
 ``Foo_Response[<=1] response``). rosidl describes ``ServiceEventInfo.client_gid`` as
@@ -64,7 +66,9 @@ class TypeHasher:
         canonical = self.registry.spec(type_name).name
         found = self._cache.get(canonical)
         if found is None:
-            found = self._cache[canonical] = str(self.registry.store.hash_rihs01(canonical))
+            defs = _Defs(self.registry.fielddefs, {})
+            found = str(Typestore.hash_rihs01(defs, canonical))  # type: ignore[arg-type]
+            self._cache[canonical] = found
         return found
 
     def service(self, type_name: str) -> str:
@@ -114,5 +118,5 @@ def _service_hash(registry: TypeRegistry, name: str, request: str, response: str
             ],
         ),
     }
-    defs = _Defs(registry.store.fielddefs, extra)
+    defs = _Defs(registry.fielddefs, extra)
     return str(Typestore.hash_rihs01(defs, name))  # type: ignore[arg-type]

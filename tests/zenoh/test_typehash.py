@@ -25,3 +25,15 @@ def test_humble_has_no_type_hashes() -> None:
     hasher = TypeHasher(TypeRegistry(), "humble")
     assert hasher.message("nav_msgs/msg/Odometry") == NO_HASH == "TypeHashNotSupported"
     assert hasher.service("std_srvs/srv/Empty") == NO_HASH
+
+
+def test_hashes_come_from_the_registry_definitions_without_rosbags_store() -> None:
+    """The shipped definitions hash as rosbags' store does, and hashing does not build it."""
+    registry = TypeRegistry()
+    hasher = TypeHasher(registry, "jazzy")
+    names = ["nav_msgs/msg/Odometry", "sensor_msgs/msg/LaserScan", "tf2_msgs/msg/TFMessage"]
+    hashes = [hasher.message(name) for name in names]
+    service = hasher.service("std_srvs/srv/SetBool")
+    assert registry._store is None
+    assert hashes == [str(registry.store.hash_rihs01(name)) for name in names]
+    assert service.startswith("RIHS01_") and len(service) == len("RIHS01_") + 64
