@@ -16,7 +16,15 @@ from typing import Any
 
 import numpy as np
 
-from simbridge.msgs.cdrcodec import Reader, Unsupported, Writer, compile_reader, compile_writer
+from simbridge.msgs.cdrcodec import (
+    Reader,
+    Serializer,
+    Unsupported,
+    Writer,
+    compile_reader,
+    compile_serializer,
+    compile_writer,
+)
 from simbridge.msgs.convert import NUMPY_DTYPES
 from simbridge.msgs.registry import FieldSpec, TypeRegistry, normalize_type
 
@@ -26,8 +34,6 @@ __all__ = ["CdrReader", "CdrWriter", "to_dict"]
 Builder = Callable[[Any], Any]
 _PLACEHOLDER = "structure_needs_at_least_one_member"
 _BYTES = {"uint8": np.uint8, "char": np.uint8, "byte": np.uint8, "octet": np.uint8}
-#: The encapsulation header of little-endian plain CDR.
-_HEADER = b"\x00\x01\x00\x00"
 
 
 class CdrWriter:
@@ -37,22 +43,20 @@ class CdrWriter:
         #: Where the definitions and rosbags classes come from.
         self.registry = registry
         self._builders: dict[str, Builder] = {}
-        #: Compiled writers (:mod:`~simbridge.msgs.cdrcodec`); None: rosbags writes the type.
+        #: Compiled writers (:mod:`~simbridge.msgs.cdrcodec`) of the types nested in sequences;
+        #: None: rosbags writes the type.
         self._writers: dict[str, Any] = {}
+        #: Compiled serializers by any spelling of the type seen; None: rosbags writes it.
+        self._serializers: dict[str, Any] = {}
 
     def serialize(self, typename: str, msg: Any) -> bytes:
         """Return the CDR bytes (with encapsulation header) of a canonical message."""
-        writer = self._writers.get(typename, _MISSING)  # any spelling seen before
-        if writer is _MISSING:
-            canonical = normalize_type(typename)
-            writer = self._writers.get(canonical, _MISSING)
-            if writer is _MISSING:
-                writer = self._writer(canonical)
-            self._writers[typename] = writer
-        if writer is not None:
-            buffer = bytearray(_HEADER)
-            writer(msg, buffer)
-            return bytes(buffer)
+        serializer = self._serializers.get(typename, _MISSING)
+        if serializer is _MISSING:
+            serializer = self._serializers[typename] = self._serializer(normalize_type(typename))
+        if serializer is not None:
+            data: bytes = serializer(msg)
+            return data
         return self.serialize_with_rosbags(typename, msg)
 
     def serialize_with_rosbags(self, typename: str, msg: Any) -> bytes:
@@ -75,6 +79,21 @@ class CdrWriter:
             writer = None
         self._writers[typename] = writer
         return writer
+
+    def _serializer(self, typename: str) -> Serializer | None:
+        found = self._serializers.get(typename, _MISSING)
+        if found is not _MISSING:
+            serializer: Serializer | None = found
+            return serializer
+        fielddefs = self.registry.fielddefs
+        if typename not in fielddefs:
+            self.registry.spec(typename)  # raises TypeNotFoundError with the name
+        try:
+            serializer = compile_serializer(fielddefs, typename, self._nested)
+        except Unsupported:
+            serializer = None
+        self._serializers[typename] = serializer
+        return serializer
 
     def _nested(self, typename: str) -> Writer:
         writer = self._writers.get(typename, _MISSING)

@@ -8,6 +8,7 @@ import pytest
 from simbridge.errors import TypeNotFoundError
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.msgs.cdr import CdrReader, CdrWriter
+from simbridge.msgs.cdrcodec import LAYOUTS_KEPT
 from simbridge.protocol.encoding import encode_json
 
 
@@ -87,3 +88,50 @@ def test_truncated_or_overlong_counts_are_errors_naming_the_type(
     huge = b"\x00\x01\x00\x00" + b"\xff\xff\xff\x7f"  # a string claiming 2 GB
     with pytest.raises(ValueError, match="String"):
         reader.read("std_msgs/msg/String", huge)
+
+
+@pytest.mark.parametrize(
+    "typename",
+    [
+        "nav_msgs/msg/Odometry",
+        "sensor_msgs/msg/LaserScan",
+        "tf2_msgs/msg/TFMessage",
+        "sensor_msgs/msg/Image",
+        "sensor_msgs/msg/JointState",
+        "diagnostic_msgs/msg/KeyValue",
+    ],
+)
+def test_strings_and_arrays_of_every_length_encode_as_rosbags_does(
+    parts: tuple[TypeRegistry, Converter, CdrWriter, CdrReader], typename: str
+) -> None:
+    # every length mod 8 puts the fields after a string or an array at another alignment
+    _registry, convert, writer, _reader = parts
+    for n in range(10):
+        text = "abcdefghij"[:n]
+        payload = {
+            "header": {"frame_id": text},
+            "child_frame_id": text + "é",
+            "ranges": [0.25 * k for k in range(n)],
+            "intensities": [1.5] * (n % 3),
+            "transforms": [{"child_frame_id": text[:k]} for k in range(n % 4)],
+            "encoding": text,
+            "data": list(range(n)),
+            "name": [text] * (n % 3),
+            "position": [k / 3 for k in range(n)],
+            "key": text,
+            "value": text[::-1],
+        }
+        spec = convert.default(typename)
+        msg = convert.from_json(typename, {k: v for k, v in payload.items() if k in spec})
+        data = writer.serialize(typename, msg)
+        assert data == writer.serialize_with_rosbags(typename, msg), (typename, n)
+
+
+def test_strings_of_more_lengths_than_the_layouts_kept_encode_as_rosbags_does(
+    parts: tuple[TypeRegistry, Converter, CdrWriter, CdrReader],
+) -> None:
+    _registry, _convert, writer, _reader = parts
+    for n in (*range(LAYOUTS_KEPT + 10), *range(20)):
+        msg = {"key": "k" * (n % 7), "value": "v" * n}
+        data = writer.serialize("diagnostic_msgs/msg/KeyValue", msg)
+        assert data == writer.serialize_with_rosbags("diagnostic_msgs/msg/KeyValue", msg), n
