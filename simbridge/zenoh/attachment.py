@@ -15,10 +15,14 @@ from dataclasses import dataclass
 __all__ = ["Attachment", "pack_attachment"]
 
 _HEAD = struct.Struct("<qqB")
+#: The whole attachment with rmw_zenoh's 16-byte GID, packed by one call (every sample has one).
+_GID16 = struct.Struct("<qqB16s")
 
 
 def pack_attachment(sequence: int, timestamp_ns: int, gid: bytes) -> bytes:
     """Return the wire bytes of an attachment (what :meth:`Attachment.pack` returns)."""
+    if len(gid) == 16:
+        return _GID16.pack(sequence, timestamp_ns, 16, gid)
     return _HEAD.pack(sequence, timestamp_ns, len(gid)) + gid
 
 

@@ -575,21 +575,34 @@ class ZenohLink:
         outbox, self._outbox = self._outbox, []
         if self.session is None:
             return
-        sent = 0
+        # every payload first, then the puts back to back: each part runs warm, and Zenoh's
+        # transmit thread finds the tick's samples together (bench.zenoh outward's ROS 2 phase:
+        # 21 -> 15 us a message on the loop, Zenoh's tx thread 0.8 -> 0.3 % of a core)
+        ready = []
         for entry, out in outbox:
-            sent += self._put(entry, out)
+            payload = self._payload(entry, out)
+            if payload is not None:
+                ready.append((entry, payload))
+        sent = 0
+        for entry, payload in ready:
+            sent += self._put_bytes(entry, payload)
         self.stats["published"] += sent
 
     def _put(self, entry: _Declared, out: Outgoing) -> bool:
         """Publish a delivery on a declared publisher; return whether it went out."""
+        payload = self._payload(entry, out)
+        return payload is not None and self._put_bytes(entry, payload)
+
+    def _payload(self, entry: _Declared, out: Outgoing) -> bytes | None:
+        """Return the CDR bytes of a delivery (shared with ``cbor-raw``), None if it has none."""
         try:
             payload = out.cdr() if out.cdr is not None else None
             if payload is None:
                 payload = self.cdr.serialize(entry.entity.type, out.msg)
         except Exception as err:  # a message the CDR writer cannot encode: skip, say so once
             self._log(f"cdr {entry.entity.name}", f"Zenoh: {entry.entity.name} not sent: {err}")
-            return False
-        return self._put_bytes(entry, payload)
+            return None
+        return payload
 
     def _put_bytes(self, entry: _Declared, payload: bytes, *, count: bool = False) -> bool:
         """Publish CDR bytes on a declared publisher, with rmw_zenoh's attachment.

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from simbridge.zenoh.attachment import Attachment
+from simbridge.zenoh.attachment import Attachment, pack_attachment
 
 
 def test_attachment_is_sequence_timestamp_length_and_gid_little_endian() -> None:
@@ -20,3 +20,11 @@ def test_attachment_is_sequence_timestamp_length_and_gid_little_endian() -> None
 def test_short_attachments_are_refused(data: bytes) -> None:
     with pytest.raises(ValueError, match="attachment"):
         Attachment.unpack(data)
+
+
+@pytest.mark.parametrize("size", [0, 8, 16, 24])
+def test_a_gid_of_any_length_is_packed_after_its_length(size: int) -> None:
+    gid = bytes(range(size))
+    data = pack_attachment(7, 42, gid)
+    assert data == (7).to_bytes(8, "little") + (42).to_bytes(8, "little") + bytes([size]) + gid
+    assert Attachment.unpack(data) == Attachment(7, 42, gid)

@@ -89,6 +89,72 @@ async def test_ros2_subscribers_get_odom_scan_and_tf(zapp: App, router: Router) 
     assert got["tf"][-1].transforms[0].child_frame_id == "base_link"
 
 
+async def test_samples_carry_rosbags_exact_cdr_and_rmw_zenoh_attachments(
+    zapp: App, router: Router
+) -> None:
+    import zenoh
+    from zenoh_ros2_sdk import ROS2Subscriber
+
+    from simbridge.zenoh.attachment import Attachment
+
+    link = zapp.zenoh
+    assert link is not None
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([router.endpoint]))
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    raw = await asyncio.to_thread(zenoh.open, conf)
+    got: dict[str, list[tuple[bytes, bytes]]] = {"odom": [], "scan": [], "tf": []}
+
+    def keep(name: str) -> Any:
+        def on_sample(sample: Any) -> None:  # a Zenoh thread
+            attachment = sample.attachment.to_bytes() if sample.attachment is not None else b""
+            got[name].append((sample.payload.to_bytes(), attachment))
+
+        return on_sample
+
+    taps = [raw.declare_subscriber(f"0/{name}/**", keep(name)) for name in got]
+    start = time.time_ns()
+    # the SDK's subscriptions are what makes simbridge publish (rmw_zenoh tokens)
+    subs = [
+        await asyncio.to_thread(
+            ROS2Subscriber, f"/{name}", type_name, callback=lambda _msg: None, **sdk_kw(router)
+        )
+        for name, type_name in [
+            ("odom", "nav_msgs/msg/Odometry"),
+            ("scan", "sensor_msgs/msg/LaserScan"),
+            ("tf", "tf2_msgs/msg/TFMessage"),
+        ]
+    ]
+    try:
+        await wait_for(lambda: all(len(v) >= 5 for v in got.values()), timeout=10)
+    finally:
+        for sub in subs:
+            sub.close()
+        for tap in taps:
+            tap.undeclare()
+        await asyncio.to_thread(raw.close)
+    store = zapp.graph.registry.store
+    for name, type_name in [
+        ("odom", "nav_msgs/msg/Odometry"),
+        ("scan", "sensor_msgs/msg/LaserScan"),
+        ("tf", "tf2_msgs/msg/TFMessage"),
+    ]:
+        samples = got[name][:5]
+        attachments = [Attachment.unpack(a) for _, a in samples]
+        assert all(len(a) == 33 for _, a in samples)
+        assert {a.gid for a in attachments} == {link._publishers[f"/{name}"].gid}
+        sequences = [a.sequence for a in attachments]
+        assert sequences == list(range(sequences[0], sequences[0] + 5))
+        assert all(start - 10**9 <= a.timestamp_ns <= time.time_ns() for a in attachments)
+        for payload, _ in samples:  # rosbags reads them and writes the same bytes back
+            obj = store.deserialize_cdr(payload, type_name)
+            assert bytes(store.serialize_cdr(obj, type_name, little_endian=True)) == payload
+    odom = store.deserialize_cdr(got["odom"][-1][0], "nav_msgs/msg/Odometry")
+    assert (odom.header.frame_id, odom.child_frame_id) == ("odom", "base_link")
+    assert len(odom.pose.covariance) == 36
+
+
 async def test_ros2_publisher_drives_the_robot_through_cmd_vel(zapp: App, router: Router) -> None:
     from zenoh_ros2_sdk import ROS2Publisher
 
