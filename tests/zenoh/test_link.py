@@ -16,7 +16,7 @@ from websockets.asyncio.client import connect
 from simbridge.runner import App
 from simbridge.zenoh.names import Entity
 from simbridge.zenoh.typehash import TypeHasher
-from tests.helpers import recv_until, send_json, wait_for, ws_url
+from tests.helpers import TIMEOUT_FACTOR, recv_until, send_json, wait_for, ws_url
 from tests.zenoh.conftest import Router, eventually
 
 
@@ -435,15 +435,29 @@ async def test_a_flood_of_samples_is_handed_over_in_batches_and_bounded(
 async def _receive_from(zapp: App, conn: Any, pub: Any, name: str) -> dict[str, Any]:
     """Subscribe ``conn`` to ``name`` and wait until a sample ``pub`` publishes reaches it.
 
-    Returns the message (``{"data": "probe"}``): the route is up end to end.
+    The link declares its subscriber before the publisher's session may have heard of it (a put
+    before that goes nowhere), so a probe is published every half second until one arrives;
+    then a last sample, received after every probe still under way (one publisher's samples
+    arrive in order), leaves nothing of the probes for what the test receives next.
+    Returns the probe (``{"data": "probe"}``): the route is up end to end.
     """
     link = zapp.zenoh
     assert link is not None
     await wait_for(lambda: name in zapp.graph.topics.topics, timeout=8)
     await send_json(conn, {"op": "subscribe", "topic": name})
     await wait_for(lambda: name in link._subscribers, timeout=8)
-    await asyncio.to_thread(pub.publish, data="probe")
-    msg = await recv_until(conn, lambda m: m.get("topic") == name, timeout=8)
+    loop = asyncio.get_running_loop()
+    deadline = loop.time() + 8 * TIMEOUT_FACTOR
+    while True:
+        await asyncio.to_thread(pub.publish, data="probe")
+        try:
+            msg = await recv_until(conn, lambda m: m.get("topic") == name, timeout=0.5)
+            break
+        except TimeoutError:
+            if loop.time() > deadline:
+                raise
+    await asyncio.to_thread(pub.publish, data="probes done")
+    await recv_until(conn, lambda m: m.get("msg") == {"data": "probes done"}, timeout=8)
     return dict(msg["msg"])
 
 
