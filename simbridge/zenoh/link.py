@@ -402,11 +402,13 @@ class ZenohLink:
         """Declare what the graph has and Zenoh lacks, undeclare what went, both ways."""
         if self.session is None:
             return
-        self._generation = self._signature()
         self.stats["reconciles"] += 1
         if self._remote_dirty or force:
             self._remote_dirty = False
             self._import_remote()
+        # after the import, which adds to the graph's tables: what it changed is handled below,
+        # not again by a second pass at the next tick
+        self._generation = self._signature()
         self._export_local()
         self._update_subscribers()
         self._update_state()

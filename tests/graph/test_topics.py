@@ -92,6 +92,17 @@ def test_latched_message_reaches_late_subscribers(graph: Graph) -> None:
     assert late.take() == [{"op": "publish", "topic": "/map_name", "msg": {"data": "lab"}}]
 
 
+def test_a_publish_that_latches_a_topic_counts_as_a_change_once(graph: Graph) -> None:
+    """The Zenoh link redoes its subscriptions when the change counter moves (latched apart)."""
+    a = RecordingPeer(graph, "a")
+    op(a, graph, op="advertise", topic="/note", type="std_msgs/String")
+    before = graph.topics.changes
+    op(a, graph, op="publish", topic="/note", msg={"data": "x"}, latch=True)
+    assert graph.topics.topics["/note"].latch and graph.topics.changes == before + 1
+    op(a, graph, op="publish", topic="/note", msg={"data": "y"}, latch=True)
+    assert graph.topics.changes == before + 1
+
+
 def test_unsubscribe_by_id_keeps_the_other_ids(graph: Graph) -> None:
     """Removing one of two ids keeps delivery; removing all stops it."""
     a, pub = RecordingPeer(graph, "a"), RecordingPeer(graph, "pub")
