@@ -419,9 +419,7 @@ class Graph:
         out = self.topics.outgoing(topic, admitted.msg, self.stamp())
         if op.latch or topic.latch:
             peer.session.latch(name, len(out.json_body()))  # what later subscribers will cost
-            if not topic.latch:
-                topic.latch = True
-                self.topics.changes += 1  # the Zenoh link subscribes to latched topics apart
+            self.topics.latch(topic)
         self.topics.deliver(topic, out, now, peer)
 
     def _subscribe(self, peer: Peer, admitted: Typed, now: float) -> None:

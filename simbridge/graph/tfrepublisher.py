@@ -233,9 +233,7 @@ class TfRepublisher:
                 if topic.latched is not None:
                     self.buffer.add(topic.latched.msg)
             else:
-                topic = self.graph.topics.topics[name]
-                topic.internal = [(n, c) for n, c in topic.internal if c != self._on_tf]
-                self.graph.topics.changes += 1
+                self.graph.topics.unsubscribe_internal(name, self._on_tf)
 
     def _add(self, request: _Request) -> None:
         self.requests.append(request)

@@ -191,6 +191,12 @@ class TopicTable:
                 self.unlatch(topic)
         self._forget_if_unused(topic)
 
+    def latch(self, topic: Topic) -> None:
+        """Keep the last message of ``topic`` for later subscribers from now on."""
+        if not topic.latch:
+            topic.latch = True
+            self.changes += 1  # the Zenoh link subscribes to latched topics apart
+
     def unlatch(self, topic: Topic) -> None:
         """Drop the latched message of ``topic`` (and give its bytes back to its publisher)."""
         if topic.latched_by is not None:
@@ -241,7 +247,8 @@ class TopicTable:
         if topic is None:
             return
         self.changes += 1
-        topic.internal = [(n, cb) for n, cb in topic.internal if cb is not callback]
+        # by equality: a bound method is a new object each time it is read
+        topic.internal = [(n, cb) for n, cb in topic.internal if cb != callback]
         self._forget_if_unused(topic)
 
     def unlatched(self, peer: Peer, name: str) -> None:
