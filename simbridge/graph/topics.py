@@ -128,6 +128,8 @@ class TopicTable:
         #: Called with ``(topic, message, sending peer or None)`` before each delivery
         #: (extensions: the Zenoh link forwards messages to ROS 2 subscribers).
         self.taps: list[Callable[[Topic, Outgoing, Peer | None], None]] = []
+        #: Called by :meth:`flush`: what a tap holds back to send together, sent now.
+        self.flushers: list[Callable[[], None]] = []
         #: When the message being delivered arrived (monotonic seconds): the in-process
         #: subscribers that time commands read it (the ``/cmd_vel`` watchdog).
         self.now = 0.0
@@ -291,6 +293,11 @@ class TopicTable:
             msg = f"publish: msg must be a JSON object, got {type(payload).__name__}"
             raise ProtocolError(msg)
         return payload
+
+    def flush(self) -> None:
+        """Send what the taps hold back (a publisher that has more to compute says so)."""
+        for flush in self.flushers:
+            flush()
 
     def deliver(self, topic: Topic, out: Outgoing, now: float, source: Peer | None) -> None:
         """Send ``out`` to every subscriber of ``topic`` and run the in-process callbacks.

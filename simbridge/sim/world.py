@@ -111,6 +111,9 @@ class Robot:
 WORLD_MARGIN = 1.0
 #: Metres around the start poses of a world without walls where robots may be placed.
 OPEN_WORLD = 50.0
+#: Groups of robots whose last scans :meth:`World.scans` keeps (robots scan in turns: with the
+#: LiDAR at half the step rate, two groups alternate).
+SCAN_GROUPS = 8
 
 
 class World:
@@ -149,9 +152,9 @@ class World:
         self._rng: np.random.Generator | None = None
         self._angles_key: tuple[int, float] | None = None
         self._angles: FloatArray = np.zeros(0)
-        #: The last batch of noiseless ranges and what it depends on (see :meth:`scans`).
-        self._scan_key: tuple[object, ...] | None = None
-        self._scan_ranges: FloatArray = np.zeros((0, 0))
+        #: The last noiseless ranges of each group of robots scanned together (robots take
+        #: turns: one group a step), with what they were cast from.
+        self._scan_cache: dict[tuple[str, ...], tuple[tuple[object, ...], FloatArray]] = {}
         for robot in self.robots.values():
             robot.place(robot.start)
 
@@ -288,11 +291,14 @@ class World:
         centres_list = [(r.state.x, r.state.y) for r in self.robots.values()]
         poses_list = [self.laser_pose(n) for n in names]
         # The walls never change, so while no robot moved (nor a LiDAR setting) the noiseless
-        # ranges are the last ones: a parked robot's scan costs no raycast.
-        key: tuple[object, ...] = (tuple(names), tuple(self.robots), tuple(centres_list))
-        key += (tuple(poses_list),)
+        # ranges are the group's last ones: a parked robot's scan costs no raycast.
+        group = tuple(names)
+        key: tuple[object, ...] = (tuple(self.robots), tuple(centres_list), tuple(poses_list))
         key += (radius, lidar.rays, lidar.range_max)
-        if key != self._scan_key:
+        cached = self._scan_cache.get(group)
+        if cached is not None and cached[0] == key:
+            ranges = cached[1]
+        else:
             everyone = list(self.robots)
             index = {n: i for i, n in enumerate(everyone)}
             poses = np.array(poses_list, dtype=np.float64).reshape(-1, 3)
@@ -309,8 +315,10 @@ class World:
                 owners=owners,
             )
             raw.flags.writeable = False
-            self._scan_key, self._scan_ranges = key, raw
-        ranges = self._scan_ranges
+            if len(self._scan_cache) >= SCAN_GROUPS:
+                self._scan_cache.clear()  # the groups changed (robots came and went)
+            self._scan_cache[group] = (key, raw)
+            ranges = raw
         if lidar.noise_stddev > 0:
             ranges = ranges + self.rng.normal(0.0, lidar.noise_stddev, ranges.shape)
         return np.clip(ranges, lidar.range_min, lidar.range_max).astype(np.float32)

@@ -272,6 +272,7 @@ class ZenohLink:
         #: Actions both ways (rcl_action's services and topics).
         self.actions = ActionBridge(self)
         graph.topics.taps.append(self._on_deliver)
+        graph.topics.flushers.append(self._flush)
         self._guard_spawn()
         self._extend_access()
 
@@ -574,6 +575,13 @@ class ZenohLink:
         self._outbox.append((entry, out))
 
     def _flush(self) -> None:
+        """Put what :meth:`_on_deliver` held back.
+
+        At the end of the callback, or earlier when the graph says so (a step's /odom before
+        its scans are cast).
+        """
+        if not self._outbox:
+            return
         outbox, self._outbox = self._outbox, []
         if self.session is None:
             return

@@ -1,12 +1,13 @@
 from __future__ import annotations
 
+import itertools
 import json
 import math
 from typing import Any
 
 import pytest
 
-from simbridge.config import Params, load_world
+from simbridge.config import Params, WorldSpec, load_world
 from simbridge.graph import Graph, RobotBridge
 from simbridge.sim import World
 from tests.helpers import RecordingPeer
@@ -126,3 +127,40 @@ def test_parameters_of_the_robot_are_live(setup: Any) -> None:
     with pytest.raises(Exception, match="greater than 0"):
         graph.params.set("/virtual_robot", {"robot.mass": 0.0, "robot.inertia": 1.0})
     assert world.params.robot.inertia == 0.0075
+
+
+def test_robots_take_turns_to_scan() -> None:
+    """Each robot scans at the LiDAR rate, at its own offset: a step casts half the scans.
+
+    The first step scans every robot; after it, with a 10 Hz LiDAR and 20 Hz steps, every step
+    carries the scans of two of the four robots, and each robot's scans come two steps apart.
+    The scans of a parked group are the same when the groups alternate.
+    """
+    graph = Graph(wall_clock_ns=lambda: 42_000_000_007)
+    names = ["r1", "r2", "r3", "r4"]
+    spec = WorldSpec.parse(
+        {
+            "walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]],
+            "robots": [{"name": n, "pose": [k - 1.5, 0.0, 0.0]} for k, n in enumerate(names)],
+        }
+    )
+    world = World(spec, Params())
+    bridge = RobotBridge(graph, world)
+    peer = RecordingPeer(graph)
+    for n in names:
+        sub(peer, graph, f"/{n}/scan")
+    steps: list[list[str]] = []
+    ranges: dict[str, list[list[float]]] = {n: [] for n in names}
+    for _ in range(9):
+        world.step()
+        bridge.publish(0.0)
+        scans = [m for m in peer.take() if m["topic"].endswith("/scan")]
+        steps.append(sorted(m["topic"].split("/")[1] for m in scans))
+        for m in scans:
+            ranges[m["topic"].split("/")[1]].append(m["msg"]["ranges"])
+    assert steps[0] == names
+    assert all(len(step) == 2 for step in steps[1:])
+    for n in names:
+        at = [k for k, step in enumerate(steps) if n in step][1:]
+        assert all(b - a == 2 for a, b in itertools.pairwise(at))
+        assert all(r == ranges[n][0] for r in ranges[n])  # parked: the same scan each time
