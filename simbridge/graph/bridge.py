@@ -6,7 +6,8 @@ Node ``/virtual_robot`` publishes, per robot (REP-105 frames, wall-clock header 
   quaternion ``z = sin(theta/2), w = cos(theta/2)``, and the applied (clamped) velocity;
 * ``/tf`` (tf2_msgs/TFMessage) every step: ``odom -> base_link``, the same pose;
 * ``/tf_static``, latched: ``base_link -> laser`` from the LiDAR mount;
-* ``/scan`` (sensor_msgs/LaserScan) at ``lidar.rate``: frame ``laser``, ``angle_min = 0``,
+* ``/scan`` (sensor_msgs/LaserScan) at ``lidar.rate`` (each robot at its own phase of the scan
+  period, as unsynchronised LiDARs are): frame ``laser``, ``angle_min = 0``,
   ``angle_increment = 2 pi / rays``, ``angle_max = angle_min + (rays - 1) * increment``;
 
 and subscribes ``/cmd_vel`` (geometry_msgs/Twist, or TwistStamped with parameter
