@@ -24,7 +24,8 @@ directly (rmw_zenoh's default topology: the router is not a broker on one host).
   the students' own machines run them). Per client: /odom rate, losses (gaps in the
   header stamps), latency p99. Target: 20 Hz +- 10 %, 0 lost, p99 <= 50 ms. Where the CPU
   goes: each process kind's cores (user + system seconds over the run's seconds) against the
-  cores the machine has. ``CPROFILE=DIR`` runs each simbridge process under cProfile (its
+  cores the machine has. Where in the 50 ms period each simulator ticks (they take turns: see
+  ``ZenohLink.tick_share``). ``CPROFILE=DIR`` runs each simbridge process under cProfile (its
   ``.prof`` file in DIR when it exits; the figures are then those of a profiled run).
 """
 
@@ -34,6 +35,7 @@ import asyncio
 import contextlib
 import itertools
 import json
+import math
 import os
 import re
 import statistics
@@ -399,6 +401,21 @@ def classroom(seconds: float) -> bool:
     print(
         f"/odom lost (stamp gaps): {lost} (target 0); latency p50 {p50:.1f} ms, "
         f"p99 {p99:.1f} ms (target <= 50), {len(lat)} messages"
+    )
+    phases = []
+    for k in range(sims):
+        angles = [
+            2.0 * math.pi * (t % 50_000_000) / 50e6
+            for r in results
+            for topic, values in r.get("stamps", {}).items()
+            if topic.startswith(f"/s{k}r") and topic.endswith("/odom")
+            for t in values[:20]
+        ]
+        mean = math.atan2(sum(map(math.sin, angles)), sum(map(math.cos, angles)))
+        phases.append((mean / (2.0 * math.pi) * 50.0) % 50.0 if angles else float("nan"))
+    print(
+        "where each simulator ticks in the 50 ms period (its /odom stamps, circular mean, ms): "
+        + " ".join(f"{p:.1f}" for p in phases)
     )
     _print_health(health0, health1)
     ok = low >= 18.0 and high <= 22.0 and lost == 0 and p99 <= 50.0 and not errors

@@ -76,6 +76,19 @@ def _strip_simulation(graph: Graph, nodes: set[str]) -> None:
         graph.params.nodes.pop(node, None)
 
 
+def _turn_shift(share: tuple[int, int], dt: float, wall: float) -> float:
+    """Return the seconds to move the next tick by (within half a period either way).
+
+    ``share``: this simulator's rank among ``n`` simulators; its ticks fall ``rank / n`` of the
+    period after each multiple of the period in wall-clock time (``wall``: the next tick's
+    wall-clock time), so the simulators of one machine take turns. Half a period at most, so
+    that no gap between two ticks reaches two periods.
+    """
+    rank, count = share
+    target = rank / count * dt
+    return (target - wall + dt / 2.0) % dt - dt / 2.0
+
+
 def _percentile(values: list[float], q: float) -> float:
     if not values:
         return 0.0
@@ -270,6 +283,8 @@ class App:
         start = clock()
         k = 0
         period = self.world.dt
+        # the simulators' turns last applied (see ZenohLink.tick_share), with the period
+        turn: tuple[tuple[int, int] | None, float] = (None, period)
         while True:
             # one step per period of wall time: dt / real-time factor; a new period (factor or
             # sim.rate changed) restarts the deadlines from the last one
@@ -278,6 +293,12 @@ class App:
                 start, k, period = start + k * period, 0, dt
             k += 1
             deadline = start + k * dt
+            share = self.zenoh.tick_share if self.zenoh is not None else None
+            if (share, dt) != turn:
+                turn = (share, dt)
+                if share is not None:
+                    shift = _turn_shift(share, dt, time.time() + deadline - clock())
+                    start, deadline = start + shift, deadline + shift
             delay = deadline - clock()
             if delay > 0:
                 await asyncio.sleep(delay)

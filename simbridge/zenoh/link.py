@@ -40,7 +40,7 @@ from typing import Any
 import orjson
 
 from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
-from simbridge.graph import BRIDGE_NODE, Graph, Topic
+from simbridge.graph import BRIDGE_NODE, ROBOT_NODE, Graph, Topic
 from simbridge.graph.estop import connection_rights
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
@@ -220,6 +220,13 @@ class ZenohLink:
         self._publishers: dict[str, _Declared] = {}
         #: Remote entities by token.
         self._remote: dict[str, Entity] = {}
+        #: Zenoh session ids of the other simulators on the network (their ``/virtual_robot``
+        #: node tokens), and how many tokens of that node each has.
+        self._simulators: Counter[str] = Counter()
+        #: This simulator's place among the simulators of the network and their number (by
+        #: session id), or None alone: where in the step period it ticks (see
+        #: :meth:`tick_share`).
+        self.tick_share: tuple[int, int] | None = None
         self._remote_dirty = True
         #: Remote subscriptions per topic name (publish only while there is one).
         self._remote_subs: Counter[str] = Counter()
@@ -339,6 +346,7 @@ class ZenohLink:
             "ros_distro": self.options.distro,
             "declared": len(self._declared),
             "remote_entities": len(self._remote),
+            "tick_share": list(self.tick_share) if self.tick_share is not None else None,
             **dict(self.stats),
         }
         if self.session is not None:
@@ -743,7 +751,26 @@ class ZenohLink:
                 self._remote_subs[entity.name] -= 1
                 if self._remote_subs[entity.name] <= 0:
                     del self._remote_subs[entity.name]
+        if entity.kind == "NN" and entity.node_fqn == ROBOT_NODE:
+            self._simulators[entity.zid] += 1 if alive else -1
+            if self._simulators[entity.zid] <= 0:
+                del self._simulators[entity.zid]
+            self._update_share()
         self._remote_dirty = True
+
+    def _update_share(self) -> None:
+        """Recompute :attr:`tick_share`: this process's rank among the simulators, by zid.
+
+        The simulators of one classroom take turns in the step period: on one machine their
+        ticks would otherwise fall together about a third of the time, and every front-end then
+        got both bursts at once (``bench.zenoh classroom``, 2 x 300 robots: latency p99 97 ms
+        with the two ticks 3 ms apart, 43-52 ms with them 11-19 ms apart).
+        """
+        if not self.zid or ROBOT_NODE not in self.graph.nodes or not self._simulators:
+            self.tick_share = None
+            return
+        everyone = sorted({*self._simulators, self.zid})
+        self.tick_share = (everyone.index(self.zid), len(everyone))
 
     def _import_remote(self) -> None:
         """Make the graph hold exactly the remote publishers and services the tokens show."""

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import asyncio
 import json
+import math
+import time
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -93,6 +95,46 @@ async def test_a_latched_topic_reaches_a_late_subscriber_of_another_process(
                 got = await recv_until(late, lambda m: m.get("topic") == "/lesson", timeout=8)
         assert got["msg"] == {"data": "lesson 3: PID"}
         assert second.graph.topics.topics["/lesson"].latch
+    finally:
+        for app in apps:
+            await app.stop()
+
+
+def _phase(times: list[float], dt: float) -> float:
+    """The mean phase of wall-clock times in a period ``dt`` (circular: no wrap at 0)."""
+    angles = [2.0 * math.pi * (t % dt) / dt for t in times]
+    mean = math.atan2(sum(map(math.sin, angles)), sum(map(math.cos, angles)))
+    return (mean / (2.0 * math.pi) * dt) % dt
+
+
+async def test_simulators_of_one_network_take_turns_in_the_step_period(
+    router: Router, ros2: Any
+) -> None:
+    """Two simulators tick half a period apart (each sees the other's /virtual_robot)."""
+    apps = []
+    for _ in range(2):
+        app = App(
+            ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router)
+        )
+        await app.start()
+        apps.append(app)
+    try:
+
+        def shares() -> list[tuple[int, int] | None]:
+            return [app.zenoh.tick_share if app.zenoh is not None else None for app in apps]
+
+        await wait_for(lambda: all(s is not None and s[1] == 2 for s in shares()), timeout=10)
+        by_rank = sorted(apps, key=lambda app: app.zenoh.tick_share if app.zenoh else (0, 0))
+        assert [app.zenoh.tick_share for app in by_rank if app.zenoh] == [(0, 2), (1, 2)]
+        ticks: list[list[float]] = [[], []]
+        for k, app in enumerate(by_rank):
+            app.tick_hooks.append(lambda _now, k=k: ticks[k].append(time.time()))
+        await wait_for(lambda: min(map(len, ticks)) >= 30, timeout=10)
+        dt = apps[0].world.dt
+        apart = (_phase(ticks[1][5:], dt) - _phase(ticks[0][5:], dt)) % dt
+        assert abs(apart - dt / 2.0) < dt / 5.0, (apart, dt)
+        health = apps[0].health()["zenoh"]
+        assert health["tick_share"] in ([0, 2], [1, 2])
     finally:
         for app in apps:
             await app.stop()
