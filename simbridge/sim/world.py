@@ -112,8 +112,9 @@ WORLD_MARGIN = 1.0
 #: Metres around the start poses of a world without walls where robots may be placed.
 OPEN_WORLD = 50.0
 #: Groups of robots whose last scans :meth:`World.scans` keeps (robots scan in turns: with the
-#: LiDAR at half the step rate, two groups alternate).
-SCAN_GROUPS = 8
+#: LiDAR at half the step rate, two groups alternate; at a LiDAR rate of p/q of the step rate
+#: in lowest terms, q groups come round in turn).
+SCAN_GROUPS = 20
 
 
 class World:
@@ -315,8 +316,9 @@ class World:
                 owners=owners,
             )
             raw.flags.writeable = False
-            if len(self._scan_cache) >= SCAN_GROUPS:
-                self._scan_cache.clear()  # the groups changed (robots came and went)
+            self._scan_cache.pop(group, None)
+            if len(self._scan_cache) >= SCAN_GROUPS:  # the oldest group goes
+                del self._scan_cache[next(iter(self._scan_cache))]
             self._scan_cache[group] = (key, raw)
             ranges = raw
         if lidar.noise_stddev > 0:

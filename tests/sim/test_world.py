@@ -8,7 +8,7 @@ import pytest
 
 from simbridge.config import Params, WorldSpec, load_params, load_world
 from simbridge.sim import World
-from simbridge.sim.world import KinematicModel, Robot
+from simbridge.sim.world import SCAN_GROUPS, KinematicModel, Robot
 
 
 def test_world_keeps_the_last_command_between_steps() -> None:
@@ -254,3 +254,27 @@ def test_a_robot_is_never_placed_outside_the_world() -> None:
     with pytest.raises(ValueError, match="outside the world"):
         world.spawn("r2", (0.0, 6.5, 0.0))
     world.teleport("r1", (5.5, 0.0, 0.0))  # in the margin: open layouts have no walls there
+
+
+def test_scans_of_groups_taking_turns_are_kept_and_bounded() -> None:
+    """Parked robots scanned in turns by groups: each group's last ranges are reused.
+
+    Any number of groups may come round; the oldest beyond :data:`SCAN_GROUPS` is dropped.
+    """
+    spec = WorldSpec.parse(
+        {
+            "walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]],
+            "robots": [{"name": f"r{k}", "pose": [k - 2.0, 0.0, 0.0]} for k in range(4)],
+        }
+    )
+    world = World(spec, Params())
+    first = world.scans(["r0", "r2"])
+    assert np.array_equal(world.scans(["r1", "r3"])[0], world.scans(["r1"])[0])
+    again = world.scans(["r0", "r2"])
+    assert np.array_equal(first, again)
+    for k in range(SCAN_GROUPS + 5):
+        world.scans([f"r{k % 4}", f"r{(k + 1) % 4}"] if k % 2 else [f"r{k % 4}"])
+    assert len(world._scan_cache) <= SCAN_GROUPS
+    world.robots["r0"].place((-2.0, 1.0, 0.0))  # a robot moved: cast again
+    moved = world.scans(["r0", "r2"])
+    assert not np.array_equal(moved[0], first[0])
