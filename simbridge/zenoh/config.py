@@ -68,6 +68,9 @@ _ROUTER_DEFAULTS: dict[str, Any] = {
     "scouting/multicast/enabled": False,
     "scouting/gossip/enabled": True,
     "timestamping/enabled": {"router": True, "peer": True, "client": True},
+    # when samples go through the router (clients in client mode, machines that reach each
+    # other only through routers), it forwards a simulator's tick in one burst too
+    "transport/link/tx/queue/size/data": DATA_QUEUE_BATCHES,
 }
 
 

@@ -11,6 +11,7 @@ from simbridge.zenoh.config import (
     DATA_QUEUE_BATCHES,
     ZenohOptions,
     parse_override,
+    router_config,
     session_config,
 )
 
@@ -33,6 +34,12 @@ def test_a_tick_of_samples_fits_the_data_queue_unless_overridden() -> None:
     assert config["transport"]["link"]["tx"]["queue"]["size"]["data_low"] == 2  # Zenoh's
     env = {"ZENOH_CONFIG_OVERRIDE": "transport/link/tx/queue/size/data=2"}
     config = json.loads(str(session_config(zenoh, ZenohOptions.from_env(env))))
+    assert config["transport"]["link"]["tx"]["queue"]["size"]["data"] == 2
+    # the router forwards a tick's burst when samples go through it
+    config = json.loads(str(router_config(zenoh, [], [], {})))
+    assert config["mode"] == "router"
+    assert config["transport"]["link"]["tx"]["queue"]["size"]["data"] == DATA_QUEUE_BATCHES
+    config = json.loads(str(router_config(zenoh, [], [], env)))
     assert config["transport"]["link"]["tx"]["queue"]["size"]["data"] == 2
 
 
