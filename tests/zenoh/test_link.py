@@ -466,7 +466,7 @@ async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
 ) -> None:
     from zenoh_ros2_sdk import ROS2Publisher
 
-    from simbridge.zenoh.link import DRAIN_BATCH, RING
+    from simbridge.zenoh.link import POLL_BATCH, RING
 
     monkeypatch.setattr("simbridge.zenoh.link.CALLBACK_KEYS", 0)  # every key polled
 
@@ -478,7 +478,8 @@ async def test_a_burst_on_a_polled_topic_reaches_the_client_whole_and_in_order(
     try:
         async with connect(ws_url(zapp)) as conn:
             await _receive_from(zapp, conn, pub, "/burst")
-            count = min(RING, DRAIN_BATCH) - 10
+            count = RING - 10
+            assert count > 2 * POLL_BATCH  # several batches, each written out before the next
 
             def burst() -> None:
                 for k in range(count):
