@@ -76,17 +76,26 @@ def _strip_simulation(graph: Graph, nodes: set[str]) -> None:
         graph.params.nodes.pop(node, None)
 
 
+#: The part of a period a simulator's tick moves by at most per tick towards its turn.
+TURN_STEP = 0.1
+#: Seconds off its turn a simulator's tick is left alone.
+TURN_TOLERANCE = 0.0001
+
+
 def _turn_shift(share: tuple[int, int], dt: float, wall: float) -> float:
-    """Return the seconds to move the next tick by (within half a period either way).
+    """Return the seconds to move the next tick by, towards this simulator's turn.
 
     ``share``: this simulator's rank among ``n`` simulators; its ticks fall ``rank / n`` of the
     period after each multiple of the period in wall-clock time (``wall``: the next tick's
-    wall-clock time), so the simulators of one machine take turns. Half a period at most, so
-    that no gap between two ticks reaches two periods.
+    wall-clock time), so the simulators of one machine take turns. At most a tenth of the
+    period a tick, either way (a simulator joining or leaving moves the others' ticks over a
+    few ticks: no gap between two ticks longer than 1.1 periods); none under 0.1 ms.
     """
     rank, count = share
-    target = rank / count * dt
-    return (target - wall + dt / 2.0) % dt - dt / 2.0
+    error = (rank / count * dt - wall + dt / 2.0) % dt - dt / 2.0
+    if abs(error) < TURN_TOLERANCE:
+        return 0.0
+    return max(-dt * TURN_STEP, min(dt * TURN_STEP, error))
 
 
 def _percentile(values: list[float], q: float) -> float:
@@ -213,7 +222,7 @@ class App:
         if zenoh is not None:
             from simbridge.zenoh.link import ZenohLink  # the [zenoh] extra, only when asked
 
-            self.zenoh = ZenohLink(self.graph, zenoh)
+            self.zenoh = ZenohLink(self.graph, zenoh, simulator=not no_sim)
             self.tick_hooks.append(self.zenoh.tick)
 
     # -- facts ----------------------------------------------------------------------------
@@ -283,8 +292,6 @@ class App:
         start = clock()
         k = 0
         period = self.world.dt
-        # the simulators' turns last applied (see ZenohLink.tick_share), with the period
-        turn: tuple[tuple[int, int] | None, float] = (None, period)
         while True:
             # one step per period of wall time: dt / real-time factor; a new period (factor or
             # sim.rate changed) restarts the deadlines from the last one
@@ -294,11 +301,9 @@ class App:
             k += 1
             deadline = start + k * dt
             share = self.zenoh.tick_share if self.zenoh is not None else None
-            if (share, dt) != turn:
-                turn = (share, dt)
-                if share is not None:
-                    shift = _turn_shift(share, dt, time.time() + deadline - clock())
-                    start, deadline = start + shift, deadline + shift
+            if share is not None:  # this simulator's turn (see ZenohLink.tick_share)
+                shift = _turn_shift(share, dt, time.time() + deadline - clock())
+                start, deadline = start + shift, deadline + shift
             delay = deadline - clock()
             if delay > 0:
                 await asyncio.sleep(delay)

@@ -3,7 +3,9 @@ from __future__ import annotations
 import asyncio
 import time
 
-from simbridge.runner import MAX_CATCH_UP, App, LoopStats
+import pytest
+
+from simbridge.runner import MAX_CATCH_UP, TURN_STEP, App, LoopStats, _turn_shift
 from tests.conftest import AppFactory
 from tests.helpers import wait_for
 
@@ -66,3 +68,16 @@ async def test_stop_closes_clients_and_servers(make_app: AppFactory) -> None:
         return
     writer.close()
     raise AssertionError("the port still accepts connections after stop()")
+
+
+def test_a_simulator_moves_towards_its_turn_a_tenth_of_a_period_a_tick() -> None:
+    """Rank r of n ticks r/n of the period after each multiple of it (wall clock)."""
+    dt = 0.05
+    assert _turn_shift((0, 2), dt, 100.0) == 0.0  # on its turn
+    assert _turn_shift((1, 2), dt, 100.025) == 0.0
+    assert _turn_shift((1, 2), dt, 100.003) == pytest.approx(dt * TURN_STEP)  # far: a tenth
+    assert _turn_shift((1, 2), dt, 100.022) == pytest.approx(0.003)  # near: the rest
+    assert _turn_shift((1, 2), dt, 100.028) == pytest.approx(-0.003)  # late: earlier
+    assert _turn_shift((0, 2), dt, 100.049) == pytest.approx(0.001)  # across the multiple
+    assert _turn_shift((2, 3), dt, 100.0) == pytest.approx(-dt * TURN_STEP)  # the short way
+    assert _turn_shift((1, 2), dt, 100.02505) == 0.0  # within the tolerance

@@ -40,7 +40,7 @@ from typing import Any
 import orjson
 
 from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
-from simbridge.graph import BRIDGE_NODE, ROBOT_NODE, Graph, Topic
+from simbridge.graph import BRIDGE_NODE, ROBOT_NODE, SIM_NODE, Graph, Topic
 from simbridge.graph.estop import connection_rights
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
@@ -107,6 +107,8 @@ CALLBACK_KEYS = 8
 #: Samples one topic's ring channel holds for the event loop (the oldest go past it: 5 s of a
 #: 20 Hz topic).
 RING = 100
+#: The nodes of a simbridge simulator (a process with both takes a turn: ZenohLink.tick_share).
+_SIMULATOR_NODES = frozenset({ROBOT_NODE, SIM_NODE})
 #: Messages held back for Zenoh from which a tick's first part (its /odom) is put before the
 #: rest is computed (see ZenohLink._flush_early).
 EARLY_FLUSH = 100
@@ -209,9 +211,12 @@ class _Provider:
 class ZenohLink:
     """One Zenoh session joining simbridge's graph to the ROS 2 graph (see the module doc)."""
 
-    def __init__(self, graph: Graph, options: ZenohOptions) -> None:
+    def __init__(self, graph: Graph, options: ZenohOptions, *, simulator: bool = False) -> None:
         #: The graph mapped onto ROS 2.
         self.graph = graph
+        #: Whether this process simulates robots (not ``--no-sim``): it takes a turn in the
+        #: step period with the other simulators (:attr:`tick_share`).
+        self.simulator = simulator
         #: Domain, distribution, endpoints.
         self.options = options
         self.zenoh = import_zenoh()
@@ -233,9 +238,9 @@ class ZenohLink:
         self._publishers: dict[str, _Declared] = {}
         #: Remote entities by token.
         self._remote: dict[str, Entity] = {}
-        #: Zenoh session ids of the other simulators on the network (their ``/virtual_robot``
-        #: node tokens), and how many tokens of that node each has.
-        self._simulators: Counter[str] = Counter()
+        #: Tokens of the nodes every simbridge simulator has (``/virtual_robot`` and ``/sim``),
+        #: by Zenoh session id of the other processes: a session with both is a simulator.
+        self._sim_nodes: dict[str, set[str]] = {}
         #: This simulator's place among the simulators of the network and their number (by
         #: session id), or None alone: where in the step period it ticks (see
         #: :meth:`tick_share`).
@@ -771,10 +776,14 @@ class ZenohLink:
                 self._remote_subs[entity.name] -= 1
                 if self._remote_subs[entity.name] <= 0:
                     del self._remote_subs[entity.name]
-        if entity.kind == "NN" and entity.node_fqn == ROBOT_NODE:
-            self._simulators[entity.zid] += 1 if alive else -1
-            if self._simulators[entity.zid] <= 0:
-                del self._simulators[entity.zid]
+        if entity.kind == "NN" and entity.node_fqn in _SIMULATOR_NODES:
+            nodes = self._sim_nodes.setdefault(entity.zid, set())
+            if alive:
+                nodes.add(token)
+            else:
+                nodes.discard(token)
+                if not nodes:
+                    del self._sim_nodes[entity.zid]
             self._update_share()
         self._remote_dirty = True
 
@@ -784,12 +793,19 @@ class ZenohLink:
         The simulators of one classroom take turns in the step period: on one machine their
         ticks would otherwise fall together about a third of the time, and every front-end then
         got both bursts at once (``bench.zenoh classroom``, 2 x 300 robots: latency p99 97 ms
-        with the two ticks 3 ms apart, 43-52 ms with them 11-19 ms apart).
+        with the two ticks 3 ms apart, 43-52 ms with them 11-19 ms apart). A simulator is a
+        session with both a ``/virtual_robot`` and a ``/sim`` node (the tokens of
+        ``--no-sim`` processes and of other ROS 2 nodes do not count).
         """
-        if not self.zid or ROBOT_NODE not in self.graph.nodes or not self._simulators:
+        others = {
+            zid
+            for zid, tokens in self._sim_nodes.items()
+            if {Entity.parse(t).node_fqn for t in tokens} >= _SIMULATOR_NODES
+        }
+        if not self.zid or not self.simulator or not others:
             self.tick_share = None
             return
-        everyone = sorted({*self._simulators, self.zid})
+        everyone = sorted({*others, self.zid})
         self.tick_share = (everyone.index(self.zid), len(everyone))
 
     def _import_remote(self) -> None:

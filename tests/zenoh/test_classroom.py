@@ -18,7 +18,11 @@ import pytest
 from websockets.asyncio.client import connect
 
 from simbridge.config import ServerSettings
+from simbridge.graph import Graph
 from simbridge.runner import App
+from simbridge.zenoh.config import ZenohOptions
+from simbridge.zenoh.link import ZenohLink
+from simbridge.zenoh.names import Entity
 from tests.conftest import ClientRunner
 from tests.helpers import recv_until, send_json, wait_for, ws_url
 from tests.zenoh.conftest import Router, room_a_process, zenoh_options
@@ -129,12 +133,42 @@ async def test_simulators_of_one_network_take_turns_in_the_step_period(
         ticks: list[list[float]] = [[], []]
         for k, app in enumerate(by_rank):
             app.tick_hooks.append(lambda _now, k=k: ticks[k].append(time.time()))
-        await wait_for(lambda: min(map(len, ticks)) >= 30, timeout=10)
+        await wait_for(lambda: min(map(len, ticks)) >= 40, timeout=10)
         dt = apps[0].world.dt
-        apart = (_phase(ticks[1][5:], dt) - _phase(ticks[0][5:], dt)) % dt
-        assert abs(apart - dt / 2.0) < dt / 5.0, (apart, dt)
+        # rank r of 2 ticks r/2 of the period after each multiple of it (wall clock), after the
+        # few ticks it takes to get there (a tenth of the period a tick)
+        for rank, times in enumerate(ticks):
+            off = (_phase(times[15:], dt) - rank * dt / 2.0 + dt / 2.0) % dt - dt / 2.0
+            assert abs(off) < dt / 10.0, (rank, off, dt)
         health = apps[0].health()["zenoh"]
         assert health["tick_share"] in ([0, 2], [1, 2])
     finally:
         for app in apps:
             await app.stop()
+
+
+def test_the_simulators_are_the_sessions_with_both_simulator_nodes() -> None:
+    """Rank by session id among the processes with /virtual_robot and /sim; not --no-sim."""
+
+    def node(zid: str, name: str) -> str:
+        return Entity(0, zid, "0", "0", "NN", "/", name).token()
+
+    link = ZenohLink(Graph(), ZenohOptions(), simulator=True)
+    link.zid = "5"
+    assert link.tick_share is None
+    link._token_changed(node("3", "virtual_robot"), alive=True)  # a node of that name alone
+    assert link.tick_share is None
+    link._token_changed(node("3", "sim"), alive=True)
+    assert link.tick_share == (1, 2)
+    link._token_changed(node("9", "virtual_robot"), alive=True)
+    link._token_changed(node("9", "sim"), alive=True)
+    assert link.tick_share == (1, 3)
+    link._token_changed(node("3", "sim"), alive=False)  # "3" left (its tokens go one by one)
+    assert link.tick_share == (0, 2)
+    link._token_changed(node("9", "virtual_robot"), alive=False)
+    assert link.tick_share is None  # alone again
+    front = ZenohLink(Graph(), ZenohOptions(), simulator=False)
+    front.zid = "1"
+    front._token_changed(node("3", "virtual_robot"), alive=True)
+    front._token_changed(node("3", "sim"), alive=True)
+    assert front.tick_share is None  # a --no-sim front-end takes no turn
