@@ -83,7 +83,9 @@ class _RobotTopics:
     contact: Topic | None = None
     #: The ``/cmd_vel`` callback (to remove it with the robot).
     on_cmd_vel: Any = None
-    #: Where in the scan period this robot's LiDAR fires, in [0, 1): robots take turns.
+    #: Its place in the scan turns (robots take turns)...
+    scan_turn: int = 0
+    #: ...and where in the scan period its LiDAR fires, in [0, 1): ``_spread(scan_turn)``.
     scan_offset: float = 0.0
 
 
@@ -122,11 +124,9 @@ class RobotBridge:
         self.on_robot_removed: list[Callable[[str], None]] = []
         #: Called with a robot's name after its topics are created (spawned robots too).
         self.on_robot_added: list[Callable[[str], None]] = []
-        #: Scan periods elapsed since the first step (None before it; the first step scans
-        #: every robot, then each robot at its own offset in the period).
+        #: Where the current scan period is, in [0, 1) (None before the first step, which scans
+        #: every robot; then each robot at its own offset in the period).
         self._scan_clock: float | None = None
-        #: Robots added so far (the next one's scan offset).
-        self._added = 0
         for robot in world.robots.values():
             self.add_robot(robot)
         graph.add_service("/reset", "std_srvs/srv/Empty", ROBOT_NODE, self._reset)
@@ -177,10 +177,12 @@ class RobotBridge:
                 g.topics.unadvertise(name, ROBOT_NODE)
             msg = f"{err} (a client holds that name; it must unadvertise it or disconnect)"
             raise ProtocolError(msg) from None
+        # the first place no robot has: robots killed and spawned leave the turns even
+        taken = {rt.scan_turn for rt in self.robots.values()}
+        turn = next(k for k in range(len(taken) + 1) if k not in taken)
         self.robots[robot.name] = _RobotTopics(
-            robot, odom, scan, cmd_vel, contact, on_cmd_vel, scan_offset=_spread(self._added)
+            robot, odom, scan, cmd_vel, contact, on_cmd_vel, turn, _spread(turn)
         )
-        self._added += 1
         add_robot_services(self, robot)
         for callback in self.on_robot_added:
             callback(robot.name)
@@ -316,8 +318,8 @@ class RobotBridge:
             return robots
         ratio = min(self.world.params.lidar.rate / self.world.params.sim.rate, 1.0)
         before = self._scan_clock + 1e-9
-        self._scan_clock += ratio
-        after = self._scan_clock + 1e-9
+        after = before + ratio
+        self._scan_clock = (self._scan_clock + ratio) % 1.0  # small: no rounding drift
         return [
             rt
             for rt in robots
@@ -352,17 +354,11 @@ class RobotBridge:
                 self.graph.publish(topic, msg, now)
         self._touching = set(touching)
 
-    def publish_scans(
-        self, now: float, stamp: dict[str, int], robots: list[_RobotTopics] | None = None
-    ) -> None:
-        """Raycast and publish the /scan of ``robots`` (default: all), of those listened to.
-
-        The scans of every listened-to robot are cast in one batch.
-        """
+    def publish_scans(self, now: float, stamp: dict[str, int], robots: list[_RobotTopics]) -> None:
+        """Raycast and publish the /scan of ``robots``, of those listened to, in one batch."""
         lidar = self.world.params.lidar
         increment = 2.0 * math.pi / lidar.rays
-        candidates = self.robots.values() if robots is None else robots
-        wanted = [rt for rt in candidates if rt.scan.subscriptions or rt.scan.internal]
+        wanted = [rt for rt in robots if rt.scan.subscriptions or rt.scan.internal]
         if not wanted:
             return
         all_ranges = self.world.scans([rt.robot.name for rt in wanted])

@@ -111,10 +111,8 @@ class Robot:
 WORLD_MARGIN = 1.0
 #: Metres around the start poses of a world without walls where robots may be placed.
 OPEN_WORLD = 50.0
-#: Groups of robots whose last scans :meth:`World.scans` keeps (robots scan in turns: with the
-#: LiDAR at half the step rate, two groups alternate; at a LiDAR rate of p/q of the step rate
-#: in lowest terms, q groups come round in turn).
-SCAN_GROUPS = 20
+#: A robot without ranges kept (see World.scans).
+_NO_ROW: tuple[None, None] = (None, None)
 
 
 class World:
@@ -153,9 +151,10 @@ class World:
         self._rng: np.random.Generator | None = None
         self._angles_key: tuple[int, float] | None = None
         self._angles: FloatArray = np.zeros(0)
-        #: The last noiseless ranges of each group of robots scanned together (robots take
-        #: turns: one group a step), with what they were cast from.
-        self._scan_cache: dict[tuple[str, ...], tuple[tuple[object, ...], FloatArray]] = {}
+        #: Each robot's last noiseless ranges with its laser pose, valid while the robots'
+        #: positions and the LiDAR settings are :attr:`_scan_shared` (see :meth:`scans`).
+        self._scan_rows: dict[str, tuple[tuple[float, float, float], FloatArray]] = {}
+        self._scan_shared: tuple[object, ...] = ()
         for robot in self.robots.values():
             robot.place(robot.start)
 
@@ -291,20 +290,21 @@ class World:
         radius = self.params.robot.radius
         centres_list = [(r.state.x, r.state.y) for r in self.robots.values()]
         poses_list = [self.laser_pose(n) for n in names]
-        # The walls never change, so while no robot moved (nor a LiDAR setting) the noiseless
-        # ranges are the group's last ones: a parked robot's scan costs no raycast.
-        group = tuple(names)
-        key: tuple[object, ...] = (tuple(self.robots), tuple(centres_list), tuple(poses_list))
-        key += (radius, lidar.rays, lidar.range_max)
-        cached = self._scan_cache.get(group)
-        if cached is not None and cached[0] == key:
-            ranges = cached[1]
-        else:
-            everyone = list(self.robots)
-            index = {n: i for i, n in enumerate(everyone)}
-            poses = np.array(poses_list, dtype=np.float64).reshape(-1, 3)
+        # The walls never change, so while no robot moved (nor a LiDAR setting) a robot's
+        # noiseless ranges are its last ones: a parked robot's scan costs no raycast, whichever
+        # robots are scanned with it (robots take turns).
+        shared: tuple[object, ...] = (tuple(self.robots), tuple(centres_list))
+        shared += (radius, lidar.rays, lidar.range_max)
+        rows = self._scan_rows
+        if shared != self._scan_shared:
+            rows.clear()  # a robot moved (it is in every other robot's scan), or a setting
+            self._scan_shared = shared
+        stale = [k for k, name in enumerate(names) if rows.get(name, _NO_ROW)[0] != poses_list[k]]
+        if stale:
+            index = {n: i for i, n in enumerate(self.robots)}
+            poses = np.array([poses_list[k] for k in stale], dtype=np.float64).reshape(-1, 3)
             centres = np.array(centres_list, dtype=np.float64).reshape(-1, 2)
-            owners = np.array([index[n] for n in names], dtype=np.intp)
+            owners = np.array([index[names[k]] for k in stale], dtype=np.intp)
             raw = raycast_batch(
                 poses[:, :2],
                 poses[:, 2],
@@ -316,11 +316,10 @@ class World:
                 owners=owners,
             )
             raw.flags.writeable = False
-            self._scan_cache.pop(group, None)
-            if len(self._scan_cache) >= SCAN_GROUPS:  # the oldest group goes
-                del self._scan_cache[next(iter(self._scan_cache))]
-            self._scan_cache[group] = (key, raw)
-            ranges = raw
+            for j, k in enumerate(stale):
+                rows[names[k]] = (poses_list[k], raw[j])
+        rows_of = [rows[name][1] for name in names]
+        ranges = np.stack(rows_of) if rows_of else np.zeros((0, lidar.rays))
         if lidar.noise_stddev > 0:
             ranges = ranges + self.rng.normal(0.0, lidar.noise_stddev, ranges.shape)
         return np.clip(ranges, lidar.range_min, lidar.range_max).astype(np.float32)

@@ -129,15 +129,35 @@ def test_parameters_of_the_robot_are_live(setup: Any) -> None:
     assert world.params.robot.inertia == 0.0075
 
 
-def test_robots_take_turns_to_scan() -> None:
+def _steps(
+    graph: Graph, world: World, bridge: RobotBridge, peer: RecordingPeer, n: int
+) -> list[list[str]]:
+    """Step ``n`` times; return the robots whose /scan each step carried."""
+    steps = []
+    for _ in range(n):
+        world.step()
+        bridge.publish(0.0)
+        topics = [m["topic"] for m in peer.take() if m["topic"].endswith("/scan")]
+        steps.append(sorted(t.split("/")[1] for t in topics))
+    return steps
+
+
+def _call(peer: RecordingPeer, graph: Graph, service: str, args: Any) -> Any:
+    op = {"op": "call_service", "service": service, "args": args, "id": "c"}
+    graph.receive(peer, json.dumps(op), 0.0)
+    (reply,) = [m for m in peer.take() if m["op"] == "service_response"]
+    return reply
+
+
+def test_robots_take_turns_to_scan_even_after_kills_and_spawns() -> None:
     """Each robot scans at the LiDAR rate, at its own offset: a step casts half the scans.
 
     The first step scans every robot; after it, with a 10 Hz LiDAR and 20 Hz steps, every step
-    carries the scans of two of the four robots, and each robot's scans come two steps apart.
-    The scans of a parked group are the same when the groups alternate.
+    carries two of the four robots' scans, each robot's two steps apart. Robots killed and
+    spawned in their place take the turns they left (the steps stay even).
     """
     graph = Graph(wall_clock_ns=lambda: 42_000_000_007)
-    names = ["r1", "r2", "r3", "r4"]
+    names = ["r0", "r1", "r2", "r3"]
     spec = WorldSpec.parse(
         {
             "walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]],
@@ -149,18 +169,35 @@ def test_robots_take_turns_to_scan() -> None:
     peer = RecordingPeer(graph)
     for n in names:
         sub(peer, graph, f"/{n}/scan")
-    steps: list[list[str]] = []
-    ranges: dict[str, list[list[float]]] = {n: [] for n in names}
-    for _ in range(9):
-        world.step()
-        bridge.publish(0.0)
-        scans = [m for m in peer.take() if m["topic"].endswith("/scan")]
-        steps.append(sorted(m["topic"].split("/")[1] for m in scans))
-        for m in scans:
-            ranges[m["topic"].split("/")[1]].append(m["msg"]["ranges"])
+    steps = _steps(graph, world, bridge, peer, 9)
     assert steps[0] == names
     assert all(len(step) == 2 for step in steps[1:])
     for n in names:
         at = [k for k, step in enumerate(steps) if n in step][1:]
         assert all(b - a == 2 for a, b in itertools.pairwise(at))
-        assert all(r == ranges[n][0] for r in ranges[n])  # parked: the same scan each time
+    # r0 and r2 scan on the same steps; in their place, n0 and n2 take their turns
+    together = [step for step in steps[1:] if "r0" in step]
+    assert all(step == ["r0", "r2"] for step in together)
+    for name in ("r0", "r2"):
+        assert _call(peer, graph, "/kill", {"name": name})["result"] is True
+    for name, y in (("n0", 2.0), ("n2", -2.0)):
+        assert _call(peer, graph, "/spawn", {"x": 0.0, "y": y, "name": name})["result"] is True
+        sub(peer, graph, f"/{name}/scan")
+    steps = _steps(graph, world, bridge, peer, 8)
+    assert all(len(step) == 2 for step in steps), steps
+
+
+def test_a_steps_odom_is_flushed_before_its_scans_are_cast(setup: Any) -> None:
+    """What holds messages back (the Zenoh link) is told to send /odom before the scans."""
+    graph, world, bridge = setup
+    peer = RecordingPeer(graph)
+    sub(peer, graph, "/odom")
+    sub(peer, graph, "/scan")
+    seen: list[str] = []
+    graph.topics.taps.append(lambda topic, _out, _source: seen.append(topic.name))
+    graph.topics.flushers.append(lambda: seen.append("flush"))
+    for _ in range(4):
+        world.step()
+        bridge.publish(0.0)
+    # every step /odom; every other step (10 Hz LiDAR, 20 Hz steps) a flush, then /scan
+    assert seen == ["/odom", "flush", "/scan", "/odom"] * 2, seen

@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from simbridge.config import Params, WorldSpec, load_params, load_world
-from simbridge.sim import World
-from simbridge.sim.world import SCAN_GROUPS, KinematicModel, Robot
+from simbridge.sim import World, world as world_module
+from simbridge.sim.world import KinematicModel, Robot
 
 
 def test_world_keeps_the_last_command_between_steps() -> None:
@@ -256,11 +256,18 @@ def test_a_robot_is_never_placed_outside_the_world() -> None:
     world.teleport("r1", (5.5, 0.0, 0.0))  # in the margin: open layouts have no walls there
 
 
-def test_scans_of_groups_taking_turns_are_kept_and_bounded() -> None:
-    """Parked robots scanned in turns by groups: each group's last ranges are reused.
+def test_a_parked_robots_ranges_are_reused_whichever_robots_scan_with_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Robots scan in turns: each robot's last ranges serve until a robot moves."""
+    cast: list[int] = []
+    real = world_module.raycast_batch
 
-    Any number of groups may come round; the oldest beyond :data:`SCAN_GROUPS` is dropped.
-    """
+    def counted(origins: Any, *args: Any, **kwargs: Any) -> Any:
+        cast.append(len(origins))
+        return real(origins, *args, **kwargs)
+
+    monkeypatch.setattr(world_module, "raycast_batch", counted)
     spec = WorldSpec.parse(
         {
             "walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]],
@@ -269,12 +276,14 @@ def test_scans_of_groups_taking_turns_are_kept_and_bounded() -> None:
     )
     world = World(spec, Params())
     first = world.scans(["r0", "r2"])
-    assert np.array_equal(world.scans(["r1", "r3"])[0], world.scans(["r1"])[0])
+    world.scans(["r1", "r3"])
+    assert cast == [2, 2]
     again = world.scans(["r0", "r2"])
-    assert np.array_equal(first, again)
-    for k in range(SCAN_GROUPS + 5):
-        world.scans([f"r{k % 4}", f"r{(k + 1) % 4}"] if k % 2 else [f"r{k % 4}"])
-    assert len(world._scan_cache) <= SCAN_GROUPS
-    world.robots["r0"].place((-2.0, 1.0, 0.0))  # a robot moved: cast again
+    mixed = world.scans(["r3", "r0"])
+    assert cast == [2, 2]  # no raycast: every robot's ranges are kept
+    assert np.array_equal(first, again) and np.array_equal(mixed[1], first[0])
+    fresh = World(spec, Params()).scans(["r3"])
+    assert np.array_equal(mixed[0], fresh[0])  # the kept ranges are the ones a cast gives
+    world.robots["r0"].place((-2.0, 1.0, 0.0))  # a robot moved: it is in every other's scan
     moved = world.scans(["r0", "r2"])
-    assert not np.array_equal(moved[0], first[0])
+    assert cast[2:] == [1, 2] and not np.array_equal(moved[0], first[0])
