@@ -88,14 +88,12 @@ INBOX_LIMIT = 20_000
 DRAIN_BATCH = 500
 #: Samples of the ring channels handed to the graph per poll callback at most. The frames
 #: they make for the clients are written when the callback ends (the server corks them:
-#: :meth:`simbridge.server.BridgeServer._send_many`), so with 500 a sample handled early in a
-#: tick's burst (300 /odom and 150 /scan for one front-end of bench.zenoh classroom, about
-#: 20 us each to hand over, 8 us each client write) waited for the whole burst, and the
-#: clients read nothing until its end. 32 samples are about 1 ms of work: the clients read
-#: while the rest is handled. It costs writes (a client's /odom and /scan go out together
-#: less often: 22.7 -> 29 reads per client per second, 0.1 core more for the 2 x 300
-#: classroom); latency p50 23 -> 17-20 ms, p99 39-61 -> 35-43 ms.
-POLL_BATCH = 32
+#: :meth:`simbridge.server.BridgeServer._send_many`). With 32 a callback, the clients got the
+#: start of a tick's burst sooner (bench.zenoh classroom 2 x 300: latency p50 19.9-21.5 ->
+#: 17.2-19.5 ms) but a client's /odom and /scan went out together less often (23 -> 29 reads
+#: per client per second, 0.1-0.2 core more in all), and the p99 rose (32.2, 41.9, 41.1 ->
+#: 38.2, 57.0, 46.4 ms in three alternating pairs): a whole burst a callback.
+POLL_BATCH = 500
 #: The interpreter's GIL switch interval while Zenoh runs (seconds; Python's default is 5 ms).
 SWITCH_INTERVAL = 0.0005
 #: Subscribed keys whose samples a Zenoh callback hands to the event loop at once (the inbox)
