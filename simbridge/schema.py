@@ -77,6 +77,10 @@ class ValidationError(ConfigError, ValueError):
         self.errors = list(errors)
         super().__init__(self.describe())
 
+    def __reduce__(self) -> tuple[type[ValidationError], tuple[list[tuple[str, str]]]]:
+        """Pickle by the refusals (an exception pickles its message otherwise, not ``errors``)."""
+        return type(self), (self.errors,)
+
     @classmethod
     def one(cls, reason: str, path: str = "") -> ValidationError:
         """Return an error of one refusal."""

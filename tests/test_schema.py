@@ -288,3 +288,12 @@ def test_a_world_without_robots_keeps_the_rest() -> None:
     world = WorldSpec.parse({"walls": [[0, 0, 1, 0]], "robot": {"pose": [1, 2, 3]}})
     bare = world.without_robots()
     assert bare.robots == [] and bare.start_poses() == {} and bare.walls == world.walls
+
+
+def test_a_validation_error_survives_pickling_with_its_refusals() -> None:
+    """A refusal crosses a process boundary (multiprocessing, a worker's result) whole."""
+    err = ValidationError([("robot.mass", "must be greater than 0 (got -1)"), ("", "bad")])
+    back = pickle.loads(pickle.dumps(err))
+    assert type(back) is ValidationError
+    assert back.errors == err.errors
+    assert str(back) == str(err) == "robot.mass: must be greater than 0 (got -1); bad"
