@@ -7,6 +7,7 @@ across the classroom.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import math
 import time
@@ -75,18 +76,27 @@ async def test_a_client_of_one_process_drives_a_robot_of_another(
         await app.stop()
 
 
+@contextlib.asynccontextmanager
+async def _processes(router: Router, count: int) -> AsyncIterator[list[App]]:
+    """``count`` simbridge servers (default world) on the router's Zenoh network, started."""
+    apps: list[App] = []
+    try:
+        for _ in range(count):
+            app = App(
+                ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router)
+            )
+            await app.start()
+            apps.append(app)
+        yield apps
+    finally:
+        for app in apps:
+            await app.stop()
+
+
 async def test_a_latched_topic_reaches_a_late_subscriber_of_another_process(
     router: Router, ros2: Any
 ) -> None:
-    apps = []
-    for _ in range(2):
-        app = App(
-            ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router)
-        )
-        await app.start()
-        apps.append(app)
-    first, second = apps
-    try:
+    async with _processes(router, 2) as (first, second):
         async with connect(ws_url(first)) as conn:
             advertise = {"op": "advertise", "topic": "/lesson", "type": "std_msgs/msg/String"}
             await send_json(conn, {**advertise, "latch": True})
@@ -99,9 +109,6 @@ async def test_a_latched_topic_reaches_a_late_subscriber_of_another_process(
                 got = await recv_until(late, lambda m: m.get("topic") == "/lesson", timeout=8)
         assert got["msg"] == {"data": "lesson 3: PID"}
         assert second.graph.topics.topics["/lesson"].latch
-    finally:
-        for app in apps:
-            await app.stop()
 
 
 def _phase(times: list[float], dt: float) -> float:
@@ -115,14 +122,7 @@ async def test_simulators_of_one_network_take_turns_in_the_step_period(
     router: Router, ros2: Any
 ) -> None:
     """Two simulators tick half a period apart (each sees the other's /virtual_robot)."""
-    apps = []
-    for _ in range(2):
-        app = App(
-            ServerSettings(host="127.0.0.1", port=0, http_port=0), zenoh=zenoh_options(router)
-        )
-        await app.start()
-        apps.append(app)
-    try:
+    async with _processes(router, 2) as apps:
 
         def shares() -> list[tuple[int, int] | None]:
             return [app.zenoh.tick_share if app.zenoh is not None else None for app in apps]
@@ -142,9 +142,6 @@ async def test_simulators_of_one_network_take_turns_in_the_step_period(
             assert abs(off) < dt / 10.0, (rank, off, dt)
         health = apps[0].health()["zenoh"]
         assert health["tick_share"] in ([0, 2], [1, 2])
-    finally:
-        for app in apps:
-            await app.stop()
 
 
 def test_the_simulators_are_the_sessions_with_both_simulator_nodes() -> None:
