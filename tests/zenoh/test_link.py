@@ -8,6 +8,7 @@ from __future__ import annotations
 import asyncio
 import json
 import time
+from collections.abc import Callable
 from typing import Any
 
 import pytest
@@ -63,20 +64,29 @@ async def test_ros2_discovers_simbridge_nodes_topics_and_services(
     )
 
 
-async def test_ros2_subscribers_get_odom_scan_and_tf(zapp: App, router: Router) -> None:
+#: The simulated robot's published topics a ROS 2 subscriber of these tests takes.
+ROBOT_TOPICS = [
+    ("odom", "nav_msgs/msg/Odometry"),
+    ("scan", "sensor_msgs/msg/LaserScan"),
+    ("tf", "tf2_msgs/msg/TFMessage"),
+]
+
+
+async def _sdk_subscribers(router: Router, callback: Callable[[str], Any]) -> list[Any]:
+    """ROS 2 subscribers (zenoh-ros2-sdk) of /odom, /scan and /tf, ``callback(name)`` each."""
     from zenoh_ros2_sdk import ROS2Subscriber
 
-    got: dict[str, list[Any]] = {"odom": [], "scan": [], "tf": []}
-    subs = [
+    return [
         await asyncio.to_thread(
-            ROS2Subscriber, f"/{name}", type_name, callback=got[name].append, **sdk_kw(router)
+            ROS2Subscriber, f"/{name}", type_name, callback=callback(name), **sdk_kw(router)
         )
-        for name, type_name in [
-            ("odom", "nav_msgs/msg/Odometry"),
-            ("scan", "sensor_msgs/msg/LaserScan"),
-            ("tf", "tf2_msgs/msg/TFMessage"),
-        ]
+        for name, type_name in ROBOT_TOPICS
     ]
+
+
+async def test_ros2_subscribers_get_odom_scan_and_tf(zapp: App, router: Router) -> None:
+    got: dict[str, list[Any]] = {"odom": [], "scan": [], "tf": []}
+    subs = await _sdk_subscribers(router, lambda name: got[name].append)
     try:
         await wait_for(lambda: all(len(v) >= 5 for v in got.values()), timeout=10)
     finally:
@@ -93,7 +103,6 @@ async def test_samples_carry_rosbags_exact_cdr_and_rmw_zenoh_attachments(
     zapp: App, router: Router
 ) -> None:
     import zenoh
-    from zenoh_ros2_sdk import ROS2Subscriber
 
     from simbridge.zenoh.attachment import Attachment
 
@@ -116,16 +125,7 @@ async def test_samples_carry_rosbags_exact_cdr_and_rmw_zenoh_attachments(
     taps = [raw.declare_subscriber(f"0/{name}/**", keep(name)) for name in got]
     start = time.time_ns()
     # the SDK's subscriptions are what makes simbridge publish (rmw_zenoh tokens)
-    subs = [
-        await asyncio.to_thread(
-            ROS2Subscriber, f"/{name}", type_name, callback=lambda _msg: None, **sdk_kw(router)
-        )
-        for name, type_name in [
-            ("odom", "nav_msgs/msg/Odometry"),
-            ("scan", "sensor_msgs/msg/LaserScan"),
-            ("tf", "tf2_msgs/msg/TFMessage"),
-        ]
-    ]
+    subs = await _sdk_subscribers(router, lambda _name: lambda _msg: None)
     try:
         await wait_for(lambda: all(len(v) >= 5 for v in got.values()), timeout=10)
     finally:
