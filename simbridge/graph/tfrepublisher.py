@@ -11,7 +11,10 @@ TFSubscriptionAction``), served here too (feedback only to the goal's sender). E
 simbridge sends, at ``rate`` Hz, each requested
 ``target_frame <- source_frame`` transform (a ``geometry_msgs/TransformStamped``: header frame
 the target, child the source) whenever it moved by more than ``trans_thres`` metres or
-``angular_thres`` radians since it was last sent (always the first time).
+``angular_thres`` radians since it was last sent (always the first time). A threshold of zero
+or below (either one) sends the transform at every ``rate`` tick, moved or not, as the real
+node's ``TFPair::updateNeeded`` does: roslibjs replaces a zero threshold by its default, so a
+client that wants every transform passes a negative one.
 
 Frame names are compared without a leading ``/`` (REP-105 names as roslibjs strips them). The
 transform tree is the latest transform of each child frame on /tf and /tf_static; a transform
@@ -23,8 +26,8 @@ What a client can make it do is bounded (``docs/security.md``); a request over a
 refused with the reason (a failed ``service_response``, or an ``action_result`` with
 ``result: false``):
 
-* frame names must be valid strings (no lone UTF-16 surrogates, no NUL); thresholds finite and
-  not negative; ``rate`` finite and positive, capped at the simulation rate (TF changes no
+* frame names must be valid strings (no lone UTF-16 surrogates, no NUL); thresholds finite;
+  ``rate`` finite and positive, capped at the simulation rate (TF changes no
   faster); a ``timeout`` over ``tf_max_timeout`` is capped to it (``0`` means the default 10 s);
 * a client holds at most ``tf_requests_per_client`` requests (goals and republished topics
   together) and at most ``tf_transforms_per_client`` transforms a second (frames times rate);
@@ -178,6 +181,8 @@ class _Request:
 
 
 def _moved(old: Pose, new: Pose, trans: float, angle: float) -> bool:
+    if trans <= 0 or angle <= 0:
+        return True  # tf2_web_republisher: "send every time"
     d = math.dist(old[0], new[0])
     dot = abs(sum(a * b for a, b in zip(old[1], new[1], strict=True)))
     turned = 2.0 * math.acos(min(1.0, dot))
@@ -267,8 +272,11 @@ class TfRepublisher:
         numbers = {}
         for key, default in (("angular_thres", 0.0), ("trans_thres", 0.0), ("rate", 10.0)):
             value = values.get(key, default)
-            if not finite_number(value) or value < 0:
-                msg = f"{what}: {key} must be a finite number >= 0, got {value!r}"
+            # a threshold may be negative ("send every time"); the budgets count the rate
+            floor = 0.0 if key == "rate" else -math.inf
+            if not finite_number(value) or value < floor:
+                bound = " >= 0" if key == "rate" else ""
+                msg = f"{what}: {key} must be a finite number{bound}, got {value!r}"
                 raise ServiceError(msg)
             numbers[key] = float(value)
         # as many sends a second as TF changes at most; 0 means the node's default, 10 Hz

@@ -274,3 +274,12 @@ async def test_tf_clients_get_live_transforms_from_the_republisher(app: App, cli
     turned = r["turned"]["base_link"]["rotation"]
     assert turned["z"] > 0.1 and turned["z"] ** 2 + turned["w"] ** 2 == pytest.approx(1.0)
     assert r["counts"]["base_link"] >= 2
+
+
+async def test_a_tf_client_with_negative_thresholds_gets_every_transform(
+    app: App, run_js: ClientRunner
+) -> None:
+    """A negative threshold (roslibjs passes it through) gets a transform every tick."""
+    r = await run_js("roslib1", ws_url(app), "tf_every", {"count": 5})
+    assert r["count"] >= 5 and r["last"]["w"] == pytest.approx(1.0)
+    assert r["seconds"] >= 0.2  # about one transform a tick at 10 Hz, not one burst

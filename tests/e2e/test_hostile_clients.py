@@ -175,7 +175,7 @@ async def test_tf_goals_over_the_budget_are_refused_and_cancelled_with_their_cal
 # -- row 9: a TF goal that would fail every tick; hooks isolated ---------------------------
 
 
-async def test_a_tf_goal_with_a_lone_surrogate_or_negative_thresholds_is_refused(
+async def test_a_tf_goal_with_a_lone_surrogate_or_a_negative_rate_is_refused(
     make_app: AppFactory,
 ) -> None:
     """The bad goal gets a refusal naming the problem; the loop and the watchdog go on."""
@@ -188,10 +188,10 @@ async def test_a_tf_goal_with_a_lone_surrogate_or_negative_thresholds_is_refused
             reply = await recv_until(ws, is_op("action_result", "status"))
             text = reply.get("values") or reply.get("msg")
             assert "surrogate" in str(text)
-            negative = tf_goal("n", ["r1/base_link"], trans_thres=-1.0, angular_thres=-1.0)
+            negative = tf_goal("n", ["r1/base_link"], rate=-1.0)
             await send_json(ws, negative)
             reply = await recv_until(ws, is_op("action_result", "status"))
-            assert "_thres must be" in str(reply.get("values") or reply.get("msg"))
+            assert "rate must be" in str(reply.get("values") or reply.get("msg"))
             assert not app.tf_republisher.requests
             await _watchdog_stops(app, ws)
         await watch.steady_since(start)

@@ -41,7 +41,7 @@ def call(graph: Graph, peer: RecordingPeer, **body: Any) -> None:
 
 
 def test_republish_service_feeds_a_topic_and_drops_it_after_the_timeout() -> None:
-    """/republish_tfs names a TFArray topic; unchanged transforms are not re-sent."""
+    """/republish_tfs names a TFArray topic; transforms that did not move are not re-sent."""
     graph = Graph()
     repub = TfRepublisher(graph)
     tf_topic = graph.advertise("/tf", "tf2_msgs/msg/TFMessage", "/sim")
@@ -55,6 +55,8 @@ def test_republish_service_feeds_a_topic_and_drops_it_after_the_timeout() -> Non
         args={
             "source_frames": ["base_link"],
             "target_frame": "odom",
+            "trans_thres": 0.01,
+            "angular_thres": 0.1,
             "rate": 10.0,
             "timeout": {"secs": 1, "nsecs": 0},
         },
@@ -125,6 +127,21 @@ def test_a_late_subscriber_of_a_republished_topic_gets_static_transforms() -> No
     assert msg["msg"]["transforms"][0]["child_frame_id"] == "laser"
 
 
+@pytest.mark.parametrize(("trans", "angular"), [(-1.0, 2.0), (0.01, -1.0), (0.0, 2.0)])
+def test_a_threshold_of_zero_or_below_sends_every_tick(trans: float, angular: float) -> None:
+    """As tf2_web_republisher's TFPair: the transform goes every tick, moved or not."""
+    graph = Graph()
+    repub = TfRepublisher(graph)
+    tf_topic = graph.advertise("/tf", "tf2_msgs/msg/TFMessage", "/sim")
+    client = RecordingPeer(graph)
+    call(graph, client, **goal_op("g", trans_thres=trans, angular_thres=angular))
+    graph.publish(tf_topic, {"transforms": [tf("odom", "base_link", 2.0, 0.0)]}, 0.0)
+    for tick in range(3):
+        repub.tick(tick * 0.1)
+    sent = [m for m in client.take() if m["op"] == "action_feedback"]
+    assert len(sent) == 3
+
+
 def goal_op(goal_id: str, **args: Any) -> dict[str, Any]:
     request = {"source_frames": ["base_link"], "target_frame": "odom", "rate": 10.0}
     return {
@@ -142,8 +159,9 @@ def goal_op(goal_id: str, **args: Any) -> dict[str, Any]:
     [
         ({"source_frames": ["\ud800"]}, "lone UTF-16 surrogate"),
         ({"target_frame": "od\x00om"}, "NUL"),
-        ({"trans_thres": -1.0}, "trans_thres must be a finite number >= 0"),
-        ({"angular_thres": math.nan}, "angular_thres must be a finite number >= 0"),
+        ({"trans_thres": -math.inf}, "trans_thres must be a finite number"),
+        ({"angular_thres": math.nan}, "angular_thres must be a finite number"),
+        ({"rate": -1.0}, "rate must be a finite number >= 0"),
         ({"source_frames": ["f"] * 101}, "at most 100"),
         ({"source_frames": ["f"] * 100, "rate": 20.0}, "tf_transforms_per_client"),
     ],
