@@ -68,7 +68,7 @@ __all__ = ["RemoteNode", "ZenohLink", "import_zenoh"]
 
 logger = logging.getLogger(__name__)
 
-INSTALL_HINT = 'pip install "simbridge[zenoh]"'
+INSTALL_HINT = 'pip install "simbridge[zenoh]" (in a checkout: pip install ".[zenoh]")'
 #: Seconds between two looks at the session's state (connected or not) and the actions' results.
 RECONCILE_PERIOD = 0.5
 #: Seconds between two full comparisons of the graph with what is declared while nothing
@@ -125,16 +125,16 @@ POLL_PER_CHANNEL = 0.00002
 IDLE_AFTER = 1.0
 
 
-def import_zenoh() -> Any:
-    """Import eclipse-zenoh.
+def import_zenoh(what: str = "--zenoh") -> Any:
+    """Import eclipse-zenoh for ``what`` (the option or command the user gave).
 
     Raises:
-        ConfigError: it is not installed (the message gives the install command).
+        ConfigError: it is not installed (the message names ``what`` and the install command).
     """
     try:
         return importlib.import_module("zenoh")
     except ImportError:
-        msg = f"--zenoh needs the Zenoh extra: {INSTALL_HINT}"
+        msg = f"{what} needs the Zenoh extra: {INSTALL_HINT}"
         raise ConfigError(msg) from None
 
 

@@ -46,7 +46,7 @@ def zenohd_main(argv: Sequence[str]) -> int:
     from simbridge.zenoh.link import import_zenoh
 
     try:
-        zenoh = import_zenoh()
+        zenoh = import_zenoh("the router")
         config = router_config(zenoh, args.listen, args.connect, os.environ)
     except ConfigError as err:
         print(f"simbridge zenohd: {err}", file=sys.stderr)

@@ -37,6 +37,17 @@ def test_zenoh_without_the_extra_exits_at_once_with_the_install_command() -> Non
     assert 'pip install "simbridge[zenoh]"' in done.stderr
 
 
+def test_zenohd_without_the_extra_names_the_command_not_an_option() -> None:
+    done = _python(
+        "import sys; sys.modules['zenoh'] = None\n"
+        "from simbridge.cli import main\n"
+        "raise SystemExit(main(['zenohd']))"
+    )
+    assert done.returncode == 2
+    assert done.stderr.startswith("simbridge zenohd: the router needs the Zenoh extra: pip install")
+    assert "--zenoh" not in done.stderr
+
+
 def test_without_zenoh_nothing_of_it_is_imported() -> None:
     done = _python(
         "import asyncio, sys\n"
