@@ -541,6 +541,10 @@ def _cmd_run(argv: Sequence[str]) -> int:
         return 2
 
 
+def _count(n: int, noun: str) -> str:
+    return f"{n} {noun}" if n == 1 else f"{n} {noun}s"
+
+
 def _cmd_check_config(argv: Sequence[str]) -> int:
     from simbridge.config import load_params, load_world
 
@@ -562,7 +566,7 @@ def _cmd_check_config(argv: Sequence[str]) -> int:
         print(f"simbridge: {err}", file=sys.stderr)
         return 2
     print(
-        f"ok: world '{world.name}' ({len(world.segments())} wall segments), robot "
+        f"ok: world '{world.name}' ({_count(len(world.segments()), 'wall segment')}), robot "
         f"max {params.robot.max_linear_velocity} m/s, LiDAR {params.lidar.rays} rays"
     )
     return 0

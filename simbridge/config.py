@@ -266,9 +266,11 @@ class NamedRobotSpec(RobotSpec):
 
 
 def _check_numbers(value: Any, count: int, what: str) -> list[float]:
-    if not isinstance(value, Sequence) or isinstance(value, str) or len(value) != count:
-        got = len(value) if isinstance(value, Sequence) and not isinstance(value, str) else value
-        msg = f"has {got!r} numbers, expected {what}"
+    if not isinstance(value, Sequence) or isinstance(value, str):
+        msg = f"is {value!r}, not a list; expected {what}"
+        raise ValueError(msg)
+    if len(value) != count:
+        msg = f"has {len(value)} numbers, expected {what}"
         raise ValueError(msg)
     out = []
     for x in value:

@@ -223,7 +223,8 @@ def setting(
         description: one line for people: parameter descriptions, ``ros2 param describe``.
         before: called with the given value before it is converted by the annotation; returns
             the value to convert or raises ``ValueError`` (or :class:`ValidationError`) saying
-            why (e.g. ``walls[1] has 3 numbers, expected [x1, y1, x2, y2]``).
+            why (e.g. ``has 3 numbers, expected [x1, y1, x2, y2]``, shown after the key:
+            ``walls[1]: has 3 numbers...``).
     """
     bounds = Bounds(gt=gt, ge=ge, lt=lt, le=le, min_length=min_length, max_length=max_length)
     return Setting(default, default_factory, bounds, description, before)

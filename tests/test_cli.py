@@ -20,9 +20,16 @@ from tests.helpers import ROOT, TIMEOUT_FACTOR
 PY = sys.executable
 
 
-def run(*args: str, cwd: Path = ROOT) -> subprocess.CompletedProcess[str]:
+def run(
+    *args: str, cwd: Path = ROOT, env: dict[str, str] | None = None
+) -> subprocess.CompletedProcess[str]:
     return subprocess.run(
-        [PY, "-m", "simbridge", *args], capture_output=True, text=True, timeout=60, cwd=cwd
+        [PY, "-m", "simbridge", *args],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        cwd=cwd,
+        env={**os.environ, **(env or {})},
     )
 
 
@@ -47,6 +54,28 @@ def test_check_config_accepts_the_bundled_files() -> None:
     result = run("check-config")
     assert result.returncode == 0
     assert result.stdout.startswith("ok: world 'default'")
+
+
+def test_check_config_counts_in_english(tmp_path: Path) -> None:
+    one = tmp_path / "one.yaml"
+    one.write_text("walls:\n  - [0, 0, 1, 0]\n")
+    assert "(1 wall segment)," in run("check-config", "--world", str(one)).stdout
+
+
+def test_the_readmes_sample_errors_are_what_simbridge_prints(tmp_path: Path) -> None:
+    """The world-file and environment errors the README quotes, reproduced word for word."""
+    readme = " ".join((ROOT / "README.md").read_text().split())  # quotes may span lines
+    world_error = re.search(r"`(simbridge: world file 'lab\.yaml': [^`]+)`", readme)
+    env_error = re.search(
+        r"`(simbridge: environment variable SIMBRIDGE_STALL_TIMEOUT: [^`]+)`", readme
+    )
+    assert world_error and env_error
+    walls = "".join(f"  - [{n}, 0, {n}, 1]\n" for n in range(3)) + "  - [0, 0, 1]\n"
+    (tmp_path / "lab.yaml").write_text(f"walls:\n{walls}")
+    result = run("check-config", "--world", "lab.yaml", cwd=tmp_path)
+    assert (result.returncode, result.stderr) == (2, world_error[1] + "\n")
+    result = run("check-config", env={"SIMBRIDGE_STALL_TIMEOUT": "-5"})
+    assert (result.returncode, result.stderr) == (2, env_error[1] + "\n")
 
 
 def test_bad_world_file_fails_fast_with_the_file_and_the_key(tmp_path: Path) -> None:

@@ -273,6 +273,7 @@ def test_a_world_refuses_what_pydantic_refused_with_readable_paths() -> None:
         ({"circles": [{"center": [0, 0], "radius": 0}]}, "circles[0].radius: must be greater"),
         ({"circles": [{"center": [0, 0], "radius": 1, "segments": 5}]}, "circles[0].segments"),
         ({"walls": [[0, 0, 1, 1], [0, 0, 1]]}, "walls[1]: has 3 numbers, expected [x1, y1,"),
+        ({"walls": [5]}, "walls[0]: is 5, not a list; expected [x1, y1, x2, y2]"),
         ({"polygons": [[[0, 0], [1, "x"]]]}, "polygons[0][1]: 'x' is not a finite number"),
         ({"frames": [{"parent": "", "child": "a"}]}, "frames[0].parent: must not be empty"),
         ({"robots": [{"name": 5}]}, "robots[0].name: robot name 5 is not a valid ROS name"),
