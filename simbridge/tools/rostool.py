@@ -12,7 +12,8 @@ says for ``ros2`` works unchanged against the simulation or the real robot's ros
     simbridge param set /virtual_robot robot.max_linear_velocity 0.3
 
 Every command takes ``--url`` (default ``$SIMBRIDGE_URL`` or ``ws://127.0.0.1:9090``). Errors
-go to stderr with exit code 1; Ctrl-C ends ``echo``, ``hz`` and ``pub`` with exit code 0.
+go to stderr with exit code 1; Ctrl-C ends ``echo``, ``hz`` and ``pub`` with exit code 0. ``echo``
+and ``hz`` of a topic nobody publishes (and no type given) warn as ``ros2`` does and wait for it.
 """
 
 from __future__ import annotations
@@ -127,8 +128,31 @@ def _field(msg: Any, path: str | None) -> Any:
     return value
 
 
+#: How often ``echo`` and ``hz`` ask again for the type of a topic not published yet (s).
+TYPE_POLL = 0.5
+
+
+async def _subscribe_when_published(
+    ros: RosbridgeClient, topic: str, type_name: str | None
+) -> asyncio.Queue[dict[str, Any]]:
+    """Subscribe to ``topic``; without a type, wait until someone publishes it, as ``ros2``.
+
+    ``ros2 topic echo`` and ``hz`` look the type up in the graph and, when the topic has none
+    yet, warn once and poll until it appears (a typo shows at once; Ctrl-C ends the wait).
+    """
+    if not type_name:
+        type_name = await ros.topic_type(topic)
+        if not type_name:
+            print(f"WARNING: topic [{topic}] does not appear to be published yet", file=sys.stderr)
+            sys.stderr.flush()
+        while not type_name:
+            await asyncio.sleep(TYPE_POLL)
+            type_name = await ros.topic_type(topic)
+    return await ros.subscribe(topic, type_name)
+
+
 async def _topic_echo(ros: RosbridgeClient, args: argparse.Namespace) -> int:
-    inbox = await ros.subscribe(args.topic, args.type)
+    inbox = await _subscribe_when_published(ros, args.topic, args.type)
     limit = 1 if args.once else args.times
     count = 0
     while limit is None or count < limit:
@@ -165,10 +189,14 @@ def hz_report(stamps: Sequence[float]) -> str | None:
 
 
 async def _topic_hz(ros: RosbridgeClient, args: argparse.Namespace) -> int:
-    inbox = await ros.subscribe(args.topic, args.type)
-    stamps: deque[float] = deque(maxlen=args.window)
     start = time.monotonic()
-    next_report = start + 1.0
+    try:
+        waiting = _subscribe_when_published(ros, args.topic, args.type)
+        inbox = await asyncio.wait_for(waiting, args.duration)
+    except TimeoutError:
+        return 0  # --duration ended before anyone published the topic
+    stamps: deque[float] = deque(maxlen=args.window)
+    next_report = time.monotonic() + 1.0
     reports = 0
     while args.duration is None or time.monotonic() - start < args.duration:
         remaining = next_report - time.monotonic()

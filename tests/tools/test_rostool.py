@@ -1,6 +1,7 @@
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import sys
 
 import pytest
@@ -202,3 +203,27 @@ def test_hz_report_of_regular_stamps() -> None:
     assert report.startswith("average rate: 20.000")
     assert "window: 4" in report
     assert hz_report([1.0]) is None
+
+
+async def test_topic_echo_of_a_topic_not_published_yet_warns_then_waits_for_it(app: App) -> None:
+    """As `ros2 topic echo`: one warning at once, then the first message once it appears."""
+    proc = await asyncio.create_subprocess_exec(
+        *(sys.executable, "-m", "simbridge", "topic", "echo", "/later", "--once"),
+        *("--url", ws_url(app)),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd=ROOT,
+    )
+    assert proc.stderr is not None
+    line = await asyncio.wait_for(proc.stderr.readline(), 15)
+    assert line.decode() == "WARNING: topic [/later] does not appear to be published yet\n"
+    assert proc.returncode is None  # still waiting
+    async with connect(ws_url(app)) as conn:
+        await send_json(conn, {"op": "advertise", "topic": "/later", "type": "std_msgs/String"})
+        while proc.returncode is None:  # until echo has subscribed and printed one message
+            await send_json(conn, {"op": "publish", "topic": "/later", "msg": {"data": "here"}})
+            with contextlib.suppress(TimeoutError):
+                await asyncio.wait_for(proc.wait(), 0.2)
+        code, out, err = await finish_process(proc)
+    assert code == 0, err
+    assert out == "data: here\n---\n"
