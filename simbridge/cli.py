@@ -207,6 +207,44 @@ def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> Non
     )
 
 
+def _add_foxglove_options(parser: argparse.ArgumentParser, env: Environment) -> None:
+    """Options of the Foxglove WebSocket protocol (the ``[foxglove]`` extra; see the README)."""
+    from simbridge.config import Port
+
+    group = parser.add_argument_group(
+        'Foxglove, Lichtblick and PlotJuggler natively (needs: pip install "simbridge[foxglove]")'
+    )
+    group.add_argument(
+        "--foxglove-port",
+        type=_typed(Port),
+        default=env.foxglove_port,
+        help="also serve the Foxglove WebSocket protocol (foxglove.sdk.v1) on this port, e.g. "
+        "8765: ws://HOST:8765 in Foxglove, Lichtblick or PlotJuggler [SIMBRIDGE_FOXGLOVE_PORT]",
+    )
+    group.add_argument(
+        "--foxglove-scope",
+        metavar="ACCESS",
+        default=env.foxglove_scope,
+        help="what every Foxglove client may do: admin, * or a robot name; the protocol "
+        "carries no token, so with --client-tokens the port opens only with this "
+        "[SIMBRIDGE_FOXGLOVE_SCOPE]",
+    )
+
+
+def _foxglove_settings(args: argparse.Namespace) -> dict[str, Any]:
+    """Return the Foxglove settings of the options.
+
+    Raises:
+        ConfigError: --foxglove-port without the extra (the message gives the install command).
+    """
+    if args.foxglove_port is None:
+        return {"foxglove_scope": args.foxglove_scope} if args.foxglove_scope else {}
+    from simbridge.foxglove.front import import_foxglove
+
+    import_foxglove()  # exits at once, with the install command, when the extra is missing
+    return {"foxglove_port": args.foxglove_port, "foxglove_scope": args.foxglove_scope}
+
+
 def _zenoh_options(args: argparse.Namespace) -> Any:
     """Return the ZenohOptions of ``--zenoh``, or None without it.
 
@@ -321,6 +359,7 @@ def _run_parser(env: Environment) -> argparse.ArgumentParser:
     _add_config_options(parser, env)
     _add_security_options(parser, env)
     _add_zenoh_options(parser, env)
+    _add_foxglove_options(parser, env)
     parser.add_argument(
         "--admin-token",
         metavar="TOKEN",
@@ -429,7 +468,8 @@ async def _serve(
         loop.add_signal_handler(sig, stop.set)
     shown = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
     page = f"  page http://{shown}:{app.http_port}/" if app.http_port is not None else ""
-    print(f"simbridge: rosbridge ws://{shown}:{app.ws_port}/{page}", flush=True)
+    fox = f"  foxglove ws://{shown}:{app.foxglove.port}" if app.foxglove is not None else ""
+    print(f"simbridge: rosbridge ws://{shown}:{app.ws_port}/{page}{fox}", flush=True)
     await stop.wait()
     print("simbridge: stopping", flush=True)
     await app.stop()
@@ -524,6 +564,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
             use_sim_time=args.use_sim_time,
             demo_nodes=args.demo_nodes,
             **_security_settings(args),
+            **_foxglove_settings(args),
         )
         # validate before binding anything, so a bad file fails fast and clearly
         load_world(args.world)

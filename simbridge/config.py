@@ -474,6 +474,18 @@ Rate = Annotated[float, Bounds(gt=0)]
 LogLevel = Literal["debug", "info", "warning", "error"]
 
 
+def _foxglove_scope(value: Any) -> Any:
+    """The access of a Foxglove port: ``admin``, ``*`` or a robot name."""
+    if (
+        value is None
+        or value in ("admin", "*")
+        or (isinstance(value, str) and ROBOT_NAME.match(value))
+    ):
+        return value
+    msg = f"{value!r} is not an access: give 'admin', '*' or a robot name (e.g. r1)"
+    raise ValueError(msg)
+
+
 class ServerSettings(Record, frozen=True):
     """Network and limit settings of one simbridge process (command-line options).
 
@@ -577,6 +589,25 @@ class ServerSettings(Record, frozen=True):
     #: TLS certificate chain and private key (PEM): serve wss:// and https://.
     certfile: str | None = None
     keyfile: str | None = None
+    # -- the Foxglove WebSocket protocol (the [foxglove] extra; README "Foxglove, Lichtblick and
+    # PlotJuggler") --
+    #: Port of the Foxglove WebSocket protocol (``foxglove.sdk.v1``) beside rosbridge (None: off).
+    foxglove_port: Port | None = None
+    #: Access of every client of the Foxglove port: ``admin``, ``*`` or a robot name. The
+    #: protocol carries no token, so with client tokens or a rosauth secret (a class) the port
+    #: stays closed unless this opens it; without them, None gives what a rosbridge client
+    #: without a token gets.
+    foxglove_scope: str | None = setting(default=None, before=_foxglove_scope)
+
+    def check(self) -> None:
+        """Check that a Foxglove port in a class was opened on purpose (``foxglove_scope``)."""
+        if self.foxglove_port is not None and self.auth_required and self.foxglove_scope is None:
+            msg = (
+                "foxglove_port: the Foxglove protocol carries no token, so in a class (client "
+                "tokens or an auth secret) the port stays closed; open it for every Foxglove "
+                "client with foxglove_scope (--foxglove-scope admin, * or a robot name)"
+            )
+            raise ValueError(msg)
 
     @property
     def auth_required(self) -> bool:
@@ -637,6 +668,8 @@ class Environment(Record, frozen=True):
     zenoh: bool | None = None
     record: str | None = None
     log_level: LogLevel | None = None
+    foxglove_port: Port | None = None
+    foxglove_scope: str | None = None
 
     @classmethod
     def read(cls, environ: Mapping[str, str]) -> Environment:

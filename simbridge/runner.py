@@ -39,6 +39,7 @@ from simbridge.web.admin import install_admin
 
 
 if TYPE_CHECKING:
+    from simbridge.foxglove.front import FoxgloveFront
     from simbridge.zenoh.config import ZenohOptions
     from simbridge.zenoh.link import ZenohLink
 
@@ -224,6 +225,16 @@ class App:
 
             self.zenoh = ZenohLink(self.graph, zenoh, simulator=not no_sim)
             self.tick_hooks.append(self.zenoh.tick)
+        #: The Foxglove WebSocket protocol (``--foxglove-port``), or None.
+        self.foxglove: FoxgloveFront | None = None
+        s = self.settings
+        if s.foxglove_port is not None:
+            from simbridge.foxglove.front import FoxgloveFront  # the [foxglove] extra, if asked
+
+            self.foxglove = FoxgloveFront(
+                self.graph, port=s.foxglove_port, host=s.host, scope=s.foxglove_scope
+            )
+            self.tick_hooks.append(self.foxglove.tick)
 
     # -- facts ----------------------------------------------------------------------------
 
@@ -251,6 +262,7 @@ class App:
             **self.server.stats(),
             "loop": {**self.stats.summary(), "failures": self.robot.failures},
             **({"zenoh": self.zenoh.health()} if self.zenoh is not None else {}),
+            **({"foxglove": self.foxglove.health()} if self.foxglove is not None else {}),
         }
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -270,6 +282,8 @@ class App:
         self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
         if self.zenoh is not None:
             await self.zenoh.start()
+        if self.foxglove is not None:
+            await self.foxglove.start()
         self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
         self.ready.set()
 
@@ -281,6 +295,8 @@ class App:
                 await self._loop_task
         if self.zenoh is not None:
             await self.zenoh.close()
+        if self.foxglove is not None:
+            await self.foxglove.close()
         if self._http is not None:
             self._http.close()
             await self._http.wait_closed()

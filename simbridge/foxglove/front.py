@@ -1,0 +1,638 @@
+"""The Foxglove WebSocket protocol beside rosbridge, from the same graph, on the Foxglove SDK.
+
+:class:`FoxgloveFront` runs the SDK's server (``foxglove.start_server``: subprotocol
+``foxglove.sdk.v1``) on its own port and maps the graph onto it:
+
+* **channels**: every typed topic of a type the registry knows, with its ``ros2msg`` schema
+  (the full definition text) and CDR messages. The CDR bytes are the ones cached on the
+  delivery (:attr:`Outgoing.cdr <simbridge.protocol.Outgoing.cdr>`), shared with ``cbor-raw``
+  subscribers and Zenoh: serialized once, whatever the number of users. Topics are advertised
+  when they appear (spawned robots, client-advertised topics) and unadvertised when they go
+  (:meth:`FoxgloveFront.tick` compares the tables' change counters). A subscribed channel
+  stands in the graph as an in-process subscriber (node ``/foxglove_bridge``), so that the
+  simulation publishes what only Foxglove listens to; a latched topic's message is sent again
+  when a client subscribes (the SDK's Python API cannot send to one client, so the channel's
+  other subscribers get it again too: latched topics are idempotent).
+* **client publish**: a client channel is a rosbridge ``advertise`` and each message a
+  ``publish`` of the client's own session, through :meth:`Graph.dispatch
+  <simbridge.graph.Graph.dispatch>`: the admission checks type, payload, rate and scope as for
+  any rosbridge client; a refusal becomes an SDK status message.
+* **services**: every service of the graph with ``ros2msg`` request and response schemas; a
+  call is a rosbridge ``call_service`` of the client's session (admission, pending-call
+  budget, the service table: in-process handlers and client providers alike).
+* **parameters**: the in-process nodes' parameters (``/virtual_robot.robot.mass``), read from
+  a snapshot, set through ``/rosapi/set_param`` as a rosbridge client sets them (an
+  administrative service: admin rights needed), and every change, wherever it came from
+  (``/admin``, rosbridge, Foxglove), pushed to the clients that subscribed to it.
+* **time**: with ``use_sim_time``, the ``/clock`` time is broadcast as the server's time (the
+  stamps are sim time then, and stop with the simulation).
+
+The SDK calls back on its own threads. Each callback only hands its arguments to the event loop
+(``call_soon_threadsafe``); the loop's work is the graph's. Two answers are waited for off the
+loop: a service call (the SDK runs its handler on a blocking-pool thread, which waits for the
+loop's answer) and nothing else: parameter reads answer from a snapshot the loop keeps, and a
+parameter set answers with the current values at once (the change, when the loop has applied
+it, follows as a parameter update). Each client has its own bounded queues in the SDK (a client
+that stops reading loses its oldest data messages, and is disconnected when its control queue
+fills), so it never slows the others.
+
+The protocol carries no token (the SDK's handshake reads only the subprotocol, and its Python
+listener sees a client id): every Foxglove client gets the port's one access (see
+:class:`~simbridge.config.ServerSettings` ``foxglove_scope``).
+"""
+
+from __future__ import annotations
+
+import asyncio
+import concurrent.futures
+import importlib
+import itertools
+import json
+import logging
+from collections.abc import Callable, Hashable
+from dataclasses import dataclass, field
+from typing import Any
+
+import orjson
+
+from simbridge.errors import ConfigError, ServiceError, SimbridgeError
+from simbridge.foxglove.mapping import (
+    ADMIN_SCOPE,
+    CLIENT_ENCODINGS,
+    INSTALL_HINT,
+    MESSAGE_ENCODING,
+    SCHEMA_ENCODING,
+    param_name,
+    plain,
+    split_param,
+    status_of,
+)
+from simbridge.graph import Graph, Topic
+from simbridge.graph.topics import Peer
+from simbridge.msgs.cdr import CdrReader, CdrWriter
+from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session, ops as o
+
+
+__all__ = ["FOXGLOVE_NODE", "FoxgloveFront", "import_foxglove"]
+
+logger = logging.getLogger(__name__)
+
+#: The node that Foxglove clients' subscriptions belong to in the graph (as foxglove_bridge).
+FOXGLOVE_NODE = "/foxglove_bridge"
+#: Outgoing messages the SDK queues per client (its data and its control queue each).
+BACKLOG = 1024
+#: The simulation's clock: the server's time with ``use_sim_time``.
+CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
+#: Seconds a service call's SDK thread waits for the graph beyond the call's own timeout.
+CALL_MARGIN = 2.0
+
+
+def import_foxglove() -> Any:
+    """Import the Foxglove SDK.
+
+    Raises:
+        ConfigError: it is not installed (the message gives the install command).
+    """
+    try:
+        return importlib.import_module("foxglove")
+    except ImportError:
+        msg = f"--foxglove-port needs the Foxglove extra: {INSTALL_HINT}"
+        raise ConfigError(msg) from None
+
+
+class _Client:
+    """One Foxglove client as a peer of the graph: its own session, budgets and access."""
+
+    def __init__(self, front: FoxgloveFront, client_id: int, session: Session) -> None:
+        self.front = front
+        self.client_id = client_id
+        self.session = session
+        self.label = f"Foxglove client {client_id}"
+        #: Its client channels: channel id -> (topic, encoding, type or None).
+        self.channels: dict[int, tuple[str, str, str | None]] = {}
+        #: Its calls waiting for the graph's answer: op id -> future.
+        self.calls: dict[str, asyncio.Future[dict[str, Any]]] = {}
+
+    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
+        """Take what the graph tells this client: a refusal or a call's answer."""
+        if not frame.text:
+            return
+        status = status_of(frame.data)
+        if status is not None:
+            self.front.status(f"{self.label}: {status[1]}", status[0])
+            return
+        body = orjson.loads(frame.data)
+        if isinstance(body, dict) and body.get("op") == "service_response":
+            future = self.calls.pop(str(body.get("id")), None)
+            if future is not None and not future.done():
+                future.set_result(body)
+
+
+@dataclass(eq=False, slots=True)
+class _Channel:
+    """A topic's channel: the SDK's object and who subscribed to it."""
+
+    topic: str
+    type: str
+    channel: Any
+    subscribers: set[int] = field(default_factory=set)
+
+
+class FoxgloveFront:
+    """The Foxglove WebSocket server beside the graph (see the module doc)."""
+
+    def __init__(self, graph: Graph, *, port: int, host: str, scope: str | None) -> None:
+        #: The graph served.
+        self.graph = graph
+        self.port_asked = port
+        self.host = host
+        #: Access of every Foxglove client (None: what a rosbridge client without a token gets).
+        self.scope = scope
+        self.fox = import_foxglove()
+        self.websocket = importlib.import_module("foxglove.websocket")
+        self.context = self.fox.Context()
+        self.cdr = CdrWriter(graph.registry)
+        self.reader = CdrReader(graph.registry)
+        self.server: Any = None
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._channels: dict[str, _Channel] = {}
+        self._by_id: dict[int, _Channel] = {}
+        self._services: dict[str, str] = {}
+        self._clients: dict[int, _Client] = {}
+        self._signature: tuple[int, int] = (-1, -1)
+        self._call_ids = itertools.count(1)
+        self._tasks: set[asyncio.Task[None]] = set()
+        #: Parameter values by Foxglove name, replaced whole by the loop (read by SDK threads).
+        self._params: dict[str, Any] = {}
+        self._time = graph.settings.use_sim_time
+        #: Counters for /healthz.
+        self.stats: dict[str, int] = {
+            "published": 0,
+            "received": 0,
+            "refused": 0,
+            "calls": 0,
+            "parameter_sets": 0,
+        }
+        graph.topics.taps.append(self._on_deliver)
+        for node in graph.params.nodes.values():
+            node.on_change.append(self._param_changer(node.name))
+        graph.params.on_add.append(
+            lambda node: node.on_change.append(self._param_changer(node.name))
+        )
+        self._snapshot_params()
+
+    # -- lifecycle --------------------------------------------------------------------------
+
+    @property
+    def port(self) -> int:
+        """The bound port (0 before start)."""
+        return int(self.server.port) if self.server is not None else 0
+
+    async def start(self) -> None:
+        """Start the SDK's server (binding in a thread) and advertise the graph."""
+        self._loop = asyncio.get_running_loop()
+        ws = self.websocket
+        caps = [ws.Capability.ClientPublish, ws.Capability.Services, ws.Capability.Parameters]
+        if self._time:
+            caps.append(ws.Capability.Time)
+        self.server = await asyncio.to_thread(
+            self.fox.start_server,
+            name="simbridge",
+            host=self.host,
+            port=self.port_asked,
+            capabilities=caps,
+            server_listener=_Listener(self),
+            supported_encodings=list(CLIENT_ENCODINGS),
+            context=self.context,
+            message_backlog_size=BACKLOG,
+        )
+        if self._time:
+            self.graph.subscribe(CLOCK_TOPIC, CLOCK_TYPE, FOXGLOVE_NODE, self._on_clock)
+        self.reconcile()
+        logger.info("Foxglove WebSocket protocol on port %d (foxglove.sdk.v1)", self.port)
+
+    async def close(self) -> None:
+        """Stop the server (in a thread: the SDK waits for its connections to close)."""
+        server, self.server = self.server, None
+        if self._time:
+            self.graph.topics.unsubscribe_internal(CLOCK_TOPIC, self._on_clock)
+        if server is not None:
+            await asyncio.to_thread(server.stop)
+        for entry in self._channels.values():
+            entry.channel.close()
+        self._channels.clear()
+        self._by_id.clear()
+
+    def health(self) -> dict[str, Any]:
+        """Return the ``/healthz`` part of the Foxglove port."""
+        return {
+            "port": self.port,
+            "protocol": "foxglove.sdk.v1",
+            "access": self.scope or "as a rosbridge client without a token",
+            "channels": len(self._channels),
+            "subscribed_channels": sum(1 for c in self._channels.values() if c.subscribers),
+            "services": len(self._services),
+            "clients_publishing_or_calling": len(self._clients),
+            **self.stats,
+        }
+
+    def tick(self, now: float) -> None:
+        """Advertise what appeared in the graph and unadvertise what went (a tick hook)."""
+        signature = (self.graph.topics.changes, self.graph.services.changes)
+        if signature != self._signature and self.server is not None:
+            self.reconcile()
+
+    # -- channels ---------------------------------------------------------------------------
+
+    def reconcile(self) -> None:
+        """Make the channels and services match the graph's topics and services."""
+        graph = self.graph
+        self._signature = (graph.topics.changes, graph.services.changes)
+        wanted = {t.name: t.type for t in graph.topics.listed() if t.known and t.type}
+        for name in [n for n, c in self._channels.items() if wanted.get(n) != c.type]:
+            self._drop_channel(name)
+        for name, type_name in wanted.items():
+            if name not in self._channels:
+                self._add_channel(name, type_name)
+        self._reconcile_services()
+
+    def _add_channel(self, name: str, type_name: str) -> None:
+        try:
+            text = self.graph.registry.definition_text(type_name)
+        except SimbridgeError as err:
+            logger.debug("Foxglove: no channel for %s: %s", name, err)
+            return
+        schema = self.fox.Schema(name=type_name, encoding=SCHEMA_ENCODING, data=text.encode())
+        channel = self.fox.Channel(
+            name, schema=schema, message_encoding=MESSAGE_ENCODING, context=self.context
+        )
+        entry = _Channel(name, type_name, channel)
+        self._channels[name] = entry
+        self._by_id[channel.id()] = entry
+
+    def _drop_channel(self, name: str) -> None:
+        entry = self._channels.pop(name)
+        self._by_id.pop(entry.channel.id(), None)
+        if entry.subscribers:
+            self.graph.topics.unsubscribe_internal(name, self._marker)
+        entry.channel.close()
+
+    def _marker(self, msg: Any, source: Any) -> None:
+        """The in-process subscriber that stands for Foxglove subscribers (does nothing)."""
+
+    def _on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
+        """Tap on every delivery: log it on the topic's channel if a client subscribed."""
+        entry = self._channels.get(topic.name)
+        if entry is not None and entry.subscribers:
+            self._log(entry, out)
+
+    def _log(self, entry: _Channel, out: Outgoing) -> None:
+        try:
+            data = out.cdr() if out.cdr is not None else self.cdr.serialize(entry.type, out.msg)
+        except Exception as err:  # a message the CDR writer cannot encode: skipped, said once
+            logger.debug("Foxglove: %s not sent: %s", entry.topic, err)
+            return
+        entry.channel.log(data, log_time=self.graph.wall_clock_ns())
+        self.stats["published"] += 1
+
+    def _on_clock(self, msg: Any, source: Any) -> None:
+        """An in-process subscriber of ``/clock`` (``use_sim_time``): the server's time."""
+        clock = msg.get("clock") if isinstance(msg, dict) else None
+        if isinstance(clock, dict) and self.server is not None:
+            ns = int(clock.get("sec", 0)) * 1_000_000_000 + int(clock.get("nanosec", 0))
+            self.server.broadcast_time(max(ns, 0))
+
+    def subscribed(self, client_id: int, channel_id: int) -> None:
+        """A client subscribed to a channel (from the SDK, on the loop)."""
+        entry = self._by_id.get(channel_id)
+        if entry is None:
+            return
+        if not entry.subscribers:
+            self.graph.subscribe(entry.topic, entry.type, FOXGLOVE_NODE, self._marker)
+        entry.subscribers.add(client_id)
+        topic = self.graph.topics.topics.get(entry.topic)
+        if topic is not None and topic.latched is not None:
+            self._log(entry, topic.latched)
+
+    def unsubscribed(self, client_id: int, channel_id: int) -> None:
+        """A client unsubscribed from a channel or left (from the SDK, on the loop)."""
+        entry = self._by_id.get(channel_id)
+        if entry is None or client_id not in entry.subscribers:
+            return
+        entry.subscribers.discard(client_id)
+        if not entry.subscribers:
+            self.graph.topics.unsubscribe_internal(entry.topic, self._marker)
+
+    # -- clients: publish, calls ------------------------------------------------------------
+
+    def _client(self, client_id: int) -> _Client:
+        client = self._clients.get(client_id)
+        if client is None:
+            session = self.graph.new_session()
+            client = self._clients[client_id] = _Client(self, client_id, session)
+            self.graph.add_peer(client)  # the guard gives the access of a tokenless client
+            if self.scope == ADMIN_SCOPE:
+                session.connect(ANY_SCOPE, admin=True)
+            elif self.scope is not None:
+                admin = self.scope == ANY_SCOPE and self.graph.settings.admin_token is None
+                session.connect(self.scope, admin=admin)
+            logger.info("%s: publishing or calling", client.label)
+        return client
+
+    def _release(self, client: _Client) -> None:
+        """Forget a client that holds nothing any more (no channel, no call)."""
+        if client.channels or client.calls or self._clients.get(client.client_id) is not client:
+            return
+        del self._clients[client.client_id]
+        self.graph.remove_peer(client)
+
+    def _now(self) -> float:
+        return self._loop.time() if self._loop is not None else 0.0
+
+    def advertised(
+        self, client_id: int, channel_id: int, topic: str, encoding: str, schema: str
+    ) -> None:
+        """A client advertised a channel: a rosbridge ``advertise`` of its session."""
+        client = self._client(client_id)
+        if encoding not in CLIENT_ENCODINGS:
+            self.status(
+                f"{client.label}: {topic}: encoding {encoding!r} is not taken; use "
+                f"{' or '.join(CLIENT_ENCODINGS)}",
+                "error",
+            )
+            self._release(client)
+            return
+        type_name = schema or None
+        if type_name is None:
+            known = self.graph.topics.topics.get(topic)
+            type_name = known.type if known is not None else None
+        client.channels[channel_id] = (topic, encoding, type_name)
+        if type_name is not None:
+            op = o.Advertise(topic=topic, type=type_name, id=f"foxglove:{channel_id}")
+            self.graph.dispatch(client, op, self._now())
+
+    def unadvertised(self, client_id: int, channel_id: int) -> None:
+        """A client unadvertised a channel (or left): a rosbridge ``unadvertise``."""
+        client = self._clients.get(client_id)
+        if client is None:
+            return
+        entry = client.channels.pop(channel_id, None)
+        if entry is not None and entry[2] is not None:
+            op = o.Unadvertise(topic=entry[0], id=f"foxglove:{channel_id}")
+            self.graph.dispatch(client, op, self._now())
+        self._release(client)
+
+    def message(self, client_id: int, channel_id: int, data: bytes) -> None:
+        """A client's message: a rosbridge ``publish`` of its session (admission decides)."""
+        client = self._clients.get(client_id)
+        entry = client.channels.get(channel_id) if client is not None else None
+        if client is None or entry is None:
+            return
+        topic, encoding, type_name = entry
+        self.stats["received"] += 1
+        try:
+            if type_name is None:
+                known = self.graph.topics.topics.get(topic)
+                type_name = known.type if known is not None else None
+            if encoding == MESSAGE_ENCODING:
+                if type_name is None:
+                    msg = f"publish {topic}: CDR needs a schema name (the topic has no type yet)"
+                    raise ServiceError(msg)
+                payload = plain(self.reader.read(type_name, data))
+            else:
+                payload = orjson.loads(data)
+        except Exception as err:  # whatever the client sent: told, never raised
+            self.status(f"{client.label}: publish {topic}: cannot decode: {err}", "error")
+            return
+        op = o.Publish(topic=topic, msg=payload, type=type_name)
+        self.graph.dispatch(client, op, self._now())
+
+    async def call(self, client_id: int, name: str, encoding: str, payload: bytes) -> bytes:
+        """A client's service call: a rosbridge ``call_service`` of its session.
+
+        Raises:
+            ServiceError: the call was refused or failed (the SDK tells the client why).
+        """
+        self.stats["calls"] += 1
+        type_name = self._services.get(name)
+        service = self.graph.services.services.get(name)
+        if type_name is None or service is None:
+            msg = f"service {name} does not exist (any more)"
+            raise ServiceError(msg)
+        request_type, response_type = self.graph.registry.service(type_name)
+        try:
+            if encoding == MESSAGE_ENCODING:
+                args = plain(self.reader.read(request_type, payload))
+            else:
+                args = orjson.loads(payload) if payload else {}
+        except Exception as err:
+            text = f"service {name}: request is not {encoding} of {request_type}: {err}"
+            raise ServiceError(text) from None
+        body = await self._dispatch_call(client_id, name, args)
+        if not body.get("result"):
+            raise ServiceError(str(body.get("values")))
+        response = self.graph.converter.from_json(response_type, body.get("values") or {})
+        if encoding == MESSAGE_ENCODING:
+            return self.cdr.serialize(response_type, response)
+        return orjson.dumps(plain(response))
+
+    async def _dispatch_call(self, client_id: int, name: str, args: Any) -> dict[str, Any]:
+        client = self._client(client_id)
+        op_id = f"foxglove:{next(self._call_ids)}"
+        loop = asyncio.get_running_loop()
+        future: asyncio.Future[dict[str, Any]] = loop.create_future()
+        client.calls[op_id] = future
+        timeout = self.graph.settings.service_timeout
+        try:
+            op = o.CallService(service=name, args=args, id=op_id, timeout=timeout)
+            self.graph.dispatch(client, op, loop.time())
+            return await asyncio.wait_for(future, timeout + CALL_MARGIN / 2)
+        finally:
+            client.calls.pop(op_id, None)
+            self._release(client)
+
+    def _reconcile_services(self) -> None:
+        wanted: dict[str, str] = {}
+        for name, service in self.graph.services.services.items():
+            try:
+                self.graph.registry.service(service.type)
+            except SimbridgeError:
+                continue
+            wanted[name] = service.type
+        gone = [n for n, t in self._services.items() if wanted.get(n) != t]
+        if gone:
+            self.server.remove_services(gone)
+            for name in gone:
+                del self._services[name]
+        new = [self._service(n, t) for n, t in wanted.items() if n not in self._services]
+        new = [s for s in new if s is not None]
+        if new:
+            self.server.add_services(new)
+            for service in new:
+                self._services[service.name] = wanted[service.name]
+
+    def _service(self, name: str, type_name: str) -> Any:
+        fox = self.fox
+        try:
+            request, response = self.graph.registry.service(type_name)
+            parts = [
+                fox.MessageSchema(
+                    encoding=MESSAGE_ENCODING,
+                    schema=fox.Schema(
+                        name=part,
+                        encoding=SCHEMA_ENCODING,
+                        data=self.graph.registry.definition_text(part).encode(),
+                    ),
+                )
+                for part in (request, response)
+            ]
+        except SimbridgeError as err:
+            logger.debug("Foxglove: no service %s: %s", name, err)
+            return None
+        schema = fox.ServiceSchema(type_name, request=parts[0], response=parts[1])
+        return fox.Service(name, schema=schema, handler=self._handler(name))
+
+    def _handler(self, name: str) -> Callable[[Any], bytes]:
+        timeout = self.graph.settings.service_timeout + CALL_MARGIN
+
+        def handle(request: Any) -> bytes:  # an SDK blocking-pool thread: it may wait
+            loop = self._loop
+            if loop is None:
+                msg = "the server is stopping"
+                raise ServiceError(msg)
+            coro = self.call(request.client_id, name, request.encoding, bytes(request.payload))
+            future = asyncio.run_coroutine_threadsafe(coro, loop)
+            try:
+                return future.result(timeout)
+            except concurrent.futures.TimeoutError:
+                future.cancel()
+                msg = f"service {name}: no answer within {timeout:.0f} s"
+                raise ServiceError(msg) from None
+
+        return handle
+
+    # -- parameters -------------------------------------------------------------------------
+
+    def _snapshot_params(self) -> None:
+        values: dict[str, Any] = {}
+        for node in self.graph.params.nodes.values():
+            for key, value in node.read().items():
+                values[param_name(node.name, key)] = value
+        self._params = values  # one assignment: SDK threads read either the old or the new
+
+    def _param_changer(self, node: str) -> Callable[[list[str]], None]:
+        def changed(names: list[str]) -> None:
+            self._snapshot_params()
+            if self.server is not None and names:
+                params = self._parameters([param_name(node, n) for n in names])
+                if params:
+                    self.server.publish_parameter_values(params)
+
+        return changed
+
+    def _parameters(self, names: list[str] | None) -> list[Any]:
+        """Return the SDK parameters of ``names`` (None: all) from the snapshot."""
+        values = self._params
+        fox = self.fox
+        out = []
+        for name in names or values:
+            if name not in values:
+                continue
+            value = values[name]
+            if isinstance(value, float):
+                out.append(fox.Parameter(name, value=value, type=fox.ParameterType.Float64))
+            elif isinstance(value, list) and all(isinstance(v, float) for v in value) and value:
+                out.append(
+                    fox.Parameter(name, value=list(value), type=fox.ParameterType.Float64Array)
+                )
+            elif isinstance(value, list):
+                out.append(fox.Parameter(name, value=[float(v) for v in value]))
+            else:
+                out.append(fox.Parameter(name, value=value))
+        return out
+
+    def set_parameters(self, client_id: int, changes: list[tuple[str, Any]]) -> None:
+        """A client set parameters: ``/rosapi/set_param`` calls of its session, in order."""
+        self.stats["parameter_sets"] += 1
+        task = asyncio.get_running_loop().create_task(self._set_parameters(client_id, changes))
+        self._tasks.add(task)
+        task.add_done_callback(self._tasks.discard)
+
+    async def _set_parameters(self, client_id: int, changes: list[tuple[str, Any]]) -> None:
+        nodes = list(self.graph.params.nodes)
+        for full, value in changes:
+            split = split_param(full, nodes)
+            if split is None:
+                self.status(f"Foxglove client {client_id}: no parameter {full}", "warning")
+                continue
+            args = {"name": f"{split[0]}:{split[1]}", "value": json.dumps(value)}
+            body = await self._dispatch_call(client_id, "/rosapi/set_param", args)
+            if not body.get("result"):
+                self.status(
+                    f"Foxglove client {client_id}: parameter {full} not set: {body.get('values')}",
+                    "warning",
+                )
+
+    # -- status -----------------------------------------------------------------------------
+
+    def status(self, text: str, level: str) -> None:
+        """Send a status message (the SDK's Python API sends it to every client)."""
+        self.stats["refused"] += level == "error"
+        if self.server is None:
+            return
+        levels = self.fox.StatusLevel
+        kind = {"info": levels.Info, "warning": levels.Warning, "warn": levels.Warning}
+        self.server.publish_status(text[:500], kind.get(level, levels.Error))
+
+
+class _Listener:
+    """The SDK's server listener: every callback hands its arguments to the event loop."""
+
+    def __init__(self, front: FoxgloveFront) -> None:
+        self.front = front
+
+    def _soon(self, callback: Callable[..., None], *args: Any) -> None:
+        loop = self.front._loop
+        if loop is not None and not loop.is_closed():
+            loop.call_soon_threadsafe(callback, *args)
+
+    def on_subscribe(self, client: Any, channel: Any) -> None:
+        self._soon(self.front.subscribed, client.id, channel.id)
+
+    def on_unsubscribe(self, client: Any, channel: Any) -> None:
+        self._soon(self.front.unsubscribed, client.id, channel.id)
+
+    def on_client_advertise(self, client: Any, channel: Any) -> None:
+        self._soon(
+            self.front.advertised,
+            client.id,
+            channel.id,
+            str(channel.topic),
+            str(channel.encoding),
+            str(channel.schema_name or ""),
+        )
+
+    def on_client_unadvertise(self, client: Any, client_channel_id: int) -> None:
+        self._soon(self.front.unadvertised, client.id, client_channel_id)
+
+    def on_message_data(self, client: Any, client_channel_id: int, data: bytes) -> None:
+        self._soon(self.front.message, client.id, client_channel_id, bytes(data))
+
+    def on_get_parameters(
+        self, client: Any, param_names: list[str], request_id: str | None = None
+    ) -> list[Any]:
+        return self.front._parameters(list(param_names) or None)  # the snapshot: no wait
+
+    def on_set_parameters(
+        self, client: Any, parameters: list[Any], request_id: str | None = None
+    ) -> list[Any]:
+        changes = [(str(p.name), p.get_value()) for p in parameters]
+        self._soon(self.front.set_parameters, client.id, changes)
+        # the values as they are now; the change follows as an update once the loop applied it
+        return self.front._parameters([name for name, _ in changes])
+
+    def on_parameters_subscribe(self, param_names: list[str]) -> None:
+        return None
+
+    def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
+        return None

@@ -1,0 +1,113 @@
+"""The Foxglove port end to end, with a real Foxglove client.
+
+@foxglove/ws-protocol's FoxgloveClient and @foxglove/rosmsg2-serialization under Node
+(tests/js/foxglove.mjs); roslib 2.1.0 is the rosbridge client whose parameter change Foxglove sees.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from typing import Any
+
+import pytest
+
+from simbridge.config import WorldSpec
+from simbridge.errors import ConfigError
+from tests.conftest import AppFactory, _run_client
+from tests.helpers import JS_DIR, ROOT, TIMEOUT_FACTOR, ws_url
+
+
+pytestmark = pytest.mark.e2e
+
+
+async def _foxglove(url: str, args: dict[str, Any], timeout: float = 25) -> Any:
+    t = timeout * TIMEOUT_FACTOR
+    cmd = ["node", str(JS_DIR / "foxglove.mjs"), "--url", url, "--args", json.dumps(args)]
+    return await _run_client([*cmd, "--timeout-ms", str(int(t * 1000))], t)
+
+
+async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
+    make_app: AppFactory, node_ready: None
+) -> None:
+    app = await make_app(foxglove_port=0)
+    assert app.foxglove is not None
+    args = {
+        "refuse": {"topic": "/odom", "type": "geometry_msgs/msg/Twist"},
+        "reset": True,
+        "params": True,
+        "rosbridge": ws_url(app),
+    }
+    got = await _foxglove(f"ws://127.0.0.1:{app.foxglove.port}", args)
+    assert {"clientPublish", "services", "parameters", "parametersSubscribe"} <= set(
+        got["capabilities"]
+    )
+    assert got["odomSchema"] == "nav_msgs/msg/Odometry"
+    assert got["schemaEncoding"] == "ros2msg"
+    assert got["tfStatic"] == ["base_link->laser"]  # latched, published before the client came
+    assert 17 <= got["odomRate"] <= 23
+    assert got["odomFrames"] == ["odom", "base_link"]
+    assert got["scanRanges"] == 360
+    assert got["moved"] > 0.05  # /cmd_vel from the client channel moved the robot
+    # the type conflict is refused by the admission, as for a rosbridge client
+    assert any("already established with type nav_msgs/msg/Odometry" in s for s in got["refusal"])
+    assert got["reset"] is True
+    assert {"/reset", "/spawn", "/kill", "/estop", "/estop/reset"} <= set(got["services"])
+    assert got["paramRead"] == 0.5
+    assert got["paramFromRosbridge"] == 0.45
+    assert app.world.params.robot.max_linear_velocity == 0.45
+    health = app.health()["foxglove"]
+    assert health["port"] == app.foxglove.port and health["calls"] >= 1
+
+
+CLASS_WORLD = {
+    "name": "class",
+    "walls": [[-3, -2, 3, -2], [3, -2, 3, 2], [3, 2, -3, 2], [-3, 2, -3, -2]],
+    "robots": [{"name": "r1", "pose": [-1, 0, 0]}, {"name": "r2", "pose": [1, 1, 3.14159]}],
+}
+
+
+async def test_in_a_class_the_foxglove_port_drives_only_the_robot_it_was_opened_for(
+    make_app: AppFactory, node_ready: None
+) -> None:
+    tokens = {"student-one-token": "r1", "student-two-token": "r2"}
+    with pytest.raises(ConfigError, match="carries no token"):
+        from simbridge.config import server_settings
+
+        server_settings(foxglove_port=0, client_tokens=tokens)
+    app = await make_app(
+        world=WorldSpec.parse(CLASS_WORLD),
+        client_tokens=tokens,
+        foxglove_port=0,
+        foxglove_scope="r1",
+        use_sim_time=True,
+    )
+    assert app.foxglove is not None
+    args = {"robot": "r1", "refuse": {"topic": "/r2/cmd_vel", "type": "geometry_msgs/msg/Twist"}}
+    got = await _foxglove(f"ws://127.0.0.1:{app.foxglove.port}", {**args, "time": True})
+    assert got["moved"] > 0.05
+    assert any("/r2/cmd_vel" in s and "r1" in s for s in got["refusal"])
+    assert "time" in got["capabilities"] and got["times"] >= 2  # the sim clock, from /clock
+    assert app.world.robots["r2"].state.x == pytest.approx(1.0, abs=1e-6)  # r2 never moved
+
+
+def test_without_the_option_nothing_of_foxglove_is_imported() -> None:
+    code = (
+        "import sys; from simbridge.runner import App; App(); "
+        "print(sorted(m for m in sys.modules if 'foxglove' in m))"
+    )
+    out = subprocess.run(
+        [sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True, check=True
+    )
+    assert out.stdout.strip() == "[]"
+
+
+def test_the_option_without_the_extra_exits_with_the_install_command() -> None:
+    code = (
+        "import sys; sys.modules['foxglove'] = None; from simbridge.cli import main; "
+        "sys.exit(main(['--foxglove-port', '0', '--port', '0', '--no-http']))"
+    )
+    out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
+    assert out.returncode == 2
+    assert 'pip install "simbridge[foxglove]"' in out.stderr

@@ -1,0 +1,198 @@
+#!/usr/bin/env node
+// A real Foxglove client against simbridge's Foxglove port: @foxglove/ws-protocol's FoxgloveClient
+// on a `ws` WebSocket opened with the SDK's subprotocol, messages decoded and encoded by
+// @foxglove/rosmsg2-serialization from the schemas the server advertises.
+//
+//   node foxglove.mjs --url ws://127.0.0.1:PORT --args JSON [--timeout-ms N]
+//
+// Several checks in one connection (one Node start for the whole path). args:
+//   robot        namespace of the robot driven ("" : /cmd_vel, /odom)
+//   refuse       {topic, type}: a client channel the server must refuse (a status comes back)
+//   rosbridge    a rosbridge URL: roslib 2.1.0 sets a parameter there, seen here as an update
+//   params       true: read, set and subscribe robot.max_linear_velocity
+//   reset        true: call /reset
+//   time         true: wait for the server's time messages (use_sim_time)
+// stdout: one line, {"ok":true,"result":{...}} or {"ok":false,"error":"..."} (as run.mjs).
+
+import { parseArgs } from 'node:util';
+import WebSocket from 'ws';
+import wsProtocol from '@foxglove/ws-protocol';
+import { parse } from '@foxglove/rosmsg';
+import rosmsg2 from '@foxglove/rosmsg2-serialization';
+
+const { FoxgloveClient } = wsProtocol;
+const { MessageReader, MessageWriter } = rosmsg2;
+
+const log = (...a) => console.error(...a);
+console.log = log;
+
+const { values: opts } = parseArgs({
+  options: {
+    url: { type: 'string' },
+    args: { type: 'string', default: '{}' },
+    'timeout-ms': { type: 'string', default: '20000' },
+  },
+});
+const args = JSON.parse(opts.args);
+const deadline = Date.now() + Number(opts['timeout-ms']);
+
+function finish(ok, payload) {
+  process.stdout.write(JSON.stringify(ok ? { ok, result: payload } : { ok, error: payload }) + '\n');
+  process.exit(ok ? 0 : 1);
+}
+setTimeout(() => finish(false, 'timeout'), Number(opts['timeout-ms'])).unref();
+
+/** Resolve when `test()` is true (checked on every event and every 20 ms), or reject. */
+function until(what, test, ms = 8000) {
+  return new Promise((resolve, reject) => {
+    const end = Math.min(Date.now() + ms, deadline);
+    const look = () => {
+      const v = test();
+      if (v) return resolve(v);
+      if (Date.now() > end) return reject(new Error(`timed out waiting for ${what}`));
+      setTimeout(look, 20);
+    };
+    look();
+  });
+}
+
+const ws = new WebSocket(opts.url, ['foxglove.sdk.v1']);
+const client = new FoxgloveClient({ ws });
+const channels = new Map(); // topic -> channel
+const readers = new Map(); // channel id -> reader
+const messages = new Map(); // topic -> [{msg, at}]
+const services = new Map(); // name -> service
+const statuses = [];
+const paramValues = []; // every parameterValues event
+const times = [];
+const responses = new Map(); // call id -> {response|failure}
+let serverInfo = null;
+
+client.on('error', (e) => log('error', e));
+client.on('serverInfo', (info) => (serverInfo = info));
+client.on('status', (s) => statuses.push(s));
+client.on('time', (t) => times.push(Number(t.timestamp)));
+client.on('advertise', (list) => {
+  for (const ch of list) {
+    channels.set(ch.topic, ch);
+    if (ch.encoding === 'cdr' && ch.schemaEncoding === 'ros2msg') {
+      readers.set(ch.id, new MessageReader(parse(ch.schema, { ros2: true })));
+    }
+  }
+});
+client.on('advertiseServices', (list) => list.forEach((s) => services.set(s.name, s)));
+client.on('message', ({ subscriptionId, data }) => {
+  const topic = subs.get(subscriptionId);
+  const ch = channels.get(topic);
+  const msg = readers.get(ch.id).readMessage(new Uint8Array(data.buffer, data.byteOffset, data.byteLength));
+  if (!messages.has(topic)) messages.set(topic, []);
+  messages.get(topic).push({ msg, at: Date.now() });
+});
+client.on('parameterValues', (ev) => paramValues.push(ev));
+client.on('serviceCallResponse', (r) => responses.set(r.callId, { response: r }));
+client.on('serviceCallFailure', (f) => responses.set(f.callId, { failure: f.message }));
+
+const subs = new Map(); // subscription id -> topic
+function subscribe(topic) {
+  const ch = channels.get(topic);
+  if (!ch) throw new Error(`no channel ${topic}; channels: ${[...channels.keys()].join(' ')}`);
+  subs.set(client.subscribe(ch.id), topic);
+}
+
+let nextCall = 1;
+async function call(name, request = {}) {
+  const svc = services.get(name);
+  if (!svc) throw new Error(`no service ${name}`);
+  const schema = svc.request?.schema ?? svc.requestSchema;
+  const writer = new MessageWriter(parse(schema, { ros2: true }));
+  const callId = nextCall++;
+  client.sendServiceCallRequest({ serviceId: svc.id, callId, encoding: 'cdr', data: new DataView(writer.writeMessage(request).buffer) });
+  const got = await until(`the answer of ${name}`, () => responses.get(callId));
+  if (got.failure) throw new Error(`${name} failed: ${got.failure}`);
+  return got.response;
+}
+
+function paramValue(name, value) {
+  return paramValues.find((ev) => ev.parameters.some((p) => p.name === name && Math.abs(p.value - value) < 1e-9));
+}
+
+async function main() {
+  await until('serverInfo', () => serverInfo);
+  const ns = args.robot ? `/${args.robot}` : '';
+  await until('the channels', () => channels.has(`${ns}/odom`) && channels.has(`${ns}/scan`) && channels.has('/tf_static'));
+  const result = {
+    capabilities: serverInfo.capabilities,
+    encodings: serverInfo.supportedEncodings ?? [],
+    odomSchema: channels.get(`${ns}/odom`).schemaName,
+    schemaEncoding: channels.get(`${ns}/odom`).schemaEncoding,
+    channelCount: channels.size,
+  };
+  // /tf_static was published at start: it reaches this late subscriber all the same
+  for (const t of [`${ns}/odom`, `${ns}/scan`, '/tf_static']) subscribe(t);
+  await until('/tf_static', () => messages.get('/tf_static')?.length);
+  result.tfStatic = messages.get('/tf_static')[0].msg.transforms.map((t) => `${t.header.frame_id}->${t.child_frame_id}`);
+  await until('1 s of /odom', () => {
+    const m = messages.get(`${ns}/odom`) ?? [];
+    return m.length > 2 && m[m.length - 1].at - m[0].at >= 1000;
+  });
+  const odom = messages.get(`${ns}/odom`);
+  result.odomRate = (odom.length - 1) / ((odom[odom.length - 1].at - odom[0].at) / 1000);
+  result.odomFrames = [odom[0].msg.header.frame_id, odom[0].msg.child_frame_id];
+  await until('/scan', () => messages.get(`${ns}/scan`)?.length);
+  result.scanRanges = messages.get(`${ns}/scan`)[0].msg.ranges.length;
+
+  // drive: the teleop panel's path (a client channel, CDR of geometry_msgs/msg/Twist)
+  const twistDef = parse('geometry_msgs/Vector3 linear\ngeometry_msgs/Vector3 angular\n' + '='.repeat(80) + '\nMSG: geometry_msgs/Vector3\nfloat64 x\nfloat64 y\nfloat64 z\n', { ros2: true });
+  const twist = new MessageWriter(twistDef);
+  const cmd = client.advertise({ topic: `${ns}/cmd_vel`, encoding: 'cdr', schemaName: 'geometry_msgs/msg/Twist' });
+  const x0 = odom[odom.length - 1].msg.pose.pose.position.x;
+  const drive = setInterval(() => client.sendMessage(cmd, twist.writeMessage({ linear: { x: 0.3, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } })), 100);
+  await until('the robot to move', () => odom[odom.length - 1].msg.pose.pose.position.x > x0 + 0.05);
+  clearInterval(drive);
+  result.moved = odom[odom.length - 1].msg.pose.pose.position.x - x0;
+
+  if (args.refuse) {
+    const before = statuses.length;
+    const bad = client.advertise({ topic: args.refuse.topic, encoding: 'cdr', schemaName: args.refuse.type });
+    client.sendMessage(bad, twist.writeMessage({ linear: { x: 0.3, y: 0, z: 0 }, angular: { x: 0, y: 0, z: 0 } }));
+    await until('a status for the refused publish', () => statuses.length > before);
+    result.refusal = statuses.slice(before).map((s) => s.message);
+  }
+  if (args.reset) {
+    await call('/reset');
+    result.reset = true;
+  }
+  result.services = [...services.keys()].filter((n) => ['/reset', '/spawn', '/kill', '/estop', '/estop/reset'].includes(n));
+  if (args.params) {
+    const name = '/virtual_robot.robot.max_linear_velocity';
+    client.getParameters([name], 'get1');
+    const got = await until('getParameters', () => paramValues.find((ev) => ev.id === 'get1'));
+    result.paramRead = got.parameters.find((p) => p.name === name)?.value;
+    client.subscribeParameterUpdates([name]);
+    client.setParameters([{ name, value: 0.4, type: 'float64' }], 'set1');
+    await until('the update of the set', () => paramValue(name, 0.4));
+    result.paramSet = 0.4;
+    if (args.rosbridge) {
+      const ROSLIB = await import('roslib2');
+      const ros = new ROSLIB.Ros({ url: args.rosbridge });
+      await new Promise((resolve, reject) => { ros.on('connection', resolve); ros.on('error', reject); });
+      const param = new ROSLIB.Param({ ros, name: '/virtual_robot:robot.max_linear_velocity' });
+      await new Promise((resolve, reject) => param.set(0.45, resolve, (e) => reject(new Error(String(e)))));
+      await until('the update of the rosbridge set', () => paramValue(name, 0.45));
+      result.paramFromRosbridge = 0.45;
+      ros.close();
+    }
+  }
+  if (args.time) {
+    await until('server time', () => times.length >= 2);
+    result.times = times.length;
+  }
+  result.statuses = statuses.map((s) => s.message);
+  const closed = new Promise((resolve) => { ws.once('close', resolve); setTimeout(resolve, 1000); });
+  client.close();
+  await closed;
+  return result;
+}
+
+ws.on('unexpected-response', (_req, res) => finish(false, `handshake refused: HTTP ${res.statusCode}`));
+main().then((r) => finish(true, r), (e) => finish(false, e.stack || String(e)));
