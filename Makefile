@@ -4,6 +4,15 @@ PYTHON ?= python3
 VENV   ?= .venv
 BIN    := $(VENV)/bin
 HOST   ?= 0.0.0.0
+# `make run ARGS="--world config/worlds/classroom.yaml --demo-nodes"`: options for simbridge
+# (paths are relative to the checkout; SIMBRIDGE_* variables pass through as well).
+ARGS   ?=
+# `make run EXTRAS=zenoh ARGS=--zenoh`: extras of the install (pyproject.toml).
+EXTRAS ?=
+# What `make deps` runs after the Python install (the tests of this Makefile replace it).
+SETUP_TEST_DEPS ?= scripts/setup-test-deps.sh
+comma  := ,
+RUN_STAMP := $(VENV)/.run-installed$(if $(EXTRAS),-$(subst $(comma),-,$(EXTRAS)))
 
 .PHONY: run test check lint format typecheck pytest bench deps clean test-arm64
 
@@ -12,17 +21,19 @@ $(BIN)/python:
 	$(BIN)/pip install --quiet --upgrade pip
 
 # A plain (non-editable) install, exactly what `pip install simbridge` gives a user.
-$(VENV)/.run-installed: $(BIN)/python pyproject.toml $(shell find simbridge static config -type f -not -path '*/__pycache__/*' 2>/dev/null)
-	$(BIN)/pip install --quiet .
+$(RUN_STAMP): $(BIN)/python pyproject.toml $(shell find simbridge static config -type f -not -path '*/__pycache__/*' 2>/dev/null)
+	$(BIN)/pip install --quiet '.$(if $(EXTRAS),[$(EXTRAS)])'
 	touch $@
 
-run: $(VENV)/.run-installed
-	cd /tmp && $(abspath $(BIN))/simbridge --host $(HOST)
+run: $(RUN_STAMP)
+	$(BIN)/simbridge --host $(HOST) $(ARGS)
 
-# Everything the tests need, installed idempotently.
+# Everything the tests need, installed idempotently. The editable install replaces `make run`'s
+# plain one, so the next `make run` installs plainly again.
 deps: $(BIN)/python
 	$(BIN)/pip install --quiet -e '.[test]'
-	scripts/setup-test-deps.sh
+	rm -f $(VENV)/.run-installed*
+	$(SETUP_TEST_DEPS)
 
 lint:
 	$(BIN)/ruff format --check simbridge tests bench examples scripts

@@ -2,7 +2,7 @@
 // Drive to a goal position (and heading) with two PID loops at 10 Hz, over rosbridge (roslibjs).
 // The same controller as pid_goto.py; works unchanged against simbridge and the real robot.
 //
-//   cd examples && npm install roslib      # or any project that has roslib 1.x or 2.x
+//   cd examples && npm ci        # roslib 2.1.0 from package-lock.json (or any roslib 1.x or 2.x)
 //   node pid_goto.mjs --url ws://127.0.0.1:9090 --goal 1.0 0.5 --heading 1.57
 //
 // ROSLIB_MODULE=/path/to/roslib/entry.js picks another copy of roslib (the tests use theirs).
@@ -35,7 +35,11 @@ const maxSpeed = Number(opt['max-speed']);
 const timeoutS = Number(opt.timeout);
 
 const where = process.env.ROSLIB_MODULE;
-const mod = await import(where ? pathToFileURL(where).href : 'roslib');
+const mod = await import(where ? pathToFileURL(where).href : 'roslib').catch((err) => {
+  if (where || err.code !== 'ERR_MODULE_NOT_FOUND') throw err;
+  console.error('pid_goto.mjs needs roslib: run `npm ci` in examples/ (roslib 2.1.0, from package-lock.json)');
+  process.exit(1);
+});
 const ROSLIB = mod.Ros ? mod : mod.default; // roslib 2 (ESM namespace) or 1 (CommonJS)
 
 const wrap = (a) => Math.atan2(Math.sin(a), Math.cos(a));

@@ -3,7 +3,7 @@
 
 Works unchanged against simbridge and against rosbridge on the real robot:
 
-    pip install roslibpy
+    pip install roslibpy          # or, in make run's venv: .venv/bin/pip install roslibpy
     python examples/pid_goto.py --url ws://127.0.0.1:9090 --goal 1.0 0.5 --heading 1.57
 
 Reads /odom (nav_msgs/msg/Odometry), publishes /cmd_vel every 100 ms
@@ -29,7 +29,14 @@ import time
 from collections.abc import Callable
 from urllib.parse import urlparse
 
-import roslibpy
+
+try:
+    import roslibpy
+except ImportError:  # a client library, not part of simbridge: install it where this runs
+    sys.exit(
+        "pid_goto.py needs roslibpy: pip install roslibpy "
+        "(after `make run` in a checkout: .venv/bin/pip install roslibpy, then .venv/bin/python)"
+    )
 
 
 def wrap(angle: float) -> float:

@@ -26,8 +26,15 @@ import time
 from collections.abc import Callable
 from urllib.parse import urlparse
 
-import roslibpy
-import yaml
+
+try:
+    import roslibpy
+    import yaml
+except ImportError:  # client libraries, not part of simbridge: install them where this runs
+    sys.exit(
+        "velocity_sequence.py needs roslibpy and PyYAML: pip install roslibpy pyyaml "
+        "(after `make run` in a checkout: .venv/bin/pip install roslibpy, then .venv/bin/python)"
+    )
 
 
 #: ``(seconds, linear m/s, angular rad/s)``: still, then four sides and four quarter turns.

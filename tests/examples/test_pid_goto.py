@@ -11,7 +11,10 @@ import asyncio
 import json
 import math
 import os
+import shutil
+import subprocess
 import sys
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -78,3 +81,21 @@ async def test_pid_examples_reach_the_goal_in_python_and_javascript(make_app: Ap
     results = await asyncio.gather(*runs)
     for result, app in zip(results, apps, strict=True):
         check(result, app)
+
+
+def test_without_their_client_library_the_examples_say_what_to_install(tmp_path: Path) -> None:
+    """No roslibpy (python -S: no site-packages) or no roslib: one line with the command."""
+    for script, needs in [("pid_goto.py", "roslibpy"), ("velocity_sequence.py", "roslibpy")]:
+        done = subprocess.run(
+            [sys.executable, "-S", str(ROOT / "examples" / script)],
+            capture_output=True,
+            text=True,
+            timeout=30,
+        )
+        assert done.returncode == 1
+        assert f"{script} needs {needs}" in done.stderr and "pip install roslibpy" in done.stderr
+    alone = tmp_path / "pid_goto.mjs"  # away from any node_modules
+    shutil.copy(ROOT / "examples" / "pid_goto.mjs", alone)
+    done = subprocess.run(["node", str(alone)], capture_output=True, text=True, timeout=30)
+    assert done.returncode == 1
+    assert "run `npm ci` in examples/" in done.stderr
