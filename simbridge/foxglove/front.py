@@ -25,7 +25,10 @@
   administrative service: admin rights needed), and every change, wherever it came from
   (``/admin``, rosbridge, Foxglove), pushed to the clients that subscribed to it.
 * **time**: with ``use_sim_time``, the ``/clock`` time is broadcast as the server's time (the
-  stamps are sim time then, and stop with the simulation).
+  stamps are sim time then, and stop with the simulation);
+* **connection graph**: publishers, subscribers and services as rosapi lists them (rosbridge
+  clients as ``/rosbridge_websocket``, Foxglove clients as ``/foxglove_bridge``), published while
+  a client subscribed to it, at most once a second.
 
 The SDK calls back on its own threads. Each callback only hands its arguments to the event loop
 (``call_soon_threadsafe``); the loop's work is the graph's. Two answers are waited for off the
@@ -35,6 +38,14 @@ parameter set answers with the current values at once (the change, when the loop
 it, follows as a parameter update). Each client has its own bounded queues in the SDK (a client
 that stops reading loses its oldest data messages, and is disconnected when its control queue
 fills), so it never slows the others.
+
+A hazard of the SDK (0.30.3) that simbridge can only make rare: it calls the Python listener's
+``on_parameters_subscribe`` and ``on_connection_graph_subscribe`` (and their unsubscribes) while
+it holds the lock that ``publish_parameter_values`` and ``publish_connection_graph`` take, and
+those two keep the GIL while they wait for it. A publish that starts in the microseconds between a
+client's first subscription taking the lock and the callback taking the GIL would deadlock. So
+both are called only when needed: parameter values when a parameter changed, the connection
+graph while a client is subscribed to it, at most once a second.
 
 The protocol carries no token (the SDK's handshake reads only the subprotocol, and its Python
 listener sees a client id): every Foxglove client gets the port's one access (see
@@ -68,7 +79,7 @@ from simbridge.foxglove.mapping import (
     status_of,
 )
 from simbridge.graph import Graph, Topic
-from simbridge.graph.topics import Peer
+from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session, ops as o
 
@@ -81,6 +92,8 @@ logger = logging.getLogger(__name__)
 FOXGLOVE_NODE = "/foxglove_bridge"
 #: Outgoing messages the SDK queues per client (its data and its control queue each).
 BACKLOG = 1024
+#: Seconds between two connection-graph updates at least.
+GRAPH_PERIOD = 1.0
 #: The simulation's clock: the server's time with ``use_sim_time``.
 CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
 #: Seconds a service call's SDK thread waits for the graph beyond the call's own timeout.
@@ -162,6 +175,9 @@ class FoxgloveFront:
         self._signature: tuple[int, int] = (-1, -1)
         self._call_ids = itertools.count(1)
         self._tasks: set[asyncio.Task[None]] = set()
+        self._graph_wanted = False
+        self._graph_sent: tuple[int, int] = (-1, -1)
+        self._graph_next = 0.0
         #: Parameter values by Foxglove name, replaced whole by the loop (read by SDK threads).
         self._params: dict[str, Any] = {}
         self._time = graph.settings.use_sim_time
@@ -192,7 +208,12 @@ class FoxgloveFront:
         """Start the SDK's server (binding in a thread) and advertise the graph."""
         self._loop = asyncio.get_running_loop()
         ws = self.websocket
-        caps = [ws.Capability.ClientPublish, ws.Capability.Services, ws.Capability.Parameters]
+        caps = [
+            ws.Capability.ClientPublish,
+            ws.Capability.Services,
+            ws.Capability.Parameters,
+            ws.Capability.ConnectionGraph,
+        ]
         if self._time:
             caps.append(ws.Capability.Time)
         self.server = await asyncio.to_thread(
@@ -237,10 +258,52 @@ class FoxgloveFront:
         }
 
     def tick(self, now: float) -> None:
-        """Advertise what appeared in the graph and unadvertise what went (a tick hook)."""
+        """Advertise what appeared in the graph and unadvertise what went (a tick hook).
+
+        The connection graph is published while a client subscribed to it, at most once every
+        :data:`GRAPH_PERIOD` (every subscription of every client changes it).
+        """
+        if self.server is None:
+            return
         signature = (self.graph.topics.changes, self.graph.services.changes)
-        if signature != self._signature and self.server is not None:
+        if signature != self._signature:
             self.reconcile()
+        if self._graph_wanted and signature != self._graph_sent and now >= self._graph_next:
+            self.publish_graph(now)
+
+    # -- connection graph ---------------------------------------------------------------------
+
+    def graph_subscribed(self, wanted: bool) -> None:
+        """The first client subscribed to the connection graph, or the last one left."""
+        self._graph_wanted = wanted
+        if wanted and self.server is not None:
+            self.publish_graph(self._now())
+
+    def publish_graph(self, now: float) -> None:
+        """Publish the graph's publishers, subscribers and services as rosapi lists them."""
+        graph = self.graph
+        self._graph_sent = (graph.topics.changes, graph.services.changes)
+        self._graph_next = now + GRAPH_PERIOD
+        update = self.fox.ConnectionGraph()
+        for topic in graph.topics.listed():
+            publishers = sorted({self._node(owner) for owner in topic.publishers})
+            subscribers = {node for node, _ in topic.internal}
+            if topic.subscriptions:
+                subscribers.add(BRIDGE_NODE)
+            if publishers:
+                update.set_published_topic(topic.name, publishers)
+            if subscribers:
+                update.set_subscribed_topic(topic.name, sorted(subscribers))
+        for name, service in graph.services.services.items():
+            provider = service.node if service.handler is not None else self._node(service.provider)
+            update.set_advertised_service(name, [provider])
+        self.server.publish_connection_graph(update)
+
+    @staticmethod
+    def _node(owner: object) -> str:
+        if isinstance(owner, str):
+            return owner
+        return FOXGLOVE_NODE if isinstance(owner, _Client) else BRIDGE_NODE
 
     # -- channels ---------------------------------------------------------------------------
 
@@ -630,6 +693,12 @@ class _Listener:
         self._soon(self.front.set_parameters, client.id, changes)
         # the values as they are now; the change follows as an update once the loop applied it
         return self.front._parameters([name for name, _ in changes])
+
+    def on_connection_graph_subscribe(self) -> None:
+        self._soon(self.front.graph_subscribed, True)
+
+    def on_connection_graph_unsubscribe(self) -> None:
+        self._soon(self.front.graph_subscribed, False)
 
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
         return None

@@ -12,6 +12,9 @@ import sys
 from typing import Any
 
 import pytest
+from websockets.asyncio.client import connect
+from websockets.exceptions import InvalidStatus
+from websockets.typing import Subprotocol
 
 from simbridge.config import WorldSpec
 from simbridge.errors import ConfigError
@@ -38,6 +41,7 @@ async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
         "reset": True,
         "params": True,
         "rosbridge": ws_url(app),
+        "graph": True,
     }
     got = await _foxglove(f"ws://127.0.0.1:{app.foxglove.port}", args)
     assert {"clientPublish", "services", "parameters", "parametersSubscribe"} <= set(
@@ -57,6 +61,19 @@ async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
     assert got["paramRead"] == 0.5
     assert got["paramFromRosbridge"] == 0.45
     assert app.world.params.robot.max_linear_velocity == 0.45
+    assert got["graph"] == {
+        "odomPublishers": ["/virtual_robot"],
+        "odomSubscribers": ["/foxglove_bridge"],  # this client, through the marker
+        "cmdVelPublishers": ["/foxglove_bridge"],
+        "resetProviders": ["/virtual_robot"],
+    }
+    # the old name, which @foxglove/ws-protocol and older Lichtblick ask for, is refused by the
+    # SDK's handshake (simbridge serves foxglove.sdk.v1 only: no protocol code of its own)
+    old = [Subprotocol("foxglove.websocket.v1")]
+    with pytest.raises(InvalidStatus) as refused:
+        async with connect(f"ws://127.0.0.1:{app.foxglove.port}", subprotocols=old):
+            pass
+    assert refused.value.response.status_code == 400
     health = app.health()["foxglove"]
     assert health["port"] == app.foxglove.port and health["calls"] >= 1
 
