@@ -29,11 +29,13 @@ __all__ = [
     "DEFAULT_WORLD",
     "Count",
     "Environment",
+    "FloorPatch",
     "LidarParams",
     "NamedRobotSpec",
     "Params",
     "Port",
     "Rate",
+    "RealismParams",
     "RobotParams",
     "RobotSpec",
     "SafetyParams",
@@ -147,12 +149,108 @@ class LidarParams(Record):
     noise_stddev: float = setting(
         default=0.0, ge=0, le=1, description="Gaussian range noise, m (0 = exact ranges)"
     )
+    dropout: float = setting(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="fraction of rays that return no echo (read as range_max; 0 = every ray)",
+    )
 
     def check(self) -> None:
         """Check that the minimum range is below the maximum."""
         if self.range_min >= self.range_max:
             msg = f"range_min ({self.range_min}) must be below range_max ({self.range_max})"
             raise ValueError(msg)
+
+
+# -- the sim-to-real gap (issue 26): one plain parameter group, every value "off" by default --
+
+
+class RealismParams(Record):
+    """A robot as the real one behaves: motor lag, deadband, slip, geometry, encoders.
+
+    Off by default (``enabled: false``, and every value at its "exact" setting): ``/odom`` is
+    then the true pose, as the course's kinematic model has it. Equations:
+    :mod:`simbridge.sim.realism`.
+    """
+
+    enabled: bool = setting(
+        default=False,
+        description="simulate the real robot with the values below (false: the ideal model, "
+        "/odom = the true pose)",
+    )
+    cmd_latency: float = setting(
+        default=0.0,
+        ge=0,
+        le=2,
+        description="a command takes effect this long after it arrives, s",
+    )
+    motor_time_constant: float = setting(
+        default=0.0,
+        ge=0,
+        le=5,
+        description="each wheel's speed follows its command as a first-order lag of this "
+        "time constant, s (0 = at once)",
+    )
+    deadband: float = setting(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="a wheel commanded slower than this does not turn, m/s",
+    )
+    wheel_speed_scale: float = setting(
+        default=1.0,
+        gt=0,
+        le=2,
+        description="each wheel's steady speed per commanded speed (1 = exact; "
+        "simbridge fit estimates it)",
+    )
+    slip: float = setting(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="mean fraction of wheel travel lost to slip (floor patches have their own)",
+    )
+    slip_stddev: float = setting(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="spread of the slip fraction, drawn per wheel and step (seeded)",
+    )
+    wheel_radius_left: float = setting(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="true left wheel radius, m (0 = robot.wheel_radius); odometry keeps "
+        "robot.wheel_radius",
+    )
+    wheel_radius_right: float = setting(
+        default=0.0,
+        ge=0,
+        le=1,
+        description="true right wheel radius, m (0 = robot.wheel_radius)",
+    )
+    wheelbase: float = setting(
+        default=0.0,
+        ge=0,
+        le=5,
+        description="true wheelbase, m (0 = robot.wheelbase); odometry keeps robot.wheelbase",
+    )
+    encoder_ticks: int = setting(
+        default=0,
+        ge=0,
+        le=1_000_000,
+        description="encoder ticks per wheel revolution; /odom integrates whole ticks (0 = exact)",
+    )
+    seed: int = setting(
+        default=0,
+        ge=0,
+        le=2**32 - 1,
+        description="seed of the slip draws: the same seed and commands give the same run",
+    )
+
+
+# -- end of the sim-to-real block -----------------------------------------------------------
 
 
 class SimParams(Record):
@@ -183,6 +281,7 @@ class Params(Record):
     lidar: LidarParams = setting(default_factory=LidarParams)
     sim: SimParams = setting(default_factory=SimParams)
     safety: SafetyParams = setting(default_factory=SafetyParams)
+    realism: RealismParams = setting(default_factory=RealismParams)
 
     def flat(self) -> dict[str, Any]:
         """Return every setting under its dotted name (``robot.mass``): ROS 2 parameters."""
@@ -238,6 +337,9 @@ class RobotSpec(Record):
     """A robot of a world file: its start pose (x, y, theta), used at start and by /reset."""
 
     pose: tuple[float, float, float] = setting(default=(0.0, 0.0, 0.0), description="x, y, theta")
+    #: This robot's own realism values over the parameters' ``realism`` (issue 26): the
+    #: values given here are its own (``{enabled: true, motor_time_constant: 0.2}``).
+    realism: RealismParams | None = None
 
 
 #: A robot name usable as a ROS namespace: ``r1``, ``alice``, ``team_3``.
@@ -331,6 +433,30 @@ class Circle(Record):
     segments: int = setting(default=24, ge=6, le=256)
 
 
+def _floor_polygon(value: Any) -> Any:
+    if not isinstance(value, list) or len(value) < 3:
+        msg = "must be a list of at least 3 corners [x, y]"
+        raise ValueError(msg)
+    for j, pt in enumerate(value):
+        try:
+            _check_numbers(pt, 2, "[x, y]")
+        except ValueError as err:
+            raise ValidationError.one(str(err), f"[{j}]") from None
+    return value
+
+
+class FloorPatch(Record):
+    """A patch of floor with its own slip (a rug, a ramp): a polygon in the world frame."""
+
+    name: str = setting(default="", max_length=200, description="shown to people")
+    polygon: list[tuple[float, float]] = setting(
+        before=_floor_polygon, description="corners [x, y], at least 3"
+    )
+    slip: float = setting(
+        ge=0, le=1, description="fraction of wheel travel lost to slip on this patch"
+    )
+
+
 class StaticFrame(Record):
     """A fixed transform ``parent -> child`` published on ``/tf_static`` (REP-105 frame names).
 
@@ -370,6 +496,8 @@ class WorldSpec(Record):
     #: Start the ROS tutorial nodes (talker, listener, add_two_ints, fibonacci), as
     #: ``--demo-nodes`` does.
     demo_nodes: bool = False
+    #: Floor patches with their own slip, for robots under a realism profile (issue 26).
+    floor: list[FloorPatch] = setting(default_factory=list, max_length=1000)
 
     def check(self) -> None:
         """Check frames (one parent each), robots (``robot`` or ``robots``, unique names)."""
@@ -403,6 +531,17 @@ class WorldSpec(Record):
         if self.robots is None:
             return {"": self.robot.pose}
         return {r.name: r.pose for r in self.robots}
+
+    def start_realism(self) -> dict[str, dict[str, object]]:
+        """Return each robot's own realism values given in the file (robots without: absent)."""
+        specs: list[tuple[str, RobotSpec]] = (
+            [("", self.robot)] if self.robots is None else [(r.name, r) for r in self.robots]
+        )
+        return {
+            name: {k: getattr(spec.realism, k) for k in spec.realism.given}
+            for name, spec in specs
+            if spec.realism is not None and spec.realism.given
+        }
 
     def without_robots(self) -> WorldSpec:
         """Return this world with no robot at all (``--no-sim``: the bridge alone)."""

@@ -5,6 +5,10 @@ Node ``/virtual_robot`` publishes, per robot (REP-105 frames, wall-clock header 
 * ``/odom`` (nav_msgs/Odometry) every step: frame ``odom``, child ``base_link``, the pose with
   quaternion ``z = sin(theta/2), w = cos(theta/2)``, and the applied (clamped) velocity;
 * ``/tf`` (tf2_msgs/TFMessage) every step: ``odom -> base_link``, the same pose;
+* ``/ground_truth`` (nav_msgs/Odometry) every step: the true pose and velocity in the same
+  frame, the pose collisions and the LiDAR use. Equal to ``/odom`` under the ideal model; under a
+  realism profile (:mod:`simbridge.sim.realism`) ``/odom`` and ``/tf`` are the encoders'
+  estimate and drift from it, as a real robot's do;
 * ``/tf_static``, latched: ``base_link -> laser`` from the LiDAR mount;
 * ``/scan`` (sensor_msgs/LaserScan) at ``lidar.rate`` (each robot at its own phase of the scan
   period, as unsynchronised LiDARs are): frame ``laser``, ``angle_min = 0``,
@@ -42,7 +46,7 @@ from simbridge.graph.graph import Graph
 from simbridge.graph.params import ParamNode
 from simbridge.graph.rosapi import request_fields
 from simbridge.graph.topics import Peer, Topic
-from simbridge.sim import Robot, World
+from simbridge.sim import Robot, RobotState, World
 
 
 __all__ = ["ROBOT_NODE", "RobotBridge"]
@@ -73,12 +77,36 @@ def _rpy_quaternion(roll: float, pitch: float, yaw: float) -> dict[str, float]:
     }
 
 
+def _odometry(stamp: dict[str, int], frame: str, child: str, s: RobotState) -> dict[str, Any]:
+    """A nav_msgs/Odometry of pose and twist ``s``."""
+    return {
+        "header": {"stamp": stamp, "frame_id": frame},
+        "child_frame_id": child,
+        "pose": {
+            "pose": {
+                "position": {"x": s.x, "y": s.y, "z": 0.0},
+                "orientation": _quaternion(s.theta),
+            },
+            "covariance": _ZERO36,
+        },
+        "twist": {
+            "twist": {
+                "linear": {"x": s.v, "y": 0.0, "z": 0.0},
+                "angular": {"x": 0.0, "y": 0.0, "z": s.omega},
+            },
+            "covariance": _ZERO36,
+        },
+    }
+
+
 @dataclass(eq=False, slots=True)
 class _RobotTopics:
     robot: Robot
     odom: Topic
     scan: Topic
     cmd_vel: Topic
+    #: The true pose (``/ground_truth``).
+    truth: Topic
     #: Contacts of this robot (``simbridge_msgs/msg/Contact``).
     contact: Topic | None = None
     #: The ``/cmd_vel`` callback (to remove it with the robot).
@@ -170,6 +198,7 @@ class RobotBridge:
             odom = advertise("odom", "nav_msgs/msg/Odometry")
             scan = advertise("scan", "sensor_msgs/msg/LaserScan")
             contact = advertise("contact", CONTACT_TYPE)
+            truth = advertise("ground_truth", "nav_msgs/msg/Odometry")
             kind = cmd_vel_type(self.world.params)
             cmd_vel = g.subscribe(robot.topic("cmd_vel"), kind, ROBOT_NODE, on_cmd_vel)
         except ProtocolError as err:
@@ -181,7 +210,7 @@ class RobotBridge:
         taken = {rt.scan_turn for rt in self.robots.values()}
         turn = next(k for k in range(len(taken) + 1) if k not in taken)
         self.robots[robot.name] = _RobotTopics(
-            robot, odom, scan, cmd_vel, contact, on_cmd_vel, turn, _spread(turn)
+            robot, odom, scan, cmd_vel, truth, contact, on_cmd_vel, turn, _spread(turn)
         )
         add_robot_services(self, robot)
         for callback in self.on_robot_added:
@@ -191,7 +220,7 @@ class RobotBridge:
         """Remove the topics and services of one robot (the world keeps its own list)."""
         rt = self.robots.pop(name)
         topics = self.graph.topics
-        for topic in (rt.odom, rt.scan, rt.contact):
+        for topic in (rt.odom, rt.scan, rt.contact, rt.truth):
             if topic is not None:
                 topics.unadvertise(topic.name, ROBOT_NODE)
         topics.unsubscribe_internal(rt.cmd_vel.name, rt.on_cmd_vel)
@@ -263,10 +292,13 @@ class RobotBridge:
         transforms = []
         for rt in self.robots.values():
             odom_wanted = rt.odom.subscriptions or rt.odom.internal
+            robot = rt.robot
+            if rt.truth.subscriptions or rt.truth.internal:
+                truth = _odometry(stamp, robot.frame("odom"), robot.frame("base_link"), robot.state)
+                g.publish(rt.truth, truth, now)
             if not (odom_wanted or tf_wanted):
                 continue  # nobody listens to this robot's pose: no message is built
-            robot = rt.robot
-            s = robot.state
+            s = robot.state if robot.plant is None else robot.plant.odom
             q = _quaternion(s.theta)
             position = {"x": s.x, "y": s.y, "z": 0.0}
             odom_frame = robot.frame("odom")

@@ -14,10 +14,18 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from simbridge.config import Params, RobotParams, ValidationError, WorldSpec, check_robot_name
+from simbridge.config import (
+    Params,
+    RealismParams,
+    RobotParams,
+    ValidationError,
+    WorldSpec,
+    check_robot_name,
+)
 from simbridge.sim.collision import Contact, pose_clear, resolve_moves
 from simbridge.sim.kinematics import RobotState, clamp_command, integrate, wrap_angle
 from simbridge.sim.lidar import FloatArray, beam_angles, raycast_batch, segments_array
+from simbridge.sim.realism import Floor, Plant
 
 
 __all__ = ["PER_ROBOT_PARAMS", "KinematicModel", "MotionModel", "Robot", "World"]
@@ -82,6 +90,27 @@ class Robot:
     #: The shared parameters and this robot's parameters made from them (rebuilt when the
     #: shared ones are replaced).
     cached: tuple[RobotParams, RobotParams] | None = None
+    #: This robot's own realism values (names without ``realism.``) over the shared
+    #: ``params.realism``: "group 3 drives the worn robot"; empty: the shared profile.
+    realism_own: dict[str, object] = field(default_factory=dict)
+    #: The shared realism values and this robot's made from them.
+    realism_cached: tuple[RealismParams, RealismParams] | None = None
+    #: Its motors, wheels and encoders while it is under a realism profile (else None: /odom
+    #: is the true pose).
+    plant: Plant | None = None
+
+    def realism(self, shared: RealismParams) -> RealismParams | None:
+        """Return the realism profile this robot moves under, or None (the ideal model)."""
+        if not self.realism_own:
+            return shared if shared.enabled else None
+        if self.realism_cached is None or self.realism_cached[0] is not shared:
+            self.realism_cached = (shared, shared.replace(**self.realism_own))
+        own = self.realism_cached[1]
+        return own if own.enabled else None
+
+    def odometry(self) -> RobotState:
+        """Return what ``/odom`` reports: the encoders' estimate under a profile, else the truth."""
+        return self.state if self.plant is None else self.plant.odom
 
     def params(self, shared: RobotParams) -> RobotParams:
         """Return the parameters this robot moves with: ``shared`` with its overrides."""
@@ -105,6 +134,8 @@ class Robot:
         self.state = RobotState(x=pose[0], y=pose[1], theta=pose[2])
         self.cmd_v = 0.0
         self.cmd_omega = 0.0
+        if self.plant is not None:
+            self.plant.place(self.state)
 
 
 #: Metres around the walls' bounding box where robots may still be placed (open layouts).
@@ -129,6 +160,10 @@ class World:
         self.robots: dict[str, Robot] = {
             name: Robot(name, pose) for name, pose in spec.start_poses().items()
         }
+        for name, own in spec.start_realism().items():
+            self.robots[name].realism_own = own
+        #: The world file's floor patches (their own slip, under a realism profile).
+        self.floor = Floor(spec.floor)
         #: Contacts of the last step: (robot name, obstacle name or "wall", contact).
         self.contacts: list[tuple[str, str, Contact]] = []
         #: Robots whose motion an obstacle stopped (fully or partly) in the last step.
@@ -194,6 +229,9 @@ class World:
         robot = self.robots[name]
         if self.halted(name):
             return 0.0, 0.0
+        real = robot.realism(self.params.realism)
+        if real is not None:
+            self._plant(robot).command(self.time, v, omega, real)
         robot.cmd_v, robot.cmd_omega = v, omega
         limits = self.robot_params(name)
         return clamp_command(v, omega, limits.max_linear_velocity, limits.max_angular_velocity)
@@ -211,6 +249,7 @@ class World:
         """
         dt = self.dt
         shared = self.params.robot
+        shared_real = self.params.realism
         robots = list(self.robots.values())
         p0 = [(r.state.x, r.state.y) for r in robots]
         for i, robot in enumerate(robots):
@@ -218,8 +257,21 @@ class World:
             if self.estopped or robot.name in self.held:
                 robot.cmd_v = robot.cmd_omega = 0.0
                 robot.state.v = robot.state.omega = 0.0
+                if robot.plant is not None:
+                    robot.plant.halt()
                 continue
+            real = robot.realism(shared_real)
+            if real is None:
+                robot.plant = None  # the ideal model again: /odom is the truth
             try:
+                if real is not None:
+                    s = robot.state
+                    slip = (
+                        self.floor.slip_at(s.x, s.y, real.slip) if self.floor.patches else real.slip
+                    )
+                    self._plant(robot).step(s, self.time, dt, limits, real, slip)
+                    self._check_state(s)
+                    continue
                 v, omega = clamp_command(
                     robot.cmd_v,
                     robot.cmd_omega,
@@ -227,10 +279,7 @@ class World:
                     limits.max_angular_velocity,
                 )
                 self.motion.step(robot.state, v, omega, dt, limits)
-                s = robot.state
-                if not all(map(math.isfinite, (s.x, s.y, s.theta, s.v, s.omega))):
-                    msg = f"non-finite state {s}"
-                    raise FloatingPointError(msg)
+                self._check_state(robot.state)
             except Exception:
                 logger.exception("robot '%s' failed to update: reset to its start pose", robot.name)
                 robot.place(robot.start)
@@ -258,6 +307,22 @@ class World:
         self.touching = {name for name, _, _ in self.contacts}
         self.time += dt
         self.steps += 1
+
+    @staticmethod
+    def _check_state(s: RobotState) -> None:
+        if not all(map(math.isfinite, (s.x, s.y, s.theta, s.v, s.omega))):
+            msg = f"non-finite state {s}"
+            raise FloatingPointError(msg)
+
+    def _plant(self, robot: Robot) -> Plant:
+        """Return robot's plant, made (at its true pose, with its command) when it has none."""
+        plant = robot.plant
+        if plant is None:
+            own = robot.realism(self.params.realism) or self.params.realism
+            plant = Plant(robot.name, robot.state, own.seed)
+            plant.cmd = (robot.cmd_v, robot.cmd_omega)
+            robot.plant = plant
+        return plant
 
     def laser_pose(self, name: str) -> tuple[float, float, float]:
         """Return the pose of a robot's ``laser`` frame in ``odom`` (x, y, yaw)."""
@@ -322,6 +387,11 @@ class World:
         ranges = np.stack(rows_of) if rows_of else np.zeros((0, lidar.rays))
         if lidar.noise_stddev > 0:
             ranges = ranges + self.rng.normal(0.0, lidar.noise_stddev, ranges.shape)
+        if lidar.dropout > 0:
+            # a ray with no echo reads as one with no wall within range
+            ranges = np.where(
+                self.rng.random(ranges.shape) < lidar.dropout, lidar.range_max, ranges
+            )
         return np.clip(ranges, lidar.range_min, lidar.range_max).astype(np.float32)
 
     def estop(self) -> None:
@@ -330,6 +400,8 @@ class World:
         for robot in self.robots.values():
             robot.cmd_v = robot.cmd_omega = 0.0
             robot.state.v = robot.state.omega = 0.0
+            if robot.plant is not None:
+                robot.plant.halt()
 
     def release_estop(self) -> None:
         """Release the emergency stop; robots stay still until the next command."""
@@ -350,6 +422,8 @@ class World:
             if robot is not None:
                 robot.cmd_v = robot.cmd_omega = 0.0
                 robot.state.v = robot.state.omega = 0.0
+                if robot.plant is not None:
+                    robot.plant.halt()
         self.held = frozenset(names)
 
     def robot_params(self, name: str) -> RobotParams:
@@ -381,6 +455,28 @@ class World:
             raise err.within("robot") from None
         robot.overrides = {k: getattr(own, k) for k in kept}
         robot.cached = (self.params.robot, own) if kept else None
+        return own
+
+    def set_robot_realism(self, name: str, changes: dict[str, object]) -> RealismParams:
+        """Give robot ``name`` realism values of its own; return its profile (enabled or not).
+
+        ``changes`` are :class:`~simbridge.config.RealismParams` names (without ``realism.``),
+        None meaning back to the shared value; all or nothing.
+
+        Raises:
+            KeyError: no robot of that name.
+            ValueError: a name is unknown or a value out of range (nothing changes).
+        """
+        robot = self.robots[name]
+        kept = {k: v for k, v in {**robot.realism_own, **changes}.items() if v is not None}
+        try:
+            own = self.params.realism.replace(**kept)
+        except ValidationError as err:
+            raise err.within("realism") from None
+        robot.realism_own = {k: getattr(own, k) for k in kept}
+        robot.realism_cached = None
+        if robot.plant is not None and "seed" in changes:
+            robot.plant = None  # a new seed: a new generator (the plant starts at the truth)
         return own
 
     # -- robots at run time ----------------------------------------------------------------
