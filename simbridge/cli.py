@@ -683,6 +683,12 @@ def _cmd_compare(argv: Sequence[str]) -> int:
     return compare_main(argv)
 
 
+def _cmd_fit(argv: Sequence[str]) -> int:
+    from simbridge.tools.fit import fit_main
+
+    return fit_main(argv)
+
+
 #: Sub-commands: name -> (one-line help, function(argv) -> exit code).
 COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "check-config": ("validate a world and a parameter file, then exit", _cmd_check_config),
@@ -693,6 +699,7 @@ COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "record": ("record topics of any rosbridge URL into a rosbag2 MCAP bag", _cmd_record),
     "replay": ("replay a bag's /cmd_vel into a server or a headless simulation", _cmd_replay),
     "compare": ("compare the odometry of a simulated and a real run (RMSE, drift)", _cmd_compare),
+    "fit": ("fit the realism profile to a real robot's /cmd_vel and /odom bag", _cmd_fit),
     "zenohd": (
         "run a Zenoh router for ROS 2 over Zenoh (as rmw_zenohd; [zenoh] extra)",
         _cmd_zenohd,

@@ -6,6 +6,7 @@
 ``bag``        rosbag2 bags (MCAP or SQLite) written and read with rosbags
 ``record``     ``simbridge record|replay``: a run to a bag, a bag's commands back to a robot
 ``compare``    ``simbridge compare``: a simulated run against a real robot's bag
+``fit``        ``simbridge fit``: the realism profile of a real robot, from its bag
 =============  ================================================================================
 
 Tools sit on top of the parts (``graph``, ``msgs``, ``headless``) and nothing in the server

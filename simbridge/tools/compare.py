@@ -33,7 +33,16 @@ from simbridge.graph.cmdvel import twist_of
 from simbridge.tools.bag import read_messages
 
 
-__all__ = ["CompareError", "Comparison", "Run", "compare", "compare_main", "load_run", "plot"]
+__all__ = [
+    "CompareError",
+    "Comparison",
+    "Run",
+    "compare",
+    "compare_main",
+    "load_run",
+    "plot",
+    "replay_against",
+]
 
 Floats = npt.NDArray[np.float64]
 #: A command counts as the start when |linear| or |angular| exceeds this.
@@ -215,40 +224,61 @@ def _polyline(xs: Floats, ys: Floats, color: str, box: tuple[float, ...], width:
 
 
 def _svg(c: Comparison) -> str:
+    return _svg_many([("sim", c)])
+
+
+#: Colours of the simulated runs drawn beside the real one (ideal, fitted...).
+_SIMS = (_SIM, "#9467bd", "#17becf", "#8c564b")
+
+
+def _svg_many(runs: list[tuple[str, Comparison]]) -> str:
+    """Trajectories of the real run and each simulated one; each one's position error."""
     size, pad = 360.0, 40.0
+    real = runs[0][1].real
+    colours = [_SIMS[i % len(_SIMS)] for i in range(len(runs))]
     # trajectories, equal aspect
-    xs = np.concatenate([c.sim.x, c.real.x])
-    ys = np.concatenate([c.sim.y, c.real.y])
+    xs = np.concatenate([real.x, *(c.sim.x for _, c in runs)])
+    ys = np.concatenate([real.y, *(c.sim.y for _, c in runs)])
     span = max(float(np.ptp(xs)), float(np.ptp(ys)), 0.1) * 1.1
     cx, cy = float(xs.min() + xs.max()) / 2, float(ys.min() + ys.max()) / 2
     box = (cx - span / 2, cx + span / 2, cy - span / 2, cy + span / 2, pad, pad, size, size)
     parts = [
         f'<rect x="{pad}" y="{pad}" width="{size}" height="{size}" fill="none" stroke="#999"/>',
         f'<text x="{pad}" y="{pad - 10}">trajectories (start frame, {span:.2f} m across)</text>',
-        _polyline(c.sim.x, c.sim.y, _SIM, box, 2),
-        _polyline(c.real.x, c.real.y, _REAL, box, 2),
-        f'<text x="{pad}" y="{pad + size + 20}" fill="{_SIM}">sim</text>',
-        f'<text x="{pad + 50}" y="{pad + size + 20}" fill="{_REAL}">real</text>',
+        _polyline(real.x, real.y, _REAL, box, 2),
     ]
+    labels = [("real", _REAL)]
+    for (label, c), colour in zip(runs, colours, strict=True):
+        parts.append(_polyline(c.sim.x, c.sim.y, colour, box, 2))
+        labels.append((label, colour))
+    x = pad
+    for label, colour in labels:
+        parts.append(
+            f'<text x="{x:.0f}" y="{pad + size + 20}" fill="{colour}">{html.escape(label)}</text>'
+        )
+        x += 12 + 8 * len(label)
     # errors over time
     left = 2 * pad + size + 30
-    top_pe = max(float(c.position_error.max()), 1e-3)
-    top_he = max(float(np.abs(c.heading_error).max()), 1e-3)
-    t_end = float(c.t[-1])
+    top_pe = max(max(float(c.position_error.max()) for _, c in runs), 1e-3)
+    top_he = max(max(float(np.abs(c.heading_error).max()) for _, c in runs), 1e-3)
+    t_end = max(float(c.t[-1]) for _, c in runs)
     half = size / 2 - 10
-    for i, (values, top, color, label, unit) in enumerate(
-        [
-            (c.position_error, top_pe, _POS, "position error", "m"),
-            (np.abs(c.heading_error), top_he, _HEAD, "heading error", "rad"),
-        ]
+    single = len(runs) == 1
+    for i, (top, label, unit) in enumerate(
+        [(top_pe, "position error", "m"), (top_he, "heading error", "rad")]
     ):
         y = pad + i * (half + 20)
+        colour = (_POS, _HEAD)[i] if single else "#333"
         parts += [
             f'<rect x="{left}" y="{y}" width="{size}" height="{half}" fill="none" stroke="#999"/>',
-            f'<text x="{left}" y="{y - 5 if i == 0 else y - 4}" fill="{color}">'
+            f'<text x="{left}" y="{y - 5 if i == 0 else y - 4}" fill="{colour}">'
             f"{label} (max {top:.4f} {unit}) over {t_end:.1f} s</text>",
-            _polyline(c.t, values, color, (0.0, t_end, 0.0, top, left, y, size, half), 1.5),
         ]
+        for (_, c), run_colour in zip(runs, colours, strict=True):
+            values = c.position_error if i == 0 else np.abs(c.heading_error)
+            stroke = colour if single else run_colour
+            frame = (0.0, t_end, 0.0, top, left, y, size, half)
+            parts.append(_polyline(c.t, values, stroke, frame, 1.5))
     width, height = left + size + pad, 2 * pad + size + 30
     body = "".join(parts)
     return (
@@ -257,19 +287,26 @@ def _svg(c: Comparison) -> str:
     )
 
 
-def plot(c: Comparison, path: Path) -> None:
-    """Write the plot: ``.svg`` as is, anything else as a self-contained HTML page."""
-    svg = _svg(c)
+def plot(c: Comparison | list[tuple[str, Comparison]], path: Path) -> None:
+    """Write the plot: ``.svg`` as is, anything else as a self-contained HTML page.
+
+    ``c`` is one comparison, or several simulated runs against the same real one (labelled).
+    """
+    runs = [("sim", c)] if isinstance(c, Comparison) else c
+    svg = _svg_many(runs)
     if path.suffix.lower() == ".svg":
         path.write_text(svg, encoding="utf-8")
         return
     rows = "".join(
-        f"<tr><td>{html.escape(k)}</td><td>{v:.4f}</td></tr>"
+        f"<tr><td>{html.escape(prefix + k)}</td><td>{v:.4f}</td></tr>"
         if isinstance(v, float)
-        else f"<tr><td>{html.escape(k)}</td><td>{v}</td></tr>"
-        for k, v in c.metrics().items()
+        else f"<tr><td>{html.escape(prefix + k)}</td><td>{v}</td></tr>"
+        for label, run in runs
+        for prefix in [f"{label} " if len(runs) > 1 else ""]
+        for k, v in run.metrics().items()
     )
-    title = f"{html.escape(c.sim.name)} vs {html.escape(c.real.name)}"
+    names = " and ".join(html.escape(run.sim.name) for _, run in runs)
+    title = f"{names} vs {html.escape(runs[0][1].real.name)}"
     path.write_text(
         f'<!doctype html><html><head><meta charset="utf-8"><title>simbridge compare</title>'
         f"<style>body{{font-family:sans-serif}}td{{padding:0 1em}}</style></head><body>"
@@ -278,33 +315,92 @@ def plot(c: Comparison, path: Path) -> None:
     )
 
 
+def replay_against(
+    real_bag: str,
+    fitted: str | Path,
+    *,
+    params: str | None = None,
+    world: str | None = None,
+    odom: str = "/odom",
+    cmd_vel: str = "/cmd_vel",
+) -> list[tuple[str, Comparison]]:
+    """Replay the real run's commands on the ideal model and the fitted one; compare each.
+
+    The ideal model is ``params`` (default: the bundled ones) with ``realism.enabled`` off;
+    the fitted one is the parameters file ``fitted`` (``simbridge fit`` writes it). Both run
+    in ``world`` (default: an empty one: the real room's walls are not known).
+
+    Raises:
+        CompareError: a run cannot be compared.
+        ConfigError: a file is invalid.
+    """
+    import tempfile
+
+    from simbridge.config import WorldSpec, load_params, load_world
+    from simbridge.tools.record import replay_headless
+
+    real = load_run(real_bag, odom, cmd_vel)
+    spec = load_world(world) if world else WorldSpec()
+    base = load_params(params)
+    ideal = base.replace(realism=base.realism.replace(enabled=False))
+    out: list[tuple[str, Comparison]] = []
+    with tempfile.TemporaryDirectory(prefix="simbridge-compare-") as tmp:
+        for label, model in (("ideal", ideal), ("fitted", load_params(fitted))):
+            bag = Path(tmp) / label
+            replay_headless(real_bag, bag, topic=cmd_vel, world=spec, params=model)
+            run = load_run(bag, odom, cmd_vel)
+            run.name = f"{label} replay"
+            out.append((label, compare(run, real)))
+    return out
+
+
 def compare_main(argv: Sequence[str]) -> int:
     """Run ``simbridge compare``; return the exit code."""
     parser = argparse.ArgumentParser(
         prog="simbridge compare",
         description="Compare the odometry of two runs of the same velocity sequence "
-        "(simulation and real robot): RMSE and final drift of position and heading.",
+        "(simulation and real robot): RMSE and final drift of position and heading. With "
+        "--fitted PARAMS and one bag (the real run): replay its commands on the ideal model "
+        "and on the fitted one, and compare each with it.",
     )
-    parser.add_argument("sim", help="the simulated run's bag (directory or .mcap)")
-    parser.add_argument("real", help="the real run's bag (directory or .mcap)")
+    parser.add_argument("bags", nargs="+", help="SIM REAL (bags: directories or .mcap), or REAL")
+    parser.add_argument("--fitted", help="the fitted parameters (simbridge fit): replay REAL")
+    parser.add_argument("--params", help="with --fitted: the ideal model's parameters")
+    parser.add_argument("--world", help="with --fitted: the world to replay in (default: empty)")
     parser.add_argument("--odom", default="/odom", help="odometry topic (default /odom)")
     parser.add_argument("--cmd-vel", default="/cmd_vel", help="command topic (default /cmd_vel)")
     parser.add_argument("--plot", help="write a plot: FILE.html (self-contained) or FILE.svg")
     parser.add_argument("--json", action="store_true", help="print the figures as JSON")
     args = parser.parse_args(argv)
+    if len(args.bags) != (1 if args.fitted else 2):
+        parser.error("give SIM REAL, or REAL with --fitted PARAMS")
     try:
-        sim = load_run(args.sim, args.odom, args.cmd_vel)
-        real = load_run(args.real, args.odom, args.cmd_vel)
-        result = compare(sim, real)
+        if args.fitted:
+            runs = replay_against(
+                args.bags[0],
+                args.fitted,
+                params=args.params,
+                world=args.world,
+                odom=args.odom,
+                cmd_vel=args.cmd_vel,
+            )
+        else:
+            sim = load_run(args.bags[0], args.odom, args.cmd_vel)
+            real = load_run(args.bags[1], args.odom, args.cmd_vel)
+            runs = [("sim", compare(sim, real))]
     except SimbridgeError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 1
     if args.json:
-        print(json.dumps(result.metrics()))
+        figures = {label: c.metrics() for label, c in runs}
+        print(json.dumps(figures if args.fitted else runs[0][1].metrics()))
     else:
-        print(report(result))
+        print("\n\n".join(report(c) for _, c in runs))
+        if args.fitted:
+            rmse = ", ".join(f"{label} {c.metrics()['position_rmse_m']:.4f} m" for label, c in runs)
+            print(f"\nposition RMSE against the real run: {rmse}")
     if args.plot:
-        plot(result, Path(args.plot))
+        plot(runs, Path(args.plot))
         if not args.json:
             print(f"plot: {args.plot}")
     return 0

@@ -26,6 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from simbridge.config import Params, WorldSpec
 from simbridge.errors import SimbridgeError
 from simbridge.graph import Graph
 from simbridge.graph.cmdvel import command_type, convert_twist
@@ -275,8 +276,8 @@ def replay_headless(
     out: Path,
     *,
     topic: str = "/cmd_vel",
-    world: str | None = None,
-    params: str | None = None,
+    world: WorldSpec | str | None = None,
+    params: Params | str | None = None,
     tail: float = 2.0,
 ) -> BagWriter:
     """Drive a headless simulation with a bag's commands; record it into ``out``.

@@ -16,7 +16,9 @@ path                       method  what it does
                                   "release", "id": 3}`` (one latch, whoever latched it) or
                                   ``{"action": "release_all"}``
 ``/api/admin/robot``       POST    ``{"robot": "r1", "changes": {"robot.mass": 3.0}}``: that
-                                  robot's own values (``null``: back to the shared value)
+                                  robot's own values (``null``: back to the shared value);
+                                  ``realism.*`` too: that robot's own realism profile
+                                  (``{"realism.enabled": true, "realism.slip": 0.1}``)
 =========================  ======  ==========================================================
 
 The state lists each client by the robot it may drive and how it connected (``client 7 (r1's
@@ -35,7 +37,7 @@ from typing import TYPE_CHECKING, Any
 
 import orjson
 
-from simbridge.config import ServerSettings
+from simbridge.config import RealismParams, ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.graph import ROBOT_NODE, Graph
 from simbridge.graph.estop import INSTRUCTOR, EStop, connection_rights, describe_peer
@@ -43,7 +45,7 @@ from simbridge.graph.guard import token_access
 from simbridge.graph.roles import Roles
 from simbridge.sim import KinematicModel, MotionModel, World
 from simbridge.sim.dynamics import DynamicModel
-from simbridge.sim.world import PER_ROBOT_PARAMS
+from simbridge.sim.world import PER_ROBOT_PARAMS, Robot
 from simbridge.web.http import HttpRequest, HttpResponse, WebApp
 
 
@@ -82,6 +84,8 @@ AFFECTS: dict[str, str] = {
     "lidar.": "every robot's /scan",
     "sim.": "the simulation loop",
     "safety.": "the server's safety watchdog",
+    "realism.": "robots under a realism profile (realism.enabled): their motion and /odom; "
+    "the true pose is on /ground_truth",
 }
 
 
@@ -130,6 +134,17 @@ def token_from_headers(headers: Mapping[str, str]) -> str | None:
     if scheme.lower() == "bearer" and value.strip():
         return value.strip()
     return headers.get("x-admin-token") or None
+
+
+#: The realism profile's parameters, which each robot may have of its own (issue 26).
+REALISM_NAMES = frozenset(f"realism.{n}" for n in RealismParams.settings())
+
+
+def _own(robot: Robot) -> dict[str, object]:
+    """A robot's own values by dotted name (``robot.mass``, ``realism.slip``)."""
+    out: dict[str, object] = {f"robot.{k}": v for k, v in sorted(robot.overrides.items())}
+    out.update((f"realism.{k}", v) for k, v in sorted(robot.realism_own.items()))
+    return out
 
 
 def _first_line(err: Exception) -> str:
@@ -190,7 +205,7 @@ class _Admin:
         for name, robot in sorted(self.world.robots.items()):
             s = robot.state
             robot_rows[name] = {
-                "own": {f"robot.{k}": v for k, v in sorted(robot.overrides.items())},
+                "own": _own(robot),
                 "pose": [round(s.x, 3), round(s.y, 3), round(s.theta, 3)],
                 "held": self.world.halted(name),
                 "clients": [
@@ -203,7 +218,7 @@ class _Admin:
             "descriptions": params.descriptions,
             "affects": {name: affects(name) for name in values},
             "read_only": sorted(params.read_only),
-            "per_robot": sorted(f"robot.{n}" for n in PER_ROBOT_PARAMS),
+            "per_robot": sorted(f"robot.{n}" for n in PER_ROBOT_PARAMS) + sorted(REALISM_NAMES),
             "robots": robot_rows,
             "motion_model": self.world.motion.name,
             "motion_models": sorted(MOTION_MODELS),
@@ -262,9 +277,16 @@ class _Admin:
             msg = 'expected {"robot": "r1", "changes": {"robot.mass": 3.0, ...}}'
             raise ServiceError(msg)
         own: dict[str, float | None] = {}
+        realism: dict[str, object] = {}
         for key, value in changes.items():
+            if key in REALISM_NAMES:
+                if value is not None and not isinstance(value, bool | int | float):
+                    msg = f"{key}: expected a number or boolean (or null), got {value!r}"
+                    raise ServiceError(msg)
+                realism[key.removeprefix("realism.")] = value
+                continue
             if not key.startswith("robot."):
-                msg = f"{key}: only robot.* parameters may differ between robots"
+                msg = f"{key}: only robot.* and realism.* parameters may differ between robots"
                 raise ServiceError(msg)
             if value is not None and (
                 isinstance(value, bool) or not isinstance(value, int | float)
@@ -272,14 +294,22 @@ class _Admin:
                 msg = f"{key}: expected a number (or null for the shared value), got {value!r}"
                 raise ServiceError(msg)
             own[key.removeprefix("robot.")] = value
-        try:
-            world.set_robot_params(name, own)
+        robot = world.robots[name]
+        before = dict(robot.realism_own)
+        try:  # all or nothing: a refused robot.* value leaves the realism values as they were
+            if realism:
+                world.set_robot_realism(name, realism)
+            if own:
+                try:
+                    world.set_robot_params(name, own)
+                except ValueError:
+                    robot.realism_own, robot.realism_cached = before, None
+                    raise
         except ValueError as err:
             raise ServiceError(f"robot {name}: {_first_line(err)}") from None
         shown = ", ".join(f"{k} = {v}" for k, v in changes.items())
         self.graph.log("info", f"robot '{name}' parameters set by the instructor: {shown}")
-        robot = world.robots[name]
-        return {"robot": name, "own": {f"robot.{k}": v for k, v in robot.overrides.items()}}
+        return {"robot": name, "own": _own(robot)}
 
     def reset(self, body: dict[str, Any]) -> dict[str, Any]:
         self.world.reset()

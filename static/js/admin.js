@@ -1,7 +1,7 @@
 // The instructor's console: every call carries the admin token; the server refuses changes
 // without it. Nothing but the token field is shown until the token is accepted.
 const $ = (id) => document.getElementById(id);
-const EDITABLE = /^(robot|lidar)\./;
+const EDITABLE = /^(robot|lidar|realism)\./;
 let token = sessionStorage.getItem('simbridge-admin-token') || '';
 let current = null;   // the last /api/admin/state
 $('token').value = token;

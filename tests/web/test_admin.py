@@ -153,3 +153,25 @@ async def test_admin_gives_one_robot_parameters_of_its_own(make_app: AppFactory)
         request, app, "/api/admin/robot", {"robot": "r3", "changes": {"robot.mass": None}}, "s3cret"
     )
     assert app.world.robot_params("r3").mass == 1.5 and not app.world.robots["r3"].overrides
+
+
+async def test_admin_gives_one_robot_a_realism_profile_of_its_own(make_app: AppFactory) -> None:
+    """'Group 3 drives the worn robot': realism.* on r3 only; a bad value is refused by name."""
+    app = await make_app(world=ROOT / "config" / "worlds" / "classroom.yaml", admin_token="s3cret")
+    worn = {"realism.enabled": True, "realism.slip": 0.2, "realism.motor_time_constant": 0.3}
+    status, body = await _aio(
+        request, app, "/api/admin/robot", {"robot": "r3", "changes": worn}, "s3cret"
+    )
+    assert status == 200 and body["own"] == worn
+    real = app.world.robots["r3"].realism(app.world.params.realism)
+    assert real is not None and real.slip == 0.2
+    assert app.world.robots["r1"].realism(app.world.params.realism) is None
+    _, state = await _aio(request, app, "/api/admin/state", None, "s3cret")
+    assert state["robots"]["r3"]["own"] == worn and "realism.slip" in state["per_robot"]
+    assert "/ground_truth" in state["affects"]["realism.slip"]
+    bad = {"robot": "r3", "changes": {"realism.slip": 1.5, "robot.mass": 2.0}}
+    status, body = await _aio(request, app, "/api/admin/robot", bad, "s3cret")
+    assert status == 400 and "realism.slip: must be less than or equal to 1" in body["error"]
+    assert (
+        app.world.robots["r3"].realism_own["slip"] == 0.2 and not app.world.robots["r3"].overrides
+    )
