@@ -199,6 +199,15 @@ def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> Non
         help="listen on this Zenoh endpoint instead of tcp/localhost:0 (repeatable)",
     )
     group.add_argument(
+        "--ros2-role",
+        metavar="ROLE",
+        default=env.ros2_role,
+        help="what ROS 2 peers may do: none (read only), robot:NAME (drive robot NAME), "
+        "robots (drive every robot), admin (everything: a trusted network only); default: as "
+        "a client without a token, none once client tokens are set (docs/security.md) "
+        "[SIMBRIDGE_ROS2_ROLE]",
+    )
+    group.add_argument(
         "--ros-distro",
         choices=["humble", "jazzy", "kilted"],
         default=None,
@@ -281,6 +290,7 @@ def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
         "stall_timeout": args.stall_timeout,
         "ping_interval": args.ping_interval,
         "ping_timeout": args.ping_interval,
+        "ros2_role": args.ros2_role or None,
     }
     if args.client_tokens:
         out["client_tokens"] = load_client_tokens(args.client_tokens)

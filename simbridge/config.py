@@ -44,6 +44,7 @@ __all__ = [
     "SimParams",
     "ValidationError",
     "WorldSpec",
+    "check_ros2_role",
     "default_params_path",
     "default_world_path",
     "finite_number",
@@ -359,6 +360,21 @@ def check_robot_name(name: object) -> str:
         )
         raise ValueError(msg)
     return name
+
+
+def check_ros2_role(role: object) -> str | None:
+    """Return ``role`` if it is a ROS 2 peers' role or None (``ServerSettings.ros2_role``).
+
+    Raises:
+        ValueError: it is not.
+    """
+    if role is None or role in ("none", "robots", "admin"):
+        return role
+    if isinstance(role, str) and role.startswith("robot:"):
+        check_robot_name(role.removeprefix("robot:"))
+        return role
+    msg = f"{role!r} is not a ROS 2 role: use none, robot:NAME, robots or admin"
+    raise ValueError(msg)
 
 
 class NamedRobotSpec(RobotSpec):
@@ -728,6 +744,19 @@ class ServerSettings(Record, frozen=True):
     #: TLS certificate chain and private key (PEM): serve wss:// and https://.
     certfile: str | None = None
     keyfile: str | None = None
+    # -- ROS 2 peers (--zenoh; docs/security.md "ROS 2 peers") --
+    #: The access of whatever reaches the graph from ROS 2: ``"none"`` (it reads; it may not
+    #: drive, call administrative services or another robot's), ``"robot:NAME"`` (robot NAME,
+    #: as that student's token), ``"robots"`` (every robot, no administration) or
+    #: ``"admin"``; None: as a client without a token, and ``"none"`` in class mode (client
+    #: tokens or a rosauth secret set).
+    ros2_role: str | None = setting(default=None, before=check_ros2_role)
+    #: Bytes of one Zenoh sample (message, request or reply) at most; bigger ones are dropped.
+    zenoh_max_sample_bytes: Count = 1_000_000
+    #: Bytes of Zenoh samples waiting for the event loop at most (past it, the oldest are dropped).
+    zenoh_inbox_bytes: Count = 16_000_000
+    #: Liveliness tokens of other processes (their nodes, topics, services) kept at most.
+    zenoh_max_remote_tokens: Count = 20_000
     # -- the Foxglove WebSocket protocol (the [foxglove] extra; README "Foxglove, Lichtblick and
     # PlotJuggler") --
     #: Port of the Foxglove WebSocket protocol (``foxglove.sdk.v1``) beside rosbridge (None: off).
@@ -805,6 +834,7 @@ class Environment(Record, frozen=True):
     demo_nodes: bool | None = None
     no_sim: bool | None = None
     zenoh: bool | None = None
+    ros2_role: str | None = None
     record: str | None = None
     log_level: LogLevel | None = None
     foxglove_port: Port | None = None

@@ -70,6 +70,7 @@ from simbridge.protocol import (
 __all__ = [
     "ADMIN_SUFFIXES",
     "MIN_FRAGMENT_SIZE",
+    "NO_ROBOT",
     "Admission",
     "Call",
     "GoalRequest",
@@ -84,6 +85,9 @@ logger = logging.getLogger(__name__)
 
 #: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
 MIN_FRAGMENT_SIZE = 256
+#: The scope of a connection that may drive no robot (a ROS 2 peer in class mode): not a
+#: robot name, so no name lies in its namespace (see :mod:`simbridge.graph.guard`).
+NO_ROBOT = "-"
 #: Name endings of administrative services of any node (ROS 2 parameter services).
 ADMIN_SUFFIXES = ("/set_parameters", "/set_parameters_atomically")
 
@@ -435,6 +439,35 @@ class Admission:
         except ConversionError as err:
             msg = f"{what} for {goal.action.name}: {err}"
             raise ProtocolError(msg) from None
+
+    # -- peers outside the protocol (ROS 2 over Zenoh): the same rules, asked by name --------
+
+    def publish_refusal(self, session: Session, name: str) -> str | None:
+        """Return why ``session`` may not publish on (or provide) ``name``; None if it may.
+
+        Check 4's scope rule of ``publish``, ``advertise`` and ``advertise_service``, for a
+        peer whose messages do not come as ops (a ROS 2 publisher, service or action server):
+        it is asked once per name, and the names are not counted against the session's budgets.
+        """
+        if not self.guarded or in_namespace(session.scope, name):
+            return None
+        if session.scope == NO_ROBOT:
+            return f"{name}: not allowed; this peer may drive no robot and publishes nothing here"
+        return f"{name}: not allowed; this peer may only use names under /{session.scope}/"
+
+    def reach_refusal(self, session: Session, name: str) -> str | None:
+        """Return why ``session`` may not call service or action ``name``; None if it may.
+
+        Check 4 of ``call_service`` (administrative services; other robots' namespaces) and
+        of ``send_action_goal``, for callers outside the protocol.
+        """
+        if not self.guarded:
+            return None
+        if (name in self.admin_services or name.endswith(ADMIN_SUFFIXES)) and not session.admin:
+            return f"{name} is administrative: this peer has no admin rights"
+        if not self._may_reach(session, name):
+            return f"{name} belongs to another robot; this peer may not use it"
+        return None
 
     # -- scope -----------------------------------------------------------------------------
 

@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from simbridge.errors import ServiceError
+from simbridge.graph.admission import NO_ROBOT
 from simbridge.graph.graph import Graph
 from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
@@ -88,7 +89,13 @@ def describe_peer(peer: Peer) -> str:
     elif admin:
         what = "no token, admin"
     else:
-        what = "no token" if scope == "*" else f"authenticated for {scope}"
+        what = (
+            "no token"
+            if scope == "*"
+            else "no robot"
+            if scope == NO_ROBOT
+            else f"authenticated for {scope}"
+        )
     return f"client {peer.session.client_id} ({what})"
 
 
@@ -248,6 +255,9 @@ class EStop:
             robots = frozenset(self.world.robots)
         else:
             robots = frozenset({scope}) & frozenset(self.world.robots)
+        if not robots and scope == NO_ROBOT:
+            msg = f"{ESTOP_SERVICE}: this connection may drive no robot, so it stops none"
+            raise ServiceError(msg)
         if not robots:
             msg = f"{ESTOP_SERVICE}: this connection's robot '{scope}' does not exist"
             raise ServiceError(msg)

@@ -78,6 +78,7 @@ class ZenohLink(Protocol):
     def _put_bytes(self, entry: Any, payload: bytes, *, count: bool = False) -> bool: ...
     def _log(self, key: str, text: str) -> None: ...
     def _note(self, key: str, text: str) -> None: ...
+    def hand_over(self, take: Any, name: str, payload: Any) -> None: ...
     def client_attachment(self, entity: Entity, sequence: int) -> bytes: ...
     def _query(
         self,
@@ -252,10 +253,11 @@ class ActionBridge:
             self.link._reply(query, response_type, msg, attachment)
 
         mine = [s for s in self._served.values() if s.action == name and not s.done]
-        refusal = None
-        if (name, goal_id) in self._by_uuid:
+        # the scope rule of a rosbridge client's send_action_goal, for the ROS 2 peers' role
+        refusal = self.graph.admission.reach_refusal(self.link._caller.session, name)
+        if refusal is None and (name, goal_id) in self._by_uuid:
             refusal = f"goal id {goal_id.hex()} is in use"
-        elif len(mine) >= MAX_GOALS:
+        elif refusal is None and len(mine) >= MAX_GOALS:
             refusal = f"{MAX_GOALS} goals of ROS 2 clients in flight already"
         if refusal is not None:
             self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {refusal}")
@@ -491,11 +493,11 @@ class ActionBridge:
             f"{dds_type(message_type)}/*"
         )
 
-        def on_sample(sample: Any) -> None:  # a Zenoh thread
-            loop = link._loop
-            if loop is not None:
-                payload = bytes(sample.payload.to_bytes())
-                loop.call_soon_threadsafe(self._on_feedback, provider, payload)
+        def take(name: str, payload: bytes) -> None:
+            self._on_feedback(provider, payload)
+
+        def on_sample(sample: Any) -> None:  # a Zenoh thread: through the link's budgets
+            link.hand_over(take, provider.name, sample.payload)
 
         try:
             provider.subscriber = link.session.declare_subscriber(

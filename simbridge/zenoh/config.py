@@ -30,6 +30,7 @@ __all__ = [
     "ZenohOptions",
     "parse_override",
     "router_config",
+    "sample_limits",
     "session_config",
 ]
 
@@ -168,6 +169,7 @@ def _build(
     override: str,
     connect: Sequence[str],
     listen: Sequence[str],
+    limits: Mapping[str, Any] | None = None,
 ) -> Any:
     if uri is not None:
         try:
@@ -179,6 +181,8 @@ def _build(
         config = zenoh.Config()
         for key, value in defaults.items():
             config.insert_json5(key, json.dumps(value))
+    for key, value in (limits or {}).items():
+        config.insert_json5(key, json.dumps(value))
     for key, value in parse_override(override):
         try:
             config.insert_json5(key, value)
@@ -192,12 +196,39 @@ def _build(
     return config
 
 
-def session_config(zenoh: Any, options: ZenohOptions) -> Any:
+def sample_limits(max_sample_bytes: int) -> dict[str, Any]:
+    """Return the session's keys that bound what one incoming message may hold.
+
+    Zenoh itself drops, before any of simbridge's code sees them, incoming samples, queries
+    and replies over ``max_sample_bytes`` (a ``low_pass_filter`` on ingress; the link stays
+    up), and does not reassemble a fragmented message past twice that
+    (``transport/link/rx/max_message_size``, Zenoh's default 1 GiB): a peer's 4 MB samples
+    had taken a server to 600-780 MB (issue 29).
+    """
+    return {
+        "low_pass_filter": [
+            {
+                "id": "simbridge_max_sample_bytes",
+                "flows": ["ingress"],
+                "messages": ["put", "delete", "query", "reply"],
+                "key_exprs": ["**"],
+                "size_limit": max_sample_bytes,
+            }
+        ],
+        "transport/link/rx/max_message_size": max(2 * max_sample_bytes, 65_536),
+    }
+
+
+def session_config(zenoh: Any, options: ZenohOptions, max_sample_bytes: int | None = None) -> Any:
     """Return the ``zenoh.Config`` of simbridge's session (``zenoh``: the imported module).
+
+    ``max_sample_bytes``: add :func:`sample_limits` (to the defaults or the file; the override
+    and the endpoints still apply after them).
 
     Raises:
         ConfigError: the file, an override or an endpoint is refused by Zenoh.
     """
+    limits = sample_limits(max_sample_bytes) if max_sample_bytes is not None else {}
     return _build(
         zenoh,
         _SESSION_DEFAULTS,
@@ -205,6 +236,7 @@ def session_config(zenoh: Any, options: ZenohOptions) -> Any:
         options.override,
         options.connect,
         options.listen,
+        limits,
     )
 
 

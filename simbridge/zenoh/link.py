@@ -31,9 +31,10 @@ import importlib
 import itertools
 import logging
 import sys
+import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Collection, Hashable, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -42,10 +43,11 @@ import orjson
 from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, ROBOT_NODE, SIM_NODE, Graph, Topic
 from simbridge.graph.estop import connection_rights
+from simbridge.graph.guard import ros2_access
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session
+from simbridge.protocol import Frame, Outgoing, Session
 from simbridge.protocol.ops import CallService, ServiceResponse
 from simbridge.zenoh.actions import ActionBridge, split_action
 from simbridge.zenoh.attachment import Attachment, pack_attachment
@@ -82,10 +84,14 @@ LOG_EVERY = 30.0
 SHARED_TOPICS = frozenset({"/tf", "/tf_static", "/rosout", "/parameter_events"})
 #: Seconds a call from ROS 2 waits for a rosbridge client that provides the service.
 SERVICE_TIMEOUT = 10.0
-#: Samples waiting for the event loop at most (the oldest are dropped, and counted, past it).
+#: Samples waiting for the event loop at most (the oldest are dropped, and counted, past it);
+#: their bytes are bounded too (``zenoh_inbox_bytes``).
 INBOX_LIMIT = 20_000
-#: Samples handed to the graph per event-loop callback at most.
+#: Samples handed to the graph per event-loop callback at most, and their bytes at most (a
+#: sample bigger than that goes alone): 500 samples of 4 MB in one callback had stalled the
+#: loop 1.5-1.8 s (issue 29).
 DRAIN_BATCH = 500
+DRAIN_BYTES = 1_000_000
 #: Samples of the ring channels handed to the graph per poll callback at most. The frames
 #: they make for the clients are written when the callback ends (the server corks them:
 #: :meth:`simbridge.server.BridgeServer._send_many`). With 32 a callback, the clients got the
@@ -105,6 +111,8 @@ CALLBACK_KEYS = 8
 #: Samples one topic's ring channel holds for the event loop (the oldest go past it: 5 s of a
 #: 20 Hz topic).
 RING = 100
+#: Remote token changes applied per event-loop callback at most (see ZenohLink._drain_tokens).
+TOKEN_BATCH = 200
 #: The nodes of a simbridge simulator (a process with both takes a turn: ZenohLink.tick_share).
 _SIMULATOR_NODES = frozenset({ROBOT_NODE, SIM_NODE})
 #: Messages held back for Zenoh from which a tick's first part (its /odom) is put before the
@@ -218,7 +226,9 @@ class ZenohLink:
         #: Domain, distribution, endpoints.
         self.options = options
         self.zenoh = import_zenoh()
-        self.config = session_config(self.zenoh, options)
+        self.config = session_config(
+            self.zenoh, options, max_sample_bytes=graph.settings.zenoh_max_sample_bytes
+        )
         self.hasher = TypeHasher(graph.registry, options.distro)
         self.cdr = CdrWriter(graph.registry)
         self.reader = CdrReader(graph.registry)
@@ -244,16 +254,27 @@ class ZenohLink:
         #: :meth:`_update_share`).
         self.tick_share: tuple[int, int] | None = None
         self._remote_dirty = True
+        #: Remote token changes from Zenoh's threads waiting for the event loop (under the
+        #: inbox's lock), and whether it was woken (see :meth:`_drain_tokens`).
+        self._tokens: deque[tuple[str, bool]] = deque()
+        self._tokens_rung = False
+        #: Remote tokens kept at most (``zenoh_max_remote_tokens``).
+        self.max_tokens = graph.settings.zenoh_max_remote_tokens
+        #: The remote entities by what they stand for: topic and service names (token ->
+        #: entity), node names (tokens), actions' parts (token -> entity).
+        self._by_name: dict[str, dict[str, Entity]] = {}
+        self._remote_node_tokens: Counter[str] = Counter()
+        self._action_parts: dict[str, Entity] = {}
         #: Remote subscriptions per topic name (publish only while there is one).
         self._remote_subs: Counter[str] = Counter()
         #: Inward: topic owners and services simbridge added to the graph for remote entities.
-        self._imported_pubs: dict[tuple[str, RemoteNode], str] = {}  # (topic, owner) -> type
+        self._imported_pubs: dict[str, dict[RemoteNode, str]] = {}  # topic -> owner -> type
         self._providers: dict[str, _Provider] = {}
         #: Nodes of other processes listed in the graph (rosapi's nodes), by name.
         self._remote_nodes: set[str] = set()
         #: Remote subscriptions stand in the graph as in-process subscribers that do nothing
         #: (so that the simulation publishes what only ROS 2 listens to, and rosapi lists them).
-        self._markers: dict[tuple[str, RemoteNode], Callable[[Any, Any], None]] = {}
+        self._markers: dict[str, dict[RemoteNode, Callable[[Any, Any], None]]] = {}
         self._marker_ids: set[int] = set()
         #: Inward data subscribers by topic name, then key expression.
         self._subscribers: dict[str, dict[str, Any]] = {}
@@ -273,19 +294,33 @@ class ZenohLink:
         #: Calls to ROS 2 waiting for a reply: server id -> (provider, response type).
         self._calls: dict[str, tuple[_Provider, str]] = {}
         caller_session = graph.new_session()
-        # ROS 2 callers pass admission as a client with every right: what they may not call
-        # (administrative services, with an admin token set) is refused in _on_query
-        caller_session.connect(ANY_SCOPE, admin=True)
+        # whatever comes from ROS 2 (samples, calls, goals, remote publishers and services)
+        # passes admission as one client of the role the instructor chose (--ros2-role; in
+        # class mode by default a student without a robot: it reads, it drives nothing)
+        scope, admin = ros2_access(graph.settings)
+        caller_session.connect(scope, admin)
         self._caller = _Caller(self, caller_session)
+        #: Why ROS 2 peers may not publish on a name (None: they may), by name.
+        self._refusals: dict[str, str | None] = {}
         self._call_ids = itertools.count(1)
         self._forwarding = False
         self._next_reconcile = 0.0
         self._next_full = 0.0
         self._generation = -1
         self._logged: dict[str, float] = {}
-        #: Samples from Zenoh's threads waiting for the event loop, and whether it was woken.
-        self._inbox: deque[tuple[str, bytes]] = deque(maxlen=INBOX_LIMIT)
+        #: Samples from Zenoh's threads waiting for the event loop (who takes each, its
+        #: topic, its bytes), their bytes, and whether the loop was woken; under the lock
+        #: (several Zenoh threads hand samples over).
+        self._inbox: deque[tuple[Callable[[str, bytes], None], str, bytes]] = deque()
+        self._inbox_bytes = 0
+        self._inbox_lock = threading.Lock()
         self._inbox_rung = False
+        #: The budgets of samples (``zenoh_max_sample_bytes``, ``zenoh_inbox_bytes``).
+        self.max_sample = graph.settings.zenoh_max_sample_bytes
+        self.max_inbox = graph.settings.zenoh_inbox_bytes
+        #: The last oversized sample's topic and size, and whether its report is scheduled.
+        self._oversized: tuple[str, int] | None = None
+        self._oversized_rung = False
         self._switch_interval = sys.getswitchinterval()
         #: Deliveries to send to ROS 2 at the end of the current event-loop callback.
         self._outbox: list[tuple[_Declared, Outgoing]] = []
@@ -392,7 +427,7 @@ class ZenohLink:
         if self._poll_handle is None and self._channel_list:
             self._poll()  # idle: polled once a tick (see IDLE_AFTER)
         changed = self._signature() != self._generation
-        if now >= self._next_full or ((changed or self._remote_dirty) and self._due(now)):
+        if now >= self._next_full or (changed and self._due(now)):
             self.reconcile()
             self._next_reconcile = now + RECONCILE_PERIOD
             self._next_full = now + FULL_PERIOD
@@ -680,9 +715,8 @@ class ZenohLink:
         except ValueError as err:
             self._fail_query(query, f"service {name}: request without a valid attachment ({err})")
             return
-        if name in self.graph.admin_services and self.graph.settings.admin_token is not None:
-            self._fail_query(query, f"service {name} needs admin rights; call it from /admin")
-            return
+        # administrative services, other robots' services: refused by the admission of the
+        # call (graph.dispatch below), as for a rosbridge client of the ROS 2 peers' role
         if self.actions.handles(name):
             self.actions.on_query(name, type_name, query, attachment)
             return
@@ -749,32 +783,83 @@ class ZenohLink:
     # -- inward ----------------------------------------------------------------------------
 
     def _on_token(self, sample: Any) -> None:  # a Zenoh thread
+        put = sample.kind == self.zenoh.SampleKind.PUT
+        with self._inbox_lock:
+            self._tokens.append((str(sample.key_expr), put))
+            ring = not self._tokens_rung
+            self._tokens_rung = True  # one wake-up of the event loop per burst
         loop = self._loop
-        if loop is not None:
-            put = sample.kind == self.zenoh.SampleKind.PUT
-            loop.call_soon_threadsafe(self._token_changed, str(sample.key_expr), put)
+        if ring and loop is not None:
+            loop.call_soon_threadsafe(self._drain_tokens)
 
-    def _token_changed(self, token: str, alive: bool) -> None:
+    def _drain_tokens(self) -> None:
+        """Apply the token changes that arrived to the graph, :data:`TOKEN_BATCH` at a time.
+
+        In callbacks of their own, not the tick: a flood of 17,000 tokens had held the loop at
+        7 Hz for 50 s when every change rebuilt the whole import inside the tick (issue 29).
+        Each batch changes only the names its tokens touch (:meth:`_import_names`).
+        """
+        tokens = self._tokens
+        batch = []
+        with self._inbox_lock:
+            for _ in range(min(len(tokens), TOKEN_BATCH)):
+                batch.append(tokens.popleft())
+        names: set[str] = set()
+        nodes: set[str] = set()
+        actions = False
+        for token, alive in batch:
+            entity = self._token_changed(token, alive)
+            if entity is None:
+                continue
+            if entity.kind == "NN":
+                nodes.add(entity.node_fqn)
+            elif split_action(entity.name) is not None:
+                actions = True
+            else:
+                names.add(entity.name)
+        if (names or nodes or actions) and self.session is not None:
+            # what only the tokens changed is done here: the tick's comparison of the graph
+            # with Zenoh (its change counters) is not started by it, unless a local
+            # subscriber or client waited for one of these topics
+            quiet = self._signature() == self._generation
+            if actions:
+                self.actions.import_remote(self._allowed_action_parts())
+            waited = self._import_names(names, nodes)
+            self._update_subscribers(names)
+            if quiet and not waited:
+                self._generation = self._signature()
+        with self._inbox_lock:
+            again = bool(tokens) and self._loop is not None
+            self._tokens_rung = again
+        if again:
+            self._loop.call_soon(self._drain_tokens)  # type: ignore[union-attr]
+
+    def _token_changed(self, token: str, alive: bool) -> Entity | None:
+        """Record a remote token that appeared or went; return its entity if that changed."""
         try:
             entity = Entity.parse(token)
         except ValueError as err:
             self._log("token", f"Zenoh: ignoring a graph token: {err}")
-            return
+            return None
         if entity.zid == self.zid:
-            return
+            return None
         if alive:
             if token in self._remote:
-                return
+                return None
+            if len(self._remote) >= self.max_tokens:
+                self.stats["tokens_refused"] += 1
+                self._log(
+                    "tokens",
+                    f"Zenoh: a token of {entity.node_fqn} (session {entity.zid}) ignored: "
+                    f"{self.max_tokens} remote tokens kept already (zenoh_max_remote_tokens)",
+                )
+                return None
             self._remote[token] = entity
-            if entity.kind == "MS":
-                self._remote_subs[entity.name] += 1
+            self._index(token, entity, alive)
         else:
             if self._remote.pop(token, None) is None:
-                return
-            if entity.kind == "MS":
-                self._remote_subs[entity.name] -= 1
-                if self._remote_subs[entity.name] <= 0:
-                    del self._remote_subs[entity.name]
+                return None
+            self._index(token, entity, alive)
         if entity.kind == "NN" and entity.node_fqn in _SIMULATOR_NODES:
             nodes = self._sim_nodes.setdefault(entity.zid, set())
             if alive:
@@ -784,7 +869,35 @@ class ZenohLink:
                 if not nodes:
                     del self._sim_nodes[entity.zid]
             self._update_share()
-        self._remote_dirty = True
+        return entity
+
+    def _index(self, token: str, entity: Entity, alive: bool) -> None:
+        """Keep the remote entities by name (topics, services), node and action."""
+        if entity.kind == "NN":
+            if alive:
+                self._remote_node_tokens[entity.node_fqn] += 1
+            else:
+                self._remote_node_tokens[entity.node_fqn] -= 1
+                if self._remote_node_tokens[entity.node_fqn] <= 0:
+                    del self._remote_node_tokens[entity.node_fqn]
+            return
+        if split_action(entity.name) is not None:
+            if alive:
+                self._action_parts[token] = entity
+            else:
+                self._action_parts.pop(token, None)
+            return
+        if entity.kind == "MS":
+            self._remote_subs[entity.name] += 1 if alive else -1
+            if self._remote_subs[entity.name] <= 0:
+                del self._remote_subs[entity.name]
+        by_name = self._by_name.setdefault(entity.name, {})
+        if alive:
+            by_name[token] = entity
+        else:
+            by_name.pop(token, None)
+            if not by_name:
+                del self._by_name[entity.name]
 
     def _update_share(self) -> None:
         """Recompute :attr:`tick_share`: this process's rank among the simulators, by zid.
@@ -807,33 +920,52 @@ class ZenohLink:
         everyone = sorted({*others, self.zid})
         self.tick_share = (everyone.index(self.zid), len(everyone))
 
+    def _allowed_action_parts(self) -> list[Entity]:
+        return [
+            e
+            for e in self._action_parts.values()
+            if not self._refused(e.name, f"{e.node_fqn} (session {e.zid}):", count=False)
+        ]
+
     def _import_remote(self) -> None:
         """Make the graph hold exactly the remote publishers and services the tokens show."""
+        self.actions.import_remote(self._allowed_action_parts())
+        names = {*self._by_name, *self._imported_pubs, *self._markers, *self._providers}
+        self._import_names(names, {*self._remote_node_tokens, *self._remote_nodes})
+
+    def _import_names(self, names: Iterable[str], nodes: Iterable[str]) -> bool:
+        """Bring the graph in line with the tokens of these topic and service names and nodes.
+
+        Returns whether a topic it brought in has a subscriber here (a client waiting for it):
+        then what is declared outward may change too.
+        """
+        for node in nodes:
+            self._import_node(node)
+        waited = False
+        for name in names:
+            entities = self._by_name.get(name, {}).values()
+            self._import_subscriptions(name, entities)
+            waited |= self._import_publishers(name, entities)
+            self._import_service(name, entities)
+        return waited
+
+    def _import_publishers(self, name: str, entities: Iterable[Entity]) -> bool:
         registry = self.graph.registry
         topics = self.graph.topics
-        pubs: dict[tuple[str, RemoteNode], tuple[str, bool]] = {}
-        subs: dict[tuple[str, RemoteNode], str] = {}
-        services: dict[str, Entity] = {}
-        action_parts: list[Entity] = []
-        for entity in self._remote.values():
-            if entity.kind != "NN" and split_action(entity.name) is not None:
-                action_parts.append(entity)  # an action's service or topic: see ActionBridge
-            elif entity.kind == "MP":
+        pubs: dict[RemoteNode, tuple[str, bool]] = {}
+        for entity in entities:
+            if entity.kind == "MP":
                 owner = RemoteNode(entity.node_fqn, entity.zid)
-                pubs[(entity.name, owner)] = (entity.type, entity.qos.transient_local)
-            elif entity.kind == "MS":
-                subs[(entity.name, RemoteNode(entity.node_fqn, entity.zid))] = entity.type
-            elif entity.kind == "SS":
-                services.setdefault(entity.name, entity)
-        self.actions.import_remote(action_parts)
-        self._import_subscriptions(subs)
-        self._import_nodes({e.node_fqn for e in self._remote.values() if e.kind == "NN"})
-        for name, owner in list(self._imported_pubs):
-            if (name, owner) not in pubs:
-                del self._imported_pubs[(name, owner)]
-                topics.unadvertise(name, owner, None)
-        for (name, node), (type_name, latched) in pubs.items():
-            if (name, node) in self._imported_pubs:
+                pubs[owner] = (entity.type, entity.qos.transient_local)
+        if pubs and self._refused(name, f"{next(iter(pubs))}:", count=False):
+            pubs = {}  # the ROS 2 peers' role may not publish it here
+        imported = self._imported_pubs.get(name, {})
+        for owner in [o for o in imported if o not in pubs]:
+            del imported[owner]
+            topics.unadvertise(name, owner, None)
+        waited = False
+        for node, (type_name, latched) in pubs.items():
+            if node in imported:
                 continue
             if not registry.known(type_name):
                 # listed (rosapi shows it with its type, without a definition), not bridged
@@ -852,73 +984,94 @@ class ZenohLink:
                 )
                 continue
             try:
-                topics.advertise(name, type_name, node, latch=latched)
+                topic = topics.advertise(name, type_name, node, latch=latched)
             except SimbridgeError as err:
                 self._log(f"clash {name}", f"Zenoh: {name} from {node} not bridged: {err}")
                 self.stats["name_clashes"] += 1
                 continue
-            self._imported_pubs[(name, node)] = type_name
-        for name in [n for n in self._providers if n not in services]:
-            provider = self._providers.pop(name)
-            self.graph.services.unadvertise(provider, name)  # fails its pending calls
-        for name, entity in services.items():
-            if name in self._providers:
-                continue
-            existing = self.graph.services.services.get(name)
-            if existing is not None:
-                self._note(
-                    f"clash {name}",
-                    f"Zenoh: service {name} of {entity.node_fqn} (session {entity.zid}) not "
-                    f"bridged: {existing.node} here provides it already",
-                )
-                continue
-            if entity.type not in registry.services:
-                self._log(
-                    f"type {entity.type}",
-                    f"Zenoh: service {name} has type {entity.type}, unknown here: not bridged",
-                )
-                self.stats["unknown_types"] += 1
-                continue
-            provider = _Provider(self, self.graph.new_session(), entity)
-            service = self.graph.services.advertise(provider, name, entity.type)
-            service.node = entity.node_fqn
-            self._providers[name] = provider
+            imported = self._imported_pubs.setdefault(name, imported)
+            imported[node] = type_name
+            waited |= bool(topic.subscriptions)
+        if not imported:
+            self._imported_pubs.pop(name, None)
+        return waited
 
-    def _import_nodes(self, names: set[str]) -> None:
-        """List the nodes of other processes in the graph (rosapi), unless one is local."""
+    def _import_service(self, name: str, entities: Iterable[Entity]) -> None:
+        registry = self.graph.registry
+        entity = next((e for e in entities if e.kind == "SS"), None)
+        if entity is not None and self._refused(
+            name, f"{entity.node_fqn} (session {entity.zid}):", count=False
+        ):
+            entity = None  # the ROS 2 peers' role may not provide it here
+        if entity is None:
+            provider = self._providers.pop(name, None)
+            if provider is not None:
+                self.graph.services.unadvertise(provider, name)  # fails its pending calls
+            return
+        if name in self._providers:
+            return
+        existing = self.graph.services.services.get(name)
+        if existing is not None:
+            self._note(
+                f"clash {name}",
+                f"Zenoh: service {name} of {entity.node_fqn} (session {entity.zid}) not "
+                f"bridged: {existing.node} here provides it already",
+            )
+            return
+        if entity.type not in registry.services:
+            self._log(
+                f"type {entity.type}",
+                f"Zenoh: service {name} has type {entity.type}, unknown here: not bridged",
+            )
+            self.stats["unknown_types"] += 1
+            return
+        provider = _Provider(self, self.graph.new_session(), entity)
+        service = self.graph.services.advertise(provider, name, entity.type)
+        service.node = entity.node_fqn
+        self._providers[name] = provider
+
+    def _import_node(self, name: str) -> None:
+        """List a node of other processes in the graph (rosapi) while it has tokens."""
         nodes = self.graph.nodes
-        for name in self._remote_nodes - names:
-            self._remote_nodes.discard(name)
-            nodes.pop(name, None)
-        for name in names - self._remote_nodes:
-            if name not in nodes:
-                nodes[name] = "a ROS 2 node (Zenoh)"
-                self._remote_nodes.add(name)
+        if name not in self._remote_node_tokens:
+            if name in self._remote_nodes:
+                self._remote_nodes.discard(name)
+                nodes.pop(name, None)
+        elif name not in self._remote_nodes and name not in nodes:
+            nodes[name] = "a ROS 2 node (Zenoh)"
+            self._remote_nodes.add(name)
 
-    def _import_subscriptions(self, subs: dict[tuple[str, RemoteNode], str]) -> None:
+    def _import_subscriptions(self, name: str, entities: Iterable[Entity]) -> None:
         topics = self.graph.topics
-        for key in [k for k in self._markers if k not in subs]:
-            callback = self._markers.pop(key)
+        subs = {RemoteNode(e.node_fqn, e.zid): e.type for e in entities if e.kind == "MS"}
+        markers = self._markers.get(name, {})
+        for owner in [o for o in markers if o not in subs]:
+            callback = markers.pop(owner)
             self._marker_ids.discard(id(callback))
-            topics.unsubscribe_internal(key[0], callback)
-        for key, type_name in subs.items():
-            if key in self._markers or not self.graph.registry.known(type_name):
+            topics.unsubscribe_internal(name, callback)
+        for owner, type_name in subs.items():
+            if owner in markers or not self.graph.registry.known(type_name):
                 continue
 
             def marker(msg: Any, source: Any) -> None:
                 """A ROS 2 subscription: the message goes out through the delivery tap."""
 
             try:
-                topics.subscribe_internal(key[0], type_name, key[1], marker)
+                topics.subscribe_internal(name, type_name, owner, marker)
             except SimbridgeError as err:
-                self._log(f"clash {key[0]}", f"Zenoh: {key[0]} of {key[1]} not bridged: {err}")
+                self._log(f"clash {name}", f"Zenoh: {name} of {owner} not bridged: {err}")
                 self.stats["name_clashes"] += 1
                 continue
-            self._markers[key] = marker
+            markers = self._markers.setdefault(name, markers)
+            markers[owner] = marker
             self._marker_ids.add(id(marker))
+        if not markers:
+            self._markers.pop(name, None)
 
-    def _update_subscribers(self) -> None:
+    def _update_subscribers(self, only: Collection[str] | None = None) -> None:
         """Subscribe to remote data exactly while something here listens to it.
+
+        ``only``: for these topic names alone (those whose tokens changed).
 
         On the exact key expression of each remote publisher (its type hash included, from its
         token): a Humble publisher feeds a Jazzy simbridge and vice versa. Not on a wildcard
@@ -929,19 +1082,24 @@ class ZenohLink:
         discovery runs). Latched topics keep one advanced subscriber on the wildcard.
         """
         wanted: dict[str, tuple[str, bool, bool]] = {}
-        remote = {name for name, _node in self._imported_pubs}
-        for name, topic in self.graph.topics.topics.items():
+        remote = self._imported_pubs
+        table = self.graph.topics.topics
+        for name in table if only is None else [n for n in only if n in table]:
+            topic = table[name]
             if topic.type is None or not topic.known:
                 continue
+            if self.refusal(name) is not None:
+                continue  # ROS 2 may not publish it here: its samples are not even asked for
             # a rosbridge client's subscription only while ROS 2 publishes the topic
             local = any(id(cb) not in self._marker_ids for _n, cb in topic.internal)
             if local or (topic.subscriptions and name in remote):
                 wanted[name] = (topic.type, topic.latch, local)
         published: dict[str, set[str]] = {}
-        for entity in self._remote.values():
-            if entity.kind == "MP" and entity.name in wanted:
-                with contextlib.suppress(ValueError):
-                    published.setdefault(entity.name, set()).add(entity.keyexpr())
+        for name in wanted:
+            for entity in self._by_name.get(name, {}).values():
+                if entity.kind == "MP":
+                    with contextlib.suppress(ValueError):
+                        published.setdefault(name, set()).add(entity.keyexpr())
         keys: dict[str, set[str]] = {}
         for name, (type_name, latched, local) in wanted.items():
             try:
@@ -956,7 +1114,8 @@ class ZenohLink:
             except (SimbridgeError, ValueError) as err:
                 self._log(f"sub {name}", f"Zenoh: cannot subscribe to {name}: {err}")
         channels = dict(self._channels)
-        for name in list(self._subscribers):
+        mine = self._subscribers
+        for name in list(mine) if only is None else [n for n in only if n in mine]:
             subs = self._subscribers[name]
             for key in [k for k in subs if k not in keys.get(name, ())]:
                 _quietly(subs.pop(key).undeclare)
@@ -1037,16 +1196,24 @@ class ZenohLink:
             return
         k = self._poll_next % len(channels)
         budget = POLL_BATCH
+        room = DRAIN_BYTES
         for name, handler in channels[k:] + channels[:k] if k else channels:
             k += 1
             sample = handler.try_recv()
             while sample is not None:
-                self._on_sample(name, bytes(sample.payload.to_bytes()))
+                payload = sample.payload
+                size = len(payload)
+                if size > self.max_sample:
+                    self._drop_oversized(name, size)
+                else:
+                    self._on_sample(name, bytes(payload.to_bytes()))
+                    room -= size
                 budget -= 1
-                if not budget:
+                if not budget or room <= 0:
                     break
                 sample = handler.try_recv()
-            if not budget:
+            if not budget or room <= 0:
+                budget = 0
                 break
         self._poll_next = k
         now = loop.time()
@@ -1062,38 +1229,89 @@ class ZenohLink:
             self._poll_handle = loop.call_soon(self._poll)
 
     def _sample_handler(self, name: str) -> Callable[[Any], None]:
-        inbox = self._inbox
-
         def on_sample(sample: Any) -> None:  # a Zenoh thread: as little as it can
-            if len(inbox) == INBOX_LIMIT:
-                self.stats["samples_dropped"] += 1  # the oldest goes: the loop is overloaded
-            inbox.append((name, bytes(sample.payload.to_bytes())))
-            if not self._inbox_rung:
-                loop = self._loop
-                if loop is not None:
-                    self._inbox_rung = True  # one wake-up of the event loop per burst
-                    loop.call_soon_threadsafe(self._drain)
+            self.hand_over(self._on_sample, name, sample.payload)
 
         return on_sample
+
+    def hand_over(self, take: Callable[[str, bytes], None], name: str, payload: Any) -> None:
+        """Queue a sample's payload (Zenoh bytes) for ``take(name, bytes)`` on the event loop.
+
+        Called on Zenoh's threads. A payload over ``zenoh_max_sample_bytes`` is dropped before
+        it is copied (counted, reported once per :data:`LOG_EVERY`); past
+        :data:`INBOX_LIMIT` samples or ``zenoh_inbox_bytes`` bytes waiting, the oldest go
+        (counted: the loop is overloaded).
+        """
+        size = len(payload)
+        if size > self.max_sample:
+            self._drop_oversized(name, size)
+            return
+        data = bytes(payload.to_bytes())
+        inbox = self._inbox
+        with self._inbox_lock:
+            while inbox and (
+                len(inbox) >= INBOX_LIMIT or self._inbox_bytes + size > self.max_inbox
+            ):
+                self._inbox_bytes -= len(inbox.popleft()[2])
+                self.stats["samples_dropped"] += 1
+            inbox.append((take, name, data))
+            self._inbox_bytes += size
+            ring = not self._inbox_rung
+            self._inbox_rung = True  # one wake-up of the event loop per burst
+        loop = self._loop
+        if ring and loop is not None:
+            loop.call_soon_threadsafe(self._drain)
+
+    def _drop_oversized(self, name: str, size: int) -> None:
+        """Count a sample over ``zenoh_max_sample_bytes``; have the loop report it (any thread)."""
+        self.stats["samples_oversized"] += 1
+        self._oversized = (name, size)
+        loop = self._loop
+        if not self._oversized_rung and loop is not None:
+            self._oversized_rung = True
+            loop.call_soon_threadsafe(self._report_oversized)
+
+    def _report_oversized(self) -> None:
+        self._oversized_rung = False
+        if self._oversized is not None:
+            name, size = self._oversized
+            self._log(
+                "oversized",
+                f"Zenoh: a sample of {size} bytes on {name} dropped: over zenoh_max_sample_bytes "
+                f"({self.max_sample}); {self.stats['samples_oversized']} dropped so far",
+            )
 
     def _drain(self) -> None:
         """Hand the samples that arrived to the graph (the event loop).
 
-        Only those already there: under a flood, the loop's other work (clients, the tick)
-        runs between two batches instead of waiting for the flood to end.
+        Only those already there, at most :data:`DRAIN_BATCH` of them and :data:`DRAIN_BYTES`
+        bytes: under a flood, the loop's other work (clients, the tick) runs between two
+        batches instead of waiting for the flood to end.
         """
-        self._inbox_rung = False
         inbox = self._inbox
-        for _ in range(min(len(inbox), DRAIN_BATCH)):
-            name, payload = inbox.popleft()
-            self._on_sample(name, payload)
-        if inbox and not self._inbox_rung and self._loop is not None:
-            self._inbox_rung = True
-            self._loop.call_soon(self._drain)
+        budget = DRAIN_BYTES
+        for _ in range(DRAIN_BATCH):
+            with self._inbox_lock:
+                if not inbox:
+                    break
+                take, name, payload = inbox.popleft()
+                self._inbox_bytes -= len(payload)
+            take(name, payload)
+            budget -= len(payload)
+            if budget <= 0:
+                break
+        with self._inbox_lock:
+            again = bool(inbox) and self._loop is not None
+            self._inbox_rung = again
+        if again:
+            self._loop.call_soon(self._drain)  # type: ignore[union-attr]
 
     def _on_sample(self, name: str, payload: bytes) -> None:
         topic = self.graph.topics.topics.get(name)
         if topic is None or topic.type is None or self.session is None:
+            return
+        # (names allowed are kept as None: one look-up on the way of every sample)
+        if self._refusals.get(name, "") is not None and self._refused(name, "a sample on"):
             return
         self.stats["received"] += 1
         try:
@@ -1317,6 +1535,35 @@ class ZenohLink:
             return {**answer, "message": orjson.dumps(doc).decode()}
 
         service.handler = extended
+
+    # -- access ------------------------------------------------------------------------------
+
+    def refusal(self, name: str) -> str | None:
+        """Return why ROS 2 peers may not publish on (or provide) ``name``; None if they may.
+
+        The admission's scope rule for the ROS 2 peers' role (:func:`ros2_access`), kept per
+        name: samples of a refused name are never subscribed to (and dropped if they come),
+        remote publishers, services and actions under it are not brought into the graph.
+        """
+        try:
+            return self._refusals[name]
+        except KeyError:
+            pass
+        if len(self._refusals) >= 10_000:
+            self._refusals.clear()  # names come from the graph and the tokens: bounded anyway
+        text = self.graph.admission.publish_refusal(self._caller.session, name)
+        self._refusals[name] = text
+        return text
+
+    def _refused(self, name: str, what: str, *, count: bool = True) -> bool:
+        """Whether ROS 2 may not bring ``name`` in; log (rate-limited) and count a refusal."""
+        text = self.refusal(name)
+        if text is None:
+            return False
+        if count:
+            self.stats["refused"] += 1
+        self._log(f"refused {name}", f"Zenoh: {what} {text} (ROS 2 peers' role; --ros2-role)")
+        return True
 
     # -- logging -----------------------------------------------------------------------------
 

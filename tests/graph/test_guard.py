@@ -8,7 +8,14 @@ import pytest
 
 from simbridge.config import ServerSettings
 from simbridge.graph import Graph, install_rosapi
-from simbridge.graph.guard import Guard, TokenBucket, rosauth_mac, token_access
+from simbridge.graph.guard import (
+    NO_ROBOT,
+    Guard,
+    TokenBucket,
+    ros2_access,
+    rosauth_mac,
+    token_access,
+)
 from tests.helpers import RecordingPeer
 
 
@@ -55,6 +62,39 @@ def test_token_access_maps_admin_and_client_tokens_and_rejects_others() -> None:
     assert token_access(s, "teacher-token-ccc") == ("*", True)
     assert token_access(s, "wrong") is None
     assert token_access(s, None) is None
+
+
+def test_ros2_peers_get_the_role_chosen_and_in_class_mode_by_default_no_robot() -> None:
+    assert ros2_access(ServerSettings()) == ("*", True)  # a laptop on its own: open
+    assert ros2_access(ServerSettings(admin_token="the-admin-token")) == ("*", False)
+    assert ros2_access(ServerSettings(client_tokens=TOKENS)) == (NO_ROBOT, False)
+    assert ros2_access(ServerSettings(auth_secret="s" * 16)) == (NO_ROBOT, False)
+    classroom = {"client_tokens": TOKENS, "admin_token": "the-admin-token"}
+    for role, access in [
+        ("none", (NO_ROBOT, False)),
+        ("robot:r2", ("r2", False)),
+        ("robots", ("*", False)),
+        ("admin", ("*", True)),
+    ]:
+        assert ros2_access(ServerSettings(ros2_role=role, **classroom)) == access
+
+
+def test_a_peer_outside_the_protocol_is_asked_the_same_rules_by_name() -> None:
+    graph, _guard = make(client_tokens=TOKENS, admin_token="the-admin-token")
+    admission = graph.admission
+    nobody = graph.new_session()
+    nobody.connect(NO_ROBOT, False)
+    student = graph.new_session()
+    student.connect("r1", False)
+    for name in ("/cmd_vel", "/r1/cmd_vel", "/chatter", "/tf"):
+        assert admission.publish_refusal(nobody, name) is not None
+    assert admission.publish_refusal(student, "/r1/cmd_vel") is None
+    assert admission.publish_refusal(student, "/r2/cmd_vel") is not None
+    for name in ("/reset", "/virtual_robot/set_parameters", "/any/set_parameters_atomically"):
+        assert "administrative" in str(admission.reach_refusal(student, name))
+    assert "another robot" in str(admission.reach_refusal(nobody, "/r1/estop/reset"))
+    assert admission.reach_refusal(student, "/r1/estop/reset") is None
+    assert admission.reach_refusal(nobody, "/rosapi/topics") is None
 
 
 def test_token_bucket_allows_the_burst_then_the_rate() -> None:
