@@ -108,6 +108,9 @@ class Goal:
     table: ActionTable
     status: int = EXECUTING
     done: bool = False
+    #: The action type the sender named (``""``: none), as written; an in-process server may
+    #: serve several types under one name and answer in the one the goal was sent with.
+    sent_type: str = ""
 
     def feedback(self, values: Any) -> None:
         """Send feedback to the goal's sender (if it asked for feedback)."""
@@ -273,10 +276,12 @@ class ActionTable:
         written: str,
         feedback: bool,
         goal_uuid: bytes | None = None,
+        sent_type: str = "",
     ) -> Goal:
         """Send an admitted goal of ``peer`` (``message`` validated) to ``action``.
 
-        ``goal_uuid`` is the goal's id when the sender chose one (a ROS 2 client does).
+        ``goal_uuid`` is the goal's id when the sender chose one (a ROS 2 client does);
+        ``sent_type`` the action type it named (``send_action_goal``'s ``action_type``).
         """
         name = action.name
         server_id = f"action_goal:{name}:{next(self._counter)}"
@@ -291,6 +296,7 @@ class ActionTable:
             goal_uuid or uuid.uuid4().bytes,
             self.graph.stamp(),
             self,
+            sent_type=sent_type,
         )
         self.goals[server_id] = goal
         if action.server is not None:

@@ -455,7 +455,13 @@ class Graph:
         op = goal.op
         assert op is not None
         self.actions.submit(
-            peer, goal.action, goal.message, op_id=op.id, written=op.action, feedback=op.feedback
+            peer,
+            goal.action,
+            goal.message,
+            op_id=op.id,
+            written=op.action,
+            feedback=op.feedback,
+            sent_type=op.action_type,
         )
 
     def _action_feedback(self, peer: Peer, update: GoalUpdate, now: float) -> None:

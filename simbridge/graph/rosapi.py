@@ -303,7 +303,10 @@ def _install_params(graph: Graph) -> None:
         name = _string(req, "name", "/rosapi/delete_param")
         return {
             "successful": False,
-            "reason": f"parameter '{name}' cannot be deleted: simulator parameters are fixed",
+            "reason": (
+                f"parameter '{name}' cannot be deleted: simbridge's nodes keep the parameters "
+                "they declare"
+            ),
         }
 
     def get_param_names(args: Any) -> dict[str, Any]:

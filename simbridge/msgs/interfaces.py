@@ -1,7 +1,8 @@
 """Service and action interfaces that rosbags does not carry, and the messages they need.
 
 rosbags holds every standard ROS 2 *message*; clients of a rosbridge also use services and
-actions: ``std_srvs``, ``example_interfaces`` (``AddTwoInts``, ``Fibonacci``...), the parameter
+actions: ``std_srvs``, ``example_interfaces`` (``AddTwoInts``, ``Fibonacci``...),
+``action_tutorials_interfaces/action/Fibonacci`` (feedback ``partial_sequence``), the parameter
 services of ``rcl_interfaces``, ``action_msgs/srv/CancelGoal``, rosapi's (``rosapi_msgs``) and
 tf2_web_republisher's. The definitions below are simbridge's own text written from the public
 interfaces' field lists (names, types and constants are what clients depend on); a request and
@@ -146,6 +147,9 @@ SERVICES: dict[str, str] = {
 ACTIONS: dict[str, str] = {
     "example_interfaces/action/Fibonacci": "int32 order\n---\nint32[] sequence\n---\n"
     "int32[] sequence",
+    # the ROS 2 action tutorials' own type up to Jazzy (ros2/demos#701: the above since Kilted)
+    "action_tutorials_interfaces/action/Fibonacci": "int32 order\n---\nint32[] sequence\n---\n"
+    "int32[] partial_sequence",
     **{
         f"{pkg}/action/TFSubscription": (
             "string[] source_frames\nstring target_frame\nfloat32 angular_thres\n"

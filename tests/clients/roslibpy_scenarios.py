@@ -655,7 +655,9 @@ def tutorials(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
 
     The talker on /chatter, /add_two_ints, and /fibonacci through the ROS 1 actionlib client of
     roslibpy's docs (ros-action-client.py: actionlib_tutorials/FibonacciAction) and the ROS 2
-    ActionClient; TF of the world file's turtle1 frame via roslibpy's TFClient.
+    ActionClient, typed example_interfaces and action_tutorials_interfaces (the three goals at
+    once); TF of the world file's turtle1 frame via roslibpy's TFClient; a tutorial node's
+    use_sim_time with roslibpy.Param and get_params; whether /listener is a node, a topic.
     """
     from roslibpy.ros1 import actionlib
     from roslibpy.tf import TFClient
@@ -671,33 +673,57 @@ def tutorials(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     feedback: list[Any] = []
     goal.on("feedback", lambda f: feedback.append(f["sequence"]))
     goal.send()
-    result = goal.wait(timeout_s + order)
-    status = goal.status["status"]
-    client.dispose()
 
-    ros2: dict[str, Any] = {}
+    ros2: dict[str, dict[str, Any]] = {}
     done = threading.Event()
-    action = roslibpy.ActionClient(ros, "/fibonacci", "example_interfaces/action/Fibonacci")
+    for action_type in (
+        "example_interfaces/action/Fibonacci",
+        "action_tutorials_interfaces/action/Fibonacci",
+    ):
+        got: dict[str, Any] = {"feedback": []}
+        ros2[action_type.split("/")[0]] = got
 
-    def on_result(r: Any) -> None:
-        ros2.update(status=int(r["status"].value), values=r["values"])
-        done.set()
+        def on_result(r: Any, got: dict[str, Any] = got) -> None:
+            got.update(status=int(r["status"].value), values=r["values"])
+            if all("status" in g for g in ros2.values()):
+                done.set()
 
-    action.send_goal(roslibpy.Goal({"order": order}), on_result, lambda f: None, on_result)
-    if not done.wait(timeout_s + order):
-        raise TimeoutError("ROS 2 fibonacci result")
+        action = roslibpy.ActionClient(ros, "/fibonacci", action_type)
+        action.send_goal(
+            roslibpy.Goal({"order": order}),
+            on_result,
+            lambda f, got=got: got["feedback"].append(dict(f)),
+            on_result,
+        )
+
+    name = "/add_two_ints_server:use_sim_time"
+    param = roslibpy.Param(ros, name)
+    sim_time = [param.get(timeout=timeout_s)]
+    for value in (True, False):
+        param.set(value, timeout=timeout_s)
+        sim_time.append(param.get(timeout=timeout_s))
+    params = ros.get_params()
 
     tf = TFClient(ros, fixed_frame="world")
     turtle: list[Any] = []
     tf.subscribe("turtle1", lambda t: turtle.append(dict(t["translation"])))
     wait_for(lambda: turtle, timeout_s, "turtle1 from roslibpy's TFClient")
     tf.dispose()
+    listener = {"node": "/listener" in ros.get_nodes(), "topic": "/listener" in ros.get_topics()}
+
+    result = goal.wait(timeout_s + order)
+    status = goal.status["status"]
+    client.dispose()
+    if not done.wait(timeout_s + order):
+        raise TimeoutError("ROS 2 fibonacci results")
     return {
         "chatter": {"talker": [m["data"] for m in talker]},
         "sum": dict(total),
         "actionlib": {"result": result["sequence"], "feedback": feedback, "status": status},
         "ros2": ros2,
         "tf": turtle[0],
+        "simTime": {"values": sim_time, "listed": name in params},
+        "listener": listener,
     }
 
 

@@ -1,10 +1,12 @@
 from __future__ import annotations
 
 import json
+import random
 from typing import Any
 
 import pytest
 
+from simbridge.errors import ServiceError
 from simbridge.graph import Graph
 from simbridge.graph.tutorials import MAX_GOALS, TutorialNodes, install_tutorials
 from tests.helpers import RecordingPeer
@@ -183,9 +185,9 @@ def test_actionlib_fibonacci_speaks_ros1_topics_and_status_numbers(
     assert feedback["status"]["goal_id"]["id"] == "goal_1" and feedback["status"]["status"] == 1
     assert status["status_list"][0]["status"] == 1
     assert set(status["status_list"][0]["goal_id"]["stamp"]) == {"sec", "nanosec"}
-    run(nodes, 0.3, 1.3)
+    run(nodes, 0.3, 2.3)
     (result,) = [m["msg"] for m in c.take() if m["topic"] == "/fibonacci/result"]
-    assert result["result"] == {"sequence": [0, 1, 1]} and result["status"]["status"] == 3
+    assert result["result"] == {"sequence": [0, 1, 1, 2]} and result["status"]["status"] == 3
 
 
 def test_actionlib_cancel_preempts_only_the_senders_own_goals(
@@ -208,3 +210,147 @@ def test_actionlib_cancel_preempts_only_the_senders_own_goals(
     (result,) = [m["msg"] for m in a.take() if m["topic"] == "/fibonacci/result"]
     assert result["status"]["status"] == 2 and result["status"]["goal_id"]["id"] == "goal_a"
     assert [r.al_goal.goal_id["id"] for r in nodes.runs if r.al_goal] == ["goal_b"]
+
+
+def _ros1_goal(peer: RecordingPeer, graph: Graph, order: int, now: float) -> None:
+    for name in ("/fibonacci/feedback", "/fibonacci/result"):
+        op(peer, graph, now, op="subscribe", topic=name)
+    goal = {"goal_id": {"id": "g"}, "goal": {"order": order}}
+    op(
+        peer,
+        graph,
+        now,
+        op="publish",
+        topic="/fibonacci/goal",
+        msg=goal,
+        type="actionlib_tutorials/FibonacciActionGoal",
+    )
+
+
+def _timed(
+    peer: RecordingPeer, nodes: TutorialNodes, ticks: list[float]
+) -> list[tuple[float, str, Any]]:
+    """Tick at each of ``ticks``; return (tick time, topic, msg) of each message sent."""
+    out = []
+    for now in ticks:
+        nodes.tick(now)
+        out += [(now, m["topic"], m["msg"]) for m in peer.take()]
+    return out
+
+
+def test_actionlib_fibonacci_sends_order_feedbacks_then_order_plus_two_numbers(
+    graph: Graph, nodes: TutorialNodes
+) -> None:
+    """As actionlib_tutorials' fibonacci_server (i = 1..order): order 7, 7 feedbacks, 9 numbers.
+
+    The last feedback is [0, 1, 1, 2, 3, 5, 8, 13, 21], and the result is that sequence.
+    """
+    c = RecordingPeer(graph)
+    nodes.tick(0.0)
+    _ros1_goal(c, graph, 7, 0.0)
+    got = [(m["topic"], m["msg"]) for m in c.take()]
+    got += [(topic, m) for _when, topic, m in _timed(c, nodes, _grid(0.05, 7.5))]
+    feedback = [m["feedback"]["sequence"] for topic, m in got if topic == "/fibonacci/feedback"]
+    (result,) = [m for topic, m in got if topic == "/fibonacci/result"]
+    fib = [0, 1, 1, 2, 3, 5, 8, 13, 21]
+    assert feedback == [fib[: n + 3] for n in range(7)]
+    assert result["result"] == {"sequence": fib} and result["status"]["status"] == 3
+
+
+def _grid(start: float, end: float, jitter: float = 0.0) -> list[float]:
+    """The server loop's tick times: every 50 ms from ``start``, each up to ``jitter`` late."""
+    rng = random.Random(28)
+    n = round((end - start) / 0.05) + 1
+    return [round(start + 0.05 * k + rng.uniform(0.0, jitter), 9) for k in range(n)]
+
+
+def test_fibonacci_steps_keep_a_fixed_1hz_schedule_whatever_the_tick_jitter(
+    graph: Graph, nodes: TutorialNodes
+) -> None:
+    """As ros::Rate and rclcpp::Rate, step k is due at start + k s.
+
+    Ticks a little late (the server loop's, up to 10 ms here) never push the later steps back.
+    """
+    c = RecordingPeer(graph)
+    nodes.tick(0.0)
+    _ros1_goal(c, graph, 7, 0.0)
+    c.take()  # the first feedback, at once
+    steps = [when for when, _topic, _msg in _timed(c, nodes, _grid(0.05, 7.5, jitter=0.01))]
+    assert len(steps) == 7  # six more feedbacks, then the result
+    for k, when in enumerate(steps, start=1):
+        assert k <= when < k + 0.061, f"step {k} at {when:.3f} s"
+
+
+def _ros2_goal(peer: RecordingPeer, graph: Graph, goal_id: str, action_type: str) -> None:
+    op(
+        peer,
+        graph,
+        op="send_action_goal",
+        action="/fibonacci",
+        id=goal_id,
+        action_type=action_type,
+        args={"order": 2},
+        feedback=True,
+    )
+
+
+def test_fibonacci_feedback_names_the_field_of_the_type_the_goal_was_sent_with(
+    graph: Graph, nodes: TutorialNodes
+) -> None:
+    """example_interfaces' feedback is ``sequence``, action_tutorials_interfaces' another.
+
+    action_tutorials_interfaces (the type of the tutorials up to Jazzy) names it
+    ``partial_sequence``; both results are ``sequence``.
+    """
+    c = RecordingPeer(graph)
+    nodes.tick(0.0)
+    _ros2_goal(c, graph, "ex", "example_interfaces/action/Fibonacci")
+    _ros2_goal(c, graph, "tut", "action_tutorials_interfaces/Fibonacci")
+    run(nodes, 0.05, 1.0)
+    got = {(m["id"], m["op"]): m["values"] for m in c.take()}
+    assert got == {
+        ("ex", "action_feedback"): {"sequence": [0, 1, 1]},
+        ("tut", "action_feedback"): {"partial_sequence": [0, 1, 1]},
+        ("ex", "action_result"): {"sequence": [0, 1, 1]},
+        ("tut", "action_result"): {"sequence": [0, 1, 1]},
+    }
+
+
+def test_fibonacci_refuses_a_goal_of_another_action_type_naming_the_types_it_serves(
+    graph: Graph, nodes: TutorialNodes
+) -> None:
+    c = RecordingPeer(graph)
+    _ros2_goal(c, graph, "x", "my_pkg/action/Countdown")
+    (refused,) = c.take()
+    assert refused["op"] == "action_result" and refused["result"] is False
+    assert "my_pkg/action/Countdown" in refused["values"]
+    assert "example_interfaces/action/Fibonacci" in refused["values"]
+    assert nodes.runs == []
+
+
+def test_every_ros2_tutorial_node_declares_a_settable_bool_use_sim_time(
+    graph: Graph, nodes: TutorialNodes
+) -> None:
+    """As rclcpp's and rclpy's TimeSource declare it on every node: false, bool only."""
+    ros2_nodes = ["/add_two_ints_server", "/fibonacci_action_server", "/listener", "/talker"]
+    assert sorted(graph.params.nodes) == ros2_nodes
+    for node in ros2_nodes:
+        assert graph.params.names(node) == ["use_sim_time"]
+        assert graph.params.get(node, "use_sim_time") is False
+    graph.params.set("/add_two_ints_server", {"use_sim_time": True})
+    assert graph.params.get("/add_two_ints_server", "use_sim_time") is True
+    assert graph.params.get("/talker", "use_sim_time") is False  # each node has its own
+    with pytest.raises(ServiceError, match="use_sim_time"):
+        graph.params.set("/talker", {"use_sim_time": "yes"})
+    assert graph.params.get("/talker", "use_sim_time") is False
+
+
+def test_fibonacci_after_a_stall_restarts_its_schedule_instead_of_catching_up(
+    graph: Graph, nodes: TutorialNodes
+) -> None:
+    c = RecordingPeer(graph)
+    nodes.tick(0.0)
+    _ros1_goal(c, graph, 7, 0.0)
+    c.take()
+    assert len(_timed(c, nodes, [3.5, 3.55, 4.45])) == 1  # the loop stalled 3.5 s: one step
+    assert len(_timed(c, nodes, [4.5])) == 1
