@@ -8,6 +8,7 @@ import {
 import { LivePlot, download } from './plots.js';
 import { PidLab, exampleCode, wrapAngle } from './pid.js';
 import { spawnNear } from './spawn.js';
+import { Gap } from './gap.js';
 import { CmdVelType, TWIST, choiceFromUrl, velocityMessage, twistOf } from './cmdvel.js';
 
 const $ = (id) => document.getElementById(id);
@@ -363,12 +364,13 @@ const plots = {
   step: new LivePlot($('plotStep'), [{ label: 'setpoint', color: '#94a3b8', dash: [5, 3] }, { label: 'measured', color: '#2563eb', width: 2 }],
     { title: 'step response', window: 10, anchored: true, maxPoints: 6000, file: 'step-response', columns: ['command'] }),
 };
+const gap = new Gap(conn, view, $('plotGap'), (stamp) => plotTime(stamp));
 const liveTime = () => performance.now() / 1000;
 /** The plots' time (s) for a stamp: from the first stamp seen; a stamp going back restarts. */
 function plotTime(stamp) {
   if (stamp === undefined) return state.t0 === null ? 0 : (state.lastStamp ?? state.t0) - state.t0;
   if (state.t0 === null || stamp < (state.lastStamp ?? stamp) - 1) {
-    if (state.t0 !== null) for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.clear();
+    if (state.t0 !== null) for (const p of [plots.v, plots.w, plots.heading, plots.range, gap.plot]) p.clear();
     state.t0 = stamp;
     state.heading = null;
   }
@@ -376,7 +378,7 @@ function plotTime(stamp) {
   return stamp - state.t0;
 }
 function showPlotsTab(on) {
-  for (const p of [plots.v, plots.w, plots.heading, plots.range]) p.setVisible(on);
+  for (const p of [plots.v, plots.w, plots.heading, plots.range, gap.plot]) p.setVisible(on);
 }
 
 // ---- subscriptions -------------------------------------------------------------------------
@@ -407,6 +409,7 @@ function subscribeRobot() {
       plots.v.push(t, [state.cmd.v, state.meas.v], stamp);
       plots.w.push(t, [state.cmd.w, state.meas.w], stamp);
       plots.heading.push(t, [state.heading.unwrapped], stamp);
+      gap.onOdom(m);
       if (document.body.classList.contains('stale')) markStale();
     }),
     conn.subscribe(topic('scan'), 'sensor_msgs/msg/LaserScan', (m) => {
@@ -420,6 +423,7 @@ function subscribeRobot() {
       view.setContact({ x: m.point.x, y: m.point.y, other: m.other });
     }),
     conn.subscribe(state.ns ? `/${state.ns}/estop/state` : '/estop/state', 'std_msgs/msg/Bool', (m) => showEstop(Boolean(m.data))),
+    gap.subscribe(topic('ground_truth')),
   ];
   subscribeCmd();
   subscribeOthers();
@@ -668,5 +672,5 @@ showPlotsTab(false);
 plots.step.setVisible(false);
 
 // for tests and curious students: the page's parts
-window.simbridge = { conn, view, driver, lab, plots, state, cmdVel, download, liveTime };
+window.simbridge = { conn, view, driver, lab, plots, state, cmdVel, download, liveTime, gap };
 conn.connect();

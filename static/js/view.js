@@ -21,6 +21,7 @@ export class View {
     this.walls = [];            // [x1, y1, x2, y2]
     this.pose = null;           // {x, y, theta}
     this.others = new Map();    // other robots: name -> {x, y, theta}
+    this.ghost = null;          // {x, y, theta}: the true pose (/ground_truth), when it differs
     this.radius = 0.105;
     this.trail = [];            // [x, y]
     this.scan = [];             // [x, y] in world
@@ -99,6 +100,15 @@ export class View {
   clearTrail() { this.trail = []; this.requestDraw(); }
   clear() {
     this.pose = null; this.scan = []; this.laser = null; this.trail = []; this.contact = null;
+    this.ghost = null;
+    this.requestDraw();
+  }
+  /** The true pose drawn as a ghost beside the odometry pose (null: none). */
+  setGhost(pose) {
+    const g = this.ghost;
+    if (pose && g && g.x === pose.x && g.y === pose.y && g.theta === pose.theta) return;
+    if (!pose && !g) return;
+    this.ghost = pose;
     this.requestDraw();
   }
   setOther(name, pose) {
@@ -287,6 +297,24 @@ export class View {
       ctx.beginPath(); ctx.arc(this.pose.x, this.pose.y, r + 4 * px, 0, 2 * Math.PI); ctx.stroke();
       ctx.fillStyle = '#ea580c';
       ctx.beginPath(); ctx.arc(hit.x, hit.y, 5 * px, 0, 2 * Math.PI); ctx.fill();
+    }
+    // the true pose (a realism profile: odometry drifts from it): a dashed ghost
+    const ghost = this.ghost;
+    if (ghost) {
+      ctx.save();
+      ctx.translate(ghost.x, ghost.y);
+      ctx.strokeStyle = '#7c3aed';
+      ctx.fillStyle = 'rgba(124, 58, 237, 0.10)';
+      ctx.lineWidth = 2 * px;
+      ctx.setLineDash([5 * px, 4 * px]);
+      ctx.beginPath(); ctx.arc(0, 0, r, 0, 2 * Math.PI); ctx.fill(); ctx.stroke();
+      ctx.setLineDash([]);
+      ctx.beginPath(); ctx.moveTo(0, 0); ctx.lineTo(r * 1.3 * Math.cos(ghost.theta), r * 1.3 * Math.sin(ghost.theta)); ctx.stroke();
+      ctx.scale(px, -px);
+      ctx.fillStyle = '#6d28d9';
+      ctx.font = '11px system-ui, sans-serif';
+      ctx.fillText('true pose', r * s + 3, r * s + 12);
+      ctx.restore();
     }
     // robot
     if (this.pose) {
