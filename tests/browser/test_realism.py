@@ -1,5 +1,8 @@
-"""The sim-to-real gap in Chromium (issue 26): /admin gives one robot a worn profile; its page
-shows the true pose as a ghost and the odometry error over time, exported as CSV."""
+"""The sim-to-real gap in Chromium (issue 26).
+
+/admin gives one robot a worn profile; its page shows the true pose as a ghost and the odometry
+error over time, exported as CSV.
+"""
 
 from __future__ import annotations
 
