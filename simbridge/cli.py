@@ -150,6 +150,14 @@ def _add_security_options(parser: argparse.ArgumentParser, env: Environment) -> 
         "[SIMBRIDGE_MAX_HTTP_CONNECTIONS]",
     )
     group.add_argument(
+        "--max-http-connections-per-address",
+        type=_typed(Count),
+        default=env.max_http_connections_per_address or defaults.max_http_connections_per_address,
+        help="open connections of the HTTP port from one client address at most (default: 16; "
+        "a request with the admin token always gets in) "
+        "[SIMBRIDGE_MAX_HTTP_CONNECTIONS_PER_ADDRESS]",
+    )
+    group.add_argument(
         "--max-message-size",
         type=_typed(Count),
         default=env.max_message_size or defaults.max_message_size,
@@ -286,6 +294,7 @@ def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
         "admin_token": args.admin_token or None,
         "max_clients": args.max_clients,
         "max_http_connections": args.max_http_connections,
+        "max_http_connections_per_address": args.max_http_connections_per_address,
         "max_message_size": args.max_message_size,
         "stall_timeout": args.stall_timeout,
         "ping_interval": args.ping_interval,

@@ -676,6 +676,10 @@ class ServerSettings(Record, frozen=True):
     #: Open connections of the HTTP port at most (page, /healthz, /admin); when all are busy
     #: one more is refused with 503, else the longest-idle keep-alive one is closed for it.
     max_http_connections: Count = 256
+    #: Open connections of the HTTP port from one client address (an IPv6 address: its /64)
+    #: at most, by the same rule. A request with the admin token is never refused for want of
+    #: room, whatever fills the pool (docs/security.md, "HTTP").
+    max_http_connections_per_address: Count = 16
     #: Subscribed topic spellings per client at most.
     max_subscriptions: Count = 200
     #: Advertised topics, services and actions per client at most.
@@ -826,6 +830,7 @@ class Environment(Record, frozen=True):
     keyfile: str | None = None
     max_clients: Count | None = None
     max_http_connections: Count | None = None
+    max_http_connections_per_address: Count | None = None
     max_message_size: Count | None = None
     stall_timeout: Seconds | None = None
     ping_interval: Seconds | None = None

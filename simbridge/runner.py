@@ -274,7 +274,12 @@ class App:
         if s.http_port is not None:
             tls = tls_context(s.certfile, s.keyfile) if s.certfile else None
             self._http = await serve_http(
-                self.web, s.host, s.http_port, ssl=tls, max_connections=s.max_http_connections
+                self.web,
+                s.host,
+                s.http_port,
+                ssl=tls,
+                max_connections=s.max_http_connections,
+                max_per_address=s.max_http_connections_per_address,
             )
         loop = asyncio.get_running_loop()
         if not self.no_sim:

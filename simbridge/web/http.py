@@ -9,11 +9,17 @@ strict (a NUL or a malformed request line or header is a 400 naming the fault), 
 an order of magnitude cheaper per request than h11 (which would make an HTTP flood cost the
 20 Hz loop more than the hand-written parser it replaced did; ``python -m bench http``).
 
-What one client can make the server hold is bounded: a request's body must arrive within
-``body_timeout`` (10 s, else 408) and be at most 1 MB (else 413); at most
-``max_http_connections`` connections are open (when all are busy, 503 naming the budget;
-otherwise the longest-idle keep-alive connection is closed to make room). A path holding a
-control character (``/%00``) is a 400 on both ports before it reaches a route or the disk.
+What one client can make the server hold is bounded (``docs/security.md``, "HTTP"): a request
+line of at most 8 KB (else 414) and a head of at most 16 KB (else 431), counted as the bytes
+arrive, before the parser has buffered more than a slice of them; a head must arrive within
+``head_timeout`` of its first byte (10 s, else 408) and its body within ``body_timeout`` (10 s,
+else 408), at most 1 MB (else 413). Refusals close the connection. Pipelined requests are parsed a
+slice (4 KB) at a time and answered one at a time with a yield to the loop between two, so a
+write of 1,500 requests costs the 20 Hz loop no more than 1,500 clients would. Connections are
+budgeted in all (``max_http_connections``) and per client address
+(``max_http_connections_per_address``), and a request with the admin token is never refused for
+want of room: :mod:`simbridge.web.pool`. A path holding a control character (``/%00``) is a 400
+on both ports before it reaches a route or the disk.
 
 Static files are served read-only from one directory; a request path is resolved to a real path
 and must stay inside that directory (starlette's StaticFiles guard), whatever ``..`` or symlinks
@@ -30,7 +36,7 @@ import mimetypes
 import os
 import re
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
 from http import HTTPStatus
 from pathlib import Path
@@ -40,12 +46,16 @@ from urllib.parse import parse_qs, unquote, urlsplit
 import httptools
 import orjson
 
+from simbridge.web.pool import Pool, Slot, client_address
+
 
 if TYPE_CHECKING:
     from ssl import SSLContext
 
 __all__ = [
     "BODY_TIMEOUT",
+    "HEAD_TIMEOUT",
+    "SLOW_REQUEST",
     "HttpRequest",
     "HttpResponse",
     "Route",
@@ -72,12 +82,27 @@ _TYPES = {
     ".ico": "image/x-icon",
     ".webmanifest": "application/manifest+json",
 }
+#: Longest request target (the URL of the request line), bytes: longer is 414 and close.
+_MAX_URL = 8_192
+#: Longest request head (request line and header lines), bytes: longer is 431 and close.
 _MAX_HEAD = 16_384
 _MAX_BODY = 1_000_000
+#: Bytes of a read parsed at a time. The requests a slice completes are answered before the
+#: next slice is parsed, so the parser holds at most a slice of a head it has not seen the end
+#: of, and a read of pipelined requests is answered a few at a time, never all in one go.
+_SLICE = 4_096
 #: Seconds a keep-alive connection may wait for its next request (or a new one for its first).
 _IDLE_TIMEOUT = 30.0
+#: Seconds a request's head may take to arrive once its first byte has (then 408 and close).
+HEAD_TIMEOUT = 10.0
 #: Seconds a request's body may take to arrive once its head has (then 408 and close).
 BODY_TIMEOUT = 10.0
+#: When the pool is full, a request that has been arriving for longer than this (seconds) gives
+#: way to a newcomer (408): a browser sends a request's head in one go.
+SLOW_REQUEST = 1.0
+#: Seconds a connection in the pool's reserve (no room: it may be the instructor's) has to send
+#: its first request's head; then it gets the 503 it was spared.
+_RESERVE_TIMEOUT = 2.0
 #: Seconds a refused connection is drained before it closes (see ``_Exchange.linger``).
 _LINGER = 1.0
 
@@ -130,6 +155,10 @@ class WebApp:
         self.health = health
         #: Exact-path routes, checked before static files.
         self.routes: dict[str, Route] = {"/healthz": self._healthz}
+        #: Whether a request's headers (lower-case names) carry the administrator's credentials
+        #: (:func:`simbridge.web.admin.install_admin` sets it): such a request is never refused
+        #: for want of room in the HTTP server's pool.
+        self.privileged: Callable[[Mapping[str, str]], bool] = lambda headers: False
 
     def handle(self, request: HttpRequest) -> HttpResponse:
         """Answer one request (a bad path gets 400: it never reaches a route or the disk)."""
@@ -184,28 +213,6 @@ def parse_target(target: str) -> tuple[str, dict[str, list[str]]]:
     return parts.path or "/", parse_qs(parts.query)
 
 
-class _Connections:
-    """The open HTTP connections of one server, and its budget of them."""
-
-    def __init__(self, limit: int) -> None:
-        self.limit = limit
-        #: Each open connection's writer -> whether it waits between requests (keep-alive).
-        self.open: dict[asyncio.StreamWriter, bool] = {}
-        #: Connections refused with 503 since the start.
-        self.refused = 0
-
-    def admit(self, writer: asyncio.StreamWriter) -> bool:
-        """Take a slot for ``writer``: a free one, else the longest-idle keep-alive one."""
-        if len(self.open) >= self.limit:
-            idle = next((w for w, waiting in self.open.items() if waiting), None)
-            if idle is None:
-                return False
-            del self.open[idle]
-            idle.close()  # a keep-alive connection between requests: the client reconnects
-        self.open[writer] = False
-        return True
-
-
 def _encode(response: HttpResponse, head_only: bool, keep_alive: bool) -> bytes:
     """Return the bytes of ``response`` (RFC 9112 status line, headers, body)."""
     try:
@@ -232,27 +239,51 @@ class _Parsed:
         self.in_message = False
         #: The current request's head is complete and its body is not.
         self.in_body = False
+        #: Requests begun, and heads completed, since the connection opened.
+        self.begun = 0
+        self.heads = 0
+        #: The headers of the last complete head (lower-case names).
+        self.headers: dict[str, str] = {}
         #: The client waits for ``100 Continue`` before it sends the body.
         self.expects_continue = False
         #: The current request's body is over the limit (413).
         self.too_large = False
-        self._url = b""
+        #: Bytes of the current request's target, and of its complete header lines.
+        self.url_bytes = 0
+        self.head_seen = 0
+        #: Bytes of the slices fed wholly inside the current request's head (the parser keeps
+        #: an unfinished header line to itself: this is how its length is known).
+        self.head_fed = 0
+        self._url: list[bytes] = []
         self._headers: dict[str, str] = {}
         self._body: list[bytes] = []
         self._size = 0
 
+    @property
+    def in_head(self) -> bool:
+        """A request's head has begun and is not complete."""
+        return self.in_message and not self.in_body
+
     def on_message_begin(self) -> None:
         self.in_message = True
-        self._url, self._headers, self._body, self._size = b"", {}, [], 0
+        self.begun += 1
+        self._url, self._headers, self._body, self._size = [], {}, [], 0
+        self.url_bytes = self.head_seen = self.head_fed = 0
 
     def on_url(self, url: bytes) -> None:
-        self._url += url
+        self.url_bytes += len(url)
+        self.head_seen += len(url)
+        if self.url_bytes <= _MAX_URL:
+            self._url.append(url)
 
     def on_header(self, name: bytes, value: bytes) -> None:
+        self.head_seen += len(name) + len(value) + 4  # ": " and CRLF
         self._headers[name.decode("latin-1").lower()] = value.decode("latin-1")
 
     def on_headers_complete(self) -> None:
         self.in_body = True
+        self.heads += 1
+        self.headers = self._headers
         length = self._headers.get("content-length", "0")
         self.too_large = length.isdigit() and int(length) > _MAX_BODY
         self.expects_continue = self._headers.get("expect", "").lower() == "100-continue"
@@ -266,10 +297,31 @@ class _Parsed:
 
     def on_message_complete(self) -> None:
         self.in_message = self.in_body = False
-        path, query = parse_target(self._url.decode("latin-1"))
+        path, query = parse_target(b"".join(self._url).decode("latin-1"))
         method = self.parser.get_method().decode("ascii")
         request = HttpRequest(method, path, query, self._headers, b"".join(self._body))
         self.ready.append((request, self.parser.should_keep_alive()))
+
+    def feed(self, piece: bytes) -> tuple[int, str] | None:
+        """Parse ``piece``; return the refusal ``(status, text)`` when the request is refused.
+
+        Raises:
+            httptools.HttpParserError: the bytes are not HTTP (400).
+        """
+        inside, begun = self.in_head, self.begun
+        # no upgrades here: the request is answered, the rest ignored
+        with contextlib.suppress(httptools.HttpParserUpgrade):
+            self.parser.feed_data(piece)
+        if self.url_bytes > _MAX_URL:
+            return 414, f"request target too long (limit {_MAX_URL} bytes)\n"
+        if self.in_head:
+            if inside and self.begun == begun:  # the whole slice was this head's
+                self.head_fed += len(piece)
+            if max(self.head_seen, self.head_fed) > _MAX_HEAD:
+                return 431, f"request head too large (limit {_MAX_HEAD} bytes)\n"
+        if self.too_large:
+            return 413, f"request body too large (limit {_MAX_BODY} bytes)\n"
+        return None
 
 
 class _Exchange:
@@ -280,13 +332,21 @@ class _Exchange:
         app: WebApp,
         reader: asyncio.StreamReader,
         writer: asyncio.StreamWriter,
+        head_timeout: float,
         body_timeout: float,
     ) -> None:
         self.app = app
         self.reader = reader
         self.writer = writer
+        self.head_timeout = head_timeout
         self.body_timeout = body_timeout
         self.parsed = _Parsed()
+
+    def close(self, status: int, text: str) -> None:
+        """Answer ``status`` with ``text`` (unless 0) and close at once (the pool's eviction)."""
+        if status:
+            self.writer.write(_encode(HttpResponse.text(text, status), False, False))
+        self.writer.close()
 
     async def refuse(self, status: int, text: str, headers: dict[str, str] | None = None) -> None:
         """Answer ``status`` with ``text`` and close (a request that cannot be served)."""
@@ -314,82 +374,99 @@ class _Exchange:
                         return
                     left -= len(chunk)
 
-    async def serve(self, connections: _Connections) -> None:
+    async def serve(self, pool: Pool, slot: Slot) -> None:
         """Answer requests until the client closes, idles out, or sends what is refused."""
         loop = asyncio.get_running_loop()
         parsed = self.parsed
-        idle_until = loop.time() + _IDLE_TIMEOUT
-        body_until = 0.0
+        now = loop.time()
+        idle_until = now + (_RESERVE_TIMEOUT if slot.reserved else _IDLE_TIMEOUT)
+        head_until = body_until = 0.0
+        pending = b""  # read and not parsed yet
         while True:
             if parsed.ready:
                 request, keep_alive = parsed.ready.popleft()
+                pool.mark(slot, "busy", now)
                 response = self.app.handle(request)
                 self.writer.write(_encode(response, request.method == "HEAD", keep_alive))
                 await self.writer.drain()
                 if not keep_alive:
                     return
-                idle_until = loop.time() + _IDLE_TIMEOUT
+                # the next pipelined request waits for the loop's other work (the 20 Hz tick)
+                await asyncio.sleep(0)
+                now = loop.time()
+                idle_until = now + _IDLE_TIMEOUT
                 continue
-            # between requests a connection is idle: it may be closed to make room
-            connections.open[self.writer] = not parsed.in_message
-            deadline = body_until if parsed.in_body else idle_until
+            if not pending:
+                pool.mark(slot, "request" if parsed.in_message else "idle", now)
+                deadline, late = idle_until, ""
+                if parsed.in_message:
+                    deadline = body_until if parsed.in_body else head_until
+                    what = "body" if parsed.in_body else "head"
+                    limit = self.body_timeout if parsed.in_body else self.head_timeout
+                    late = f"request {what} not received within {limit:g} s\n"
+                try:
+                    async with asyncio.timeout_at(deadline):
+                        pending = await self.reader.read(65536)
+                except TimeoutError:
+                    if late:
+                        await self.refuse(408, late)
+                    elif slot.reserved:
+                        await self.refuse(503, slot.refusal, {"Retry-After": "1"})
+                    return
+                now = loop.time()
+                if slot.evicted or not pending:
+                    return  # closed to make room for a new connection, or by the client
+            piece, pending = pending[:_SLICE], pending[_SLICE:]
+            begun, heads = parsed.begun, parsed.heads
             try:
-                async with asyncio.timeout_at(deadline):
-                    data = await self.reader.read(65536)
-            except TimeoutError:
-                if parsed.in_body:
-                    await self.refuse(
-                        408, f"request body not received within {self.body_timeout:g} s\n"
-                    )
-                return
-            if self.writer not in connections.open or not data:
-                return  # closed to make room for a new connection, or by the client
-            was_in_body = parsed.in_body
-            try:
-                parsed.parser.feed_data(data)
-            except httptools.HttpParserUpgrade:
-                pass  # no upgrades here: the request is answered, the rest ignored
+                refusal = parsed.feed(piece)
             except httptools.HttpParserError as err:
                 await self.refuse(400, f"bad request: {err}\n")
                 return
-            if parsed.too_large:
-                await self.refuse(413, f"request body too large (limit {_MAX_BODY} bytes)\n")
+            if refusal is not None:
+                await self.refuse(*refusal)
                 return
-            if parsed.in_body and not was_in_body:
-                body_until = loop.time() + self.body_timeout
-                if parsed.expects_continue:
-                    self.writer.write(b"HTTP/1.1 100 Continue\r\n\r\n")
+            if parsed.begun != begun:
+                head_until = now + self.head_timeout
+                if slot.reserved:  # it has the reserve's few seconds, not a member's
+                    head_until = min(head_until, idle_until)
+                pool.mark(slot, "request", now)
+            if parsed.heads != heads:
+                admin = self.app.privileged(parsed.headers)
+                if slot.reserved:
+                    refused = pool.claim(slot, admin, now)
+                    if refused is not None:
+                        await self.refuse(503, refused, {"Retry-After": "1"})
+                        return
+                slot.admin = slot.admin or admin
+                if parsed.in_body:
+                    body_until = now + self.body_timeout
+                    if parsed.expects_continue:
+                        self.writer.write(b"HTTP/1.1 100 Continue\r\n\r\n")
 
 
 async def _serve_connection(
     app: WebApp,
     reader: asyncio.StreamReader,
     writer: asyncio.StreamWriter,
-    connections: _Connections,
+    pool: Pool,
+    head_timeout: float,
     body_timeout: float,
 ) -> None:
-    exchange = _Exchange(app, reader, writer, body_timeout)
+    exchange = _Exchange(app, reader, writer, head_timeout, body_timeout)
+    slot = Slot(client_address(writer.get_extra_info("peername")), exchange.close)
     try:
-        if not connections.admit(writer):
-            connections.refused += 1
-            if connections.refused == 1 or connections.refused % 100 == 0:
-                logger.warning(
-                    "HTTP: %d connections refused so far (max_http_connections=%d)",
-                    connections.refused,
-                    connections.limit,
-                )
-            await exchange.refuse(
-                503,
-                f"server busy: {connections.limit} HTTP connections are open "
-                "(max_http_connections); try again shortly\n",
-                {"Retry-After": "1"},
-            )
+        refusal = pool.admit(slot, asyncio.get_running_loop().time())
+        if refusal is not None:
+            if pool.refused == 1 or pool.refused % 100 == 0:
+                logger.warning("HTTP: %d connections refused so far: %s", pool.refused, refusal)
+            await exchange.refuse(503, refusal, {"Retry-After": "1"})
             return
-        await exchange.serve(connections)
+        await exchange.serve(pool, slot)
     except (ConnectionError, TimeoutError):
         return
     finally:
-        connections.open.pop(writer, None)
+        pool.leave(slot)
         with contextlib.suppress(Exception):
             writer.close()
 
@@ -401,7 +478,10 @@ async def serve_http(
     *,
     ssl: SSLContext | None = None,
     max_connections: int = 256,
+    max_per_address: int = 16,
+    head_timeout: float = HEAD_TIMEOUT,
     body_timeout: float = BODY_TIMEOUT,
+    slow_request: float = SLOW_REQUEST,
 ) -> asyncio.Server:
     """Start the HTTP server (HTTPS with ``ssl``); return it (``sockets`` tells the port).
 
@@ -412,14 +492,18 @@ async def serve_http(
         ssl: serve HTTPS with this context.
         max_connections: open connections at most; when all are busy a new one gets 503 naming
             the budget, else the longest-idle keep-alive connection is closed to make room.
+        max_per_address: open connections from one client address at most (the same rule).
+        head_timeout: seconds a request's head may take to arrive after its first byte (408).
         body_timeout: seconds a request's body may take to arrive after its head (then 408).
+        slow_request: when the pool is full, a request arriving for longer than this (seconds)
+            is closed (408) to make room for a newcomer.
     """
-    connections = _Connections(max_connections)
+    pool = Pool(max_connections, max_per_address, slow=slow_request)
 
     async def handler(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         # a page's idle keep-alive connection is cancelled at shutdown (SIGTERM): end quietly
         # (asyncio's stream callback would log the cancellation as an error with a traceback)
         with contextlib.suppress(asyncio.CancelledError):
-            await _serve_connection(app, reader, writer, connections, body_timeout)
+            await _serve_connection(app, reader, writer, pool, head_timeout, body_timeout)
 
     return await asyncio.start_server(handler, host, port, ssl=ssl)

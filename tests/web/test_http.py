@@ -13,7 +13,7 @@ import pytest
 
 from simbridge.config import resource_dir
 from simbridge.runner import App
-from simbridge.web import HttpResponse, WebApp, serve_http
+from simbridge.web import HttpRequest, HttpResponse, WebApp, serve_http
 from tests.helpers import http_url
 
 
@@ -231,3 +231,167 @@ async def test_nul_path_on_the_websocket_port_gets_400_too(
     assert not [r for r in caplog.records if r.exc_info], "a traceback was logged"
     status, _, _ = await fetch(http_url(app) + "/%00")
     assert status == 400
+
+
+# -- issue 29: heads bounded, pipelines yield, the pool has room for the instructor ----------
+
+
+async def _open(port: int, source: str = "127.0.0.1") -> tuple[asyncio.StreamReader, Any]:
+    """A connection from loopback address ``source`` (Linux routes all of 127/8 to lo)."""
+    return await asyncio.open_connection("127.0.0.1", port, local_addr=(source, 0))
+
+
+async def ask(port: int, data: bytes, source: str = "127.0.0.1") -> bytes:
+    """Send ``data`` from ``source``; return all it gets until the server closes."""
+    reader, writer = await _open(port, source)
+    writer.write(data)
+    try:
+        return await asyncio.wait_for(reader.read(), 5.0)
+    finally:
+        writer.close()
+
+
+@pytest.mark.parametrize(
+    ("request_bytes", "status", "text"),
+    [
+        (b"GET /" + b"a" * 200_000, b"414 ", b"request target too long (limit 8192 bytes)"),
+        (
+            b"GET / HTTP/1.1\r\nHost: x\r\nX-Endless: " + b"a" * 200_000,
+            b"431 Request Header Fields Too Large\r\n",
+            b"request head too large (limit 16384 bytes)",
+        ),
+        (
+            b"GET / HTTP/1.1\r\n" + b"".join(b"X-%d: v\r\n" % n for n in range(3_000)),
+            b"431 Request Header Fields Too Large\r\n",
+            b"request head too large",
+        ),
+    ],
+    ids=["endless-url", "endless-header-value", "many-headers"],
+)
+async def test_an_oversized_request_line_or_head_is_refused_as_it_arrives_and_closed(
+    small_server: tuple[int, WebApp], request_bytes: bytes, status: bytes, text: bytes
+) -> None:
+    """The refusal comes after at most a slice past the limit, not at the end of the bytes."""
+    port, _ = small_server
+    reader, writer = await asyncio.open_connection("127.0.0.1", port)
+    writer.write(request_bytes)  # in one write: most of it is still on its way when refused
+    reply = await asyncio.wait_for(reader.read(), 5.0)
+    writer.close()
+    assert reply.startswith(b"HTTP/1.1 " + status), reply[:200]
+    assert text in reply and b"Connection: close" in reply
+
+
+async def test_a_head_that_never_completes_times_out_with_408() -> None:
+    """A request line and one header, then silence: 408 after the head timeout, closed."""
+    web = WebApp(resource_dir("static"), lambda: {"status": "ok"})
+    server = await serve_http(web, "127.0.0.1", 0, head_timeout=0.3)
+    port = server.sockets[0].getsockname()[1]
+    try:
+        start = time.monotonic()
+        reply = await ask(port, b"GET / HTTP/1.1\r\nHost: x\r\n")
+        assert reply.startswith(b"HTTP/1.1 408 Request Timeout\r\n"), reply
+        assert b"request head not received within 0.3 s" in reply
+        assert 0.25 < time.monotonic() - start < 3.0
+    finally:
+        server.close()
+        await server.wait_closed()
+
+
+async def test_pipelined_requests_are_answered_one_at_a_time_with_the_loop_running_between(
+    small_server: tuple[int, WebApp],
+) -> None:
+    """1,500 requests in one write: another task runs between the answers, not after them all."""
+    port, web = small_server
+    answered = 0
+
+    def count(request: HttpRequest) -> HttpResponse:
+        nonlocal answered
+        answered += 1
+        return HttpResponse(200, b"ok")
+
+    web.routes["/count"] = count
+    seen: set[int] = set()
+    done = asyncio.Event()
+
+    async def other_task() -> None:
+        while not done.is_set():
+            seen.add(answered)
+            await asyncio.sleep(0)
+
+    watcher = asyncio.create_task(other_task())
+    pipeline = b"GET /count HTTP/1.1\r\nHost: x\r\n\r\n" * 1_499
+    reply = await ask(port, pipeline + CLOSE_HEALTHZ.replace(b"/healthz", b"/count"))
+    done.set()
+    await watcher
+    assert reply.count(b"HTTP/1.1 200 OK") == 1_500 and answered == 1_500
+    assert len(seen) > 1_000, f"the other task ran only at {len(seen)} points of 1,500 answers"
+
+
+@pytest.fixture
+async def pool_server() -> AsyncIterator[tuple[int, WebApp]]:
+    """A real HTTP server with a pool of 4, 2 per address; 'Bearer secret' is the instructor."""
+    web = WebApp(resource_dir("static"), lambda: {"status": "ok"})
+    web.privileged = lambda headers: headers.get("authorization") == "Bearer secret"
+    server = await serve_http(
+        web, "127.0.0.1", 0, max_connections=4, max_per_address=2, slow_request=60.0
+    )
+    yield server.sockets[0].getsockname()[1], web
+    server.close()
+    await server.wait_closed()
+
+
+async def held_mid_request(port: int, source: str) -> tuple[asyncio.StreamReader, Any]:
+    """A connection from ``source`` that has begun a request and never finishes it."""
+    reader, writer = await _open(port, source)
+    writer.write(b"GET / HTTP/1.1\r\nHost: x\r\nX-Never: ")
+    await writer.drain()
+    return reader, writer
+
+
+ADMIN_HEALTHZ = CLOSE_HEALTHZ.replace(b"Host: x", b"Host: x\r\nAuthorization: Bearer secret")
+
+
+async def test_one_address_gets_its_share_of_the_pool_and_the_503_names_the_budget(
+    pool_server: tuple[int, WebApp],
+) -> None:
+    port, _ = pool_server
+    held = [await held_mid_request(port, "127.0.0.2") for _ in range(2)]
+    reply = b""
+    for _ in range(50):  # until the server has read both heads (it counts them then)
+        reply = await ask(port, CLOSE_HEALTHZ, "127.0.0.2")
+        if reply.startswith(b"HTTP/1.1 503"):
+            break
+        await asyncio.sleep(0.01)
+    assert reply.startswith(b"HTTP/1.1 503 Service Unavailable\r\n"), reply
+    assert b"(max_http_connections_per_address)" in reply and b"Retry-After: 1" in reply
+    assert (await ask(port, CLOSE_HEALTHZ, "127.0.0.3")).startswith(b"HTTP/1.1 200 OK")
+    # the instructor behind the same address as the attacker still gets in
+    assert (await ask(port, ADMIN_HEALTHZ, "127.0.0.2")).startswith(b"HTTP/1.1 200 OK")
+    for _, writer in held:
+        writer.close()
+
+
+async def test_a_full_pool_of_unfinished_requests_still_serves_the_instructor(
+    pool_server: tuple[int, WebApp],
+) -> None:
+    """Four requests that never finish fill the pool: a student gets 503, the instructor 200."""
+    port, _ = pool_server
+    held = [await held_mid_request(port, f"127.0.0.{2 + n // 2}") for n in range(4)]
+    reply = b""
+    for _ in range(50):
+        reply = await ask(port, CLOSE_HEALTHZ, "127.0.0.9")
+        if reply.startswith(b"HTTP/1.1 503"):
+            break
+        await asyncio.sleep(0.01)
+    assert reply.startswith(b"HTTP/1.1 503"), reply
+    assert b"(max_http_connections)" in reply
+    reply = await ask(port, ADMIN_HEALTHZ, "127.0.0.9")
+    assert reply.startswith(b"HTTP/1.1 200 OK"), reply
+    # one unfinished request gave way to it, told why; the others are still open
+    reads = [asyncio.create_task(reader.read()) for reader, _ in held]
+    done, waiting = await asyncio.wait(reads, timeout=5.0, return_when=asyncio.FIRST_COMPLETED)
+    assert len(done) == 1 and b"room for the instructor's request" in next(iter(done)).result()
+    for task in waiting:
+        task.cancel()
+    for _, writer in held:
+        writer.close()

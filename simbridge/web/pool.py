@@ -1,0 +1,214 @@
+"""The HTTP port's connections and their budgets (sans-I/O: no sockets, no event loop).
+
+Three budgets bound what HTTP clients can make the server hold, and one promise keeps the
+instructor's console usable whatever they do (``docs/security.md``, "HTTP"):
+
+- ``limit`` connections in all (``max_http_connections``) and ``per_address`` from one client
+  address (``max_http_connections_per_address``; an IPv6 address counts by its /64, the block
+  one machine gets). A newcomer over a budget takes the place of a connection that holds a slot
+  for nothing: the longest idle keep-alive one (closed; the browser reconnects), else one whose
+  request has been arriving for longer than ``slow`` seconds (408: a browser sends a request's
+  head in one go). Within the per-address budget only that address's own connections give way.
+- When no place can be made, the newcomer is not refused at once: it waits in a small
+  **reserve** (``reserve`` connections, ``reserve_per_address`` from one address, a few seconds
+  each) until its request's head shows whether it carries the admin token. The instructor's
+  request is then admitted, making room if it must (any client's idle or unfinished request
+  gives way); anyone else's gets the 503 naming the budget. So an admin request is never refused
+  because students or outsiders filled the pool; the reserve itself is bounded per address, so
+  one machine flooding it only pushes out its own connections.
+
+:class:`Pool` only keeps the books and decides; the server (:mod:`simbridge.web.http`) reads,
+answers and closes. Each decision costs at most one pass over the open connections.
+"""
+
+from __future__ import annotations
+
+import ipaddress
+from collections import Counter
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, field
+from typing import Literal
+
+
+__all__ = ["Phase", "Pool", "Slot", "client_address"]
+
+#: What a connection is doing: waiting for a request (``idle``, also before its first), receiving
+#: one (``request``: its head or body is on its way) or being answered (``busy``).
+Phase = Literal["idle", "request", "busy"]
+
+
+def client_address(peername: object) -> str:
+    """Return the address a connection's budget counts by (an IPv6 address: its /64)."""
+    host = peername[0] if isinstance(peername, tuple) and peername else peername
+    if not isinstance(host, str) or not host:
+        return "local"  # a Unix socket: one local client
+    try:
+        ip = ipaddress.ip_address(host.split("%", 1)[0])
+    except ValueError:
+        return host
+    if isinstance(ip, ipaddress.IPv6Address):
+        if ip.ipv4_mapped is not None:
+            return str(ip.ipv4_mapped)
+        return str(ipaddress.IPv6Network((ip, 64), strict=False))
+    return str(ip)
+
+
+@dataclass(eq=False, slots=True)
+class Slot:
+    """One open connection, as the pool sees it."""
+
+    #: The client address it counts against (:func:`client_address`).
+    address: str
+    #: Closes the connection, answering ``status`` with ``text`` first (``status`` 0: nothing).
+    close: Callable[[int, str], None]
+    #: What it is doing, and since when (the pool's clock).
+    phase: Phase = "idle"
+    since: float = 0.0
+    #: One of its requests carried the admin token: it gives way last.
+    admin: bool = False
+    #: It waits in the reserve: admitted only if its first request is the instructor's.
+    reserved: bool = False
+    #: The refusal a reserved connection gets if its request is not the instructor's.
+    refusal: str = ""
+    #: It was closed to make room (the server stops serving it).
+    evicted: bool = False
+
+
+@dataclass(slots=True)
+class Pool:
+    """The open HTTP connections of one server, and its budgets of them."""
+
+    #: Connections at most (``max_http_connections``), and from one address.
+    limit: int
+    per_address: int
+    #: Connections waiting to show an admin token when there is no room, in all and per address.
+    reserve: int = 16
+    reserve_per_address: int = 4
+    #: Seconds a request may have been arriving before it gives way to a newcomer when full.
+    slow: float = 1.0
+    #: Admitted connections, oldest first, and how many per address.
+    members: dict[Slot, None] = field(default_factory=dict)
+    per: Counter[str] = field(default_factory=Counter)
+    #: Connections in the reserve, oldest first.
+    waiting: dict[Slot, None] = field(default_factory=dict)
+    #: Connections refused (503) and closed to make room, since the start.
+    refused: int = 0
+    evicted: int = 0
+
+    def admit(self, slot: Slot, now: float) -> str | None:
+        """Give a new connection a place; return the refusal when there is none (503).
+
+        ``None`` means it is served: a member, or (``slot.reserved``) in the reserve until its
+        first request's head says whose it is (:meth:`claim`).
+        """
+        slot.phase, slot.since = "idle", now
+        refusal = self._room(slot.address, now)
+        if refusal is None:
+            self._join(slot)
+            return None
+        ahead = [s for s in self.waiting if s.address == slot.address]
+        if len(ahead) >= self.reserve_per_address:
+            self._evict(ahead[0], 503, ahead[0].refusal)  # this address's own oldest waiter
+        elif len(self.waiting) >= self.reserve:
+            self.refused += 1
+            return refusal
+        slot.reserved, slot.refusal = True, refusal
+        self.waiting[slot] = None
+        return None
+
+    def claim(self, slot: Slot, admin: bool, now: float) -> str | None:
+        """A reserved connection's first head is here: admit it if ``admin``, else refuse it.
+
+        The instructor's request takes a member's place if it must: the longest idle, else the
+        oldest unfinished request of anyone without the admin token (over the budget, within
+        the reserve's bound, when every member is busy or the instructor's).
+        """
+        self._unwait(slot)
+        if not admin:
+            self.refused += 1
+            return slot.refusal
+        if self._room(slot.address, now) is not None:
+            victim = self._victim(self.members, now, any_request=True)
+            if victim is not None:
+                self._evict(victim, 408, "closed to make room for the instructor's request\n")
+        slot.admin = True
+        self._join(slot)
+        return None
+
+    def mark(self, slot: Slot, phase: Phase, now: float) -> None:
+        """``slot`` is now doing ``phase`` (its clock restarts only when the phase changes)."""
+        if slot.phase != phase:
+            slot.phase, slot.since = phase, now
+
+    def leave(self, slot: Slot) -> None:
+        """The connection closed: free its place."""
+        if slot in self.members:
+            del self.members[slot]
+            self.per[slot.address] -= 1
+            if self.per[slot.address] <= 0:
+                del self.per[slot.address]
+        self._unwait(slot)
+
+    # -- the decisions ------------------------------------------------------------------
+
+    def _room(self, address: str, now: float) -> str | None:
+        """Make room for a newcomer from ``address``; return the refusal if none can be made."""
+        if self.per[address] >= self.per_address:
+            own = (s for s in self.members if s.address == address)
+            victim = self._victim(own, now)
+            if victim is None:
+                return (
+                    f"server busy: {self.per_address} HTTP connections are open from your "
+                    "address (max_http_connections_per_address); try again shortly\n"
+                )
+        elif len(self.members) >= self.limit:
+            victim = self._victim(self.members, now)
+            if victim is None:
+                return (
+                    f"server busy: {self.limit} HTTP connections are open "
+                    "(max_http_connections); try again shortly\n"
+                )
+        else:
+            return None
+        if victim.phase == "idle":
+            self._evict(victim, 0, "")
+        else:
+            self._evict(victim, 408, "request not received in time while the server is full\n")
+        return None
+
+    def _victim(self, slots: Iterable[Slot], now: float, any_request: bool = False) -> Slot | None:
+        """The connection to close for a newcomer: the longest idle, else the slowest request.
+
+        Requests younger than ``slow`` seconds are spared unless ``any_request`` (for the
+        instructor); connections being answered, and the instructor's while others remain,
+        never give way.
+        """
+        idle: Slot | None = None
+        slowest: Slot | None = None
+        for s in slots:
+            if s.admin:
+                continue
+            if s.phase == "idle":
+                if idle is None or s.since < idle.since:
+                    idle = s
+            elif (
+                s.phase == "request"
+                and (any_request or now - s.since > self.slow)
+                and (slowest is None or s.since < slowest.since)
+            ):
+                slowest = s
+        return idle or slowest
+
+    def _join(self, slot: Slot) -> None:
+        slot.reserved = False
+        self.members[slot] = None
+        self.per[slot.address] += 1
+
+    def _unwait(self, slot: Slot) -> None:
+        self.waiting.pop(slot, None)
+
+    def _evict(self, slot: Slot, status: int, text: str) -> None:
+        self.leave(slot)
+        slot.evicted = True
+        self.evicted += 1
+        slot.close(status, text)

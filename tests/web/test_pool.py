@@ -1,0 +1,140 @@
+"""The HTTP connection pool's decisions, without sockets (simbridge/web/pool.py)."""
+
+from __future__ import annotations
+
+import pytest
+
+from simbridge.web.pool import Pool, Slot, client_address
+
+
+class Closed:
+    """What the pool closed, with the answer each got."""
+
+    def __init__(self) -> None:
+        self.log: list[tuple[str, int, str]] = []
+
+    def slot(self, address: str, name: str = "") -> Slot:
+        return Slot(address, lambda status, text: self.log.append((name, status, text)))
+
+
+def test_a_newcomer_over_its_address_budget_is_refused_by_name_when_nothing_gives_way() -> None:
+    pool, closed = Pool(limit=10, per_address=2, reserve=0), Closed()
+    for _ in range(2):
+        slot = closed.slot("10.0.0.1")
+        assert pool.admit(slot, 0.0) is None
+        pool.mark(slot, "request", 0.0)
+    refusal = pool.admit(closed.slot("10.0.0.1"), 0.5)
+    assert refusal is not None and "max_http_connections_per_address" in refusal
+    assert pool.admit(closed.slot("10.0.0.2"), 0.5) is None  # another address still gets in
+    assert not closed.log
+
+
+def test_at_its_address_budget_a_newcomer_takes_the_place_of_its_own_idle_connection() -> None:
+    pool, closed = Pool(limit=3, per_address=2), Closed()
+    other = closed.slot("10.0.0.9", "other")
+    assert pool.admit(other, 0.0) is None  # idle, and older than the address's own
+    mine = [closed.slot("10.0.0.1", f"mine{n}") for n in range(2)]
+    for n, slot in enumerate(mine):
+        assert pool.admit(slot, 1.0 + n) is None
+    assert pool.admit(closed.slot("10.0.0.1", "new"), 3.0) is None
+    assert closed.log == [("mine0", 0, "")]  # its own longest idle, not the other address's
+    assert other in pool.members and mine[0].evicted
+
+
+def test_when_full_a_slow_request_gives_way_with_408_and_a_young_one_does_not() -> None:
+    pool, closed = Pool(limit=2, per_address=10, reserve=0, slow=1.0), Closed()
+    old, young = closed.slot("10.0.0.1", "old"), closed.slot("10.0.0.2", "young")
+    pool.admit(old, 0.0)
+    pool.mark(old, "request", 0.0)
+    pool.admit(young, 0.9)
+    pool.mark(young, "request", 0.9)
+    newcomer = closed.slot("10.0.0.3")
+    assert pool.admit(newcomer, 1.5) is None
+    pool.mark(newcomer, "busy", 1.5)
+    assert [(name, status) for name, status, _ in closed.log] == [("old", 408)]
+    refusal = pool.admit(closed.slot("10.0.0.4"), 1.6)  # young's request is 0.7 s old
+    assert refusal is not None and "(max_http_connections)" in refusal
+    assert pool.refused == 1
+
+
+def test_busy_connections_never_give_way() -> None:
+    pool, closed = Pool(limit=1, per_address=10, reserve=0), Closed()
+    busy = closed.slot("10.0.0.1")
+    pool.admit(busy, 0.0)
+    pool.mark(busy, "busy", 0.0)
+    assert pool.admit(closed.slot("10.0.0.2"), 60.0) is not None
+    assert not closed.log
+
+
+def test_the_instructor_gets_in_from_the_reserve_and_anyone_else_gets_the_503() -> None:
+    pool, closed = Pool(limit=2, per_address=2, slow=1.0), Closed()
+    for n in range(2):
+        slot = closed.slot("10.0.0.1", f"student{n}")
+        pool.admit(slot, 0.0)
+        pool.mark(slot, "request", 0.0)
+    student, instructor = closed.slot("10.0.0.2", "s"), closed.slot("10.0.0.3", "i")
+    assert pool.admit(student, 0.5) is None and student.reserved
+    assert pool.admit(instructor, 0.5) is None and instructor.reserved
+    refusal = pool.claim(student, admin=False, now=0.6)
+    assert refusal is not None and "(max_http_connections)" in refusal
+    assert pool.claim(instructor, admin=True, now=0.6) is None  # young requests give way to it
+    assert instructor in pool.members and instructor.admin and not instructor.reserved
+    assert [(name, status) for name, status, _ in closed.log] == [("student0", 408)]
+    assert len(pool.members) == 2 and not pool.waiting
+
+
+def test_the_instructor_gets_in_even_over_the_budget_when_everyone_is_busy() -> None:
+    pool, closed = Pool(limit=1, per_address=1), Closed()
+    busy = closed.slot("10.0.0.1")
+    pool.admit(busy, 0.0)
+    pool.mark(busy, "busy", 0.0)
+    instructor = closed.slot("10.0.0.1")  # the same address: over both budgets
+    assert pool.admit(instructor, 0.1) is None and instructor.reserved
+    assert pool.claim(instructor, admin=True, now=0.1) is None
+    assert len(pool.members) == 2 and not closed.log
+
+
+def test_one_address_flooding_the_reserve_pushes_out_only_its_own_waiters() -> None:
+    pool, closed = Pool(limit=1, per_address=1, reserve=6, reserve_per_address=2), Closed()
+    member = closed.slot("10.0.0.1")
+    pool.admit(member, 0.0)
+    pool.mark(member, "busy", 0.0)
+    instructor = closed.slot("10.0.0.5", "instructor")
+    pool.admit(instructor, 0.1)
+    flood = [closed.slot("10.0.0.6", f"flood{n}") for n in range(10)]
+    for slot in flood:
+        assert pool.admit(slot, 0.2) is None
+    assert instructor in pool.waiting and len(pool.waiting) == 3
+    assert {name for name, status, _ in closed.log} == {f"flood{n}" for n in range(8)}
+    assert all(status == 503 for _, status, _ in closed.log)
+    others = [closed.slot(f"10.1.0.{n}") for n in range(4)]
+    results = [pool.admit(slot, 0.3) for slot in others]
+    assert results[:3] == [None] * 3  # the reserve's 6 places
+    assert results[3] is not None and "(max_http_connections_per_address)" not in results[3]
+
+
+def test_leaving_frees_the_place() -> None:
+    pool, closed = Pool(limit=1, per_address=1, reserve=0), Closed()
+    slot = closed.slot("10.0.0.1")
+    pool.admit(slot, 0.0)
+    pool.mark(slot, "busy", 0.0)
+    assert pool.admit(closed.slot("10.0.0.1"), 0.1) is not None
+    pool.leave(slot)
+    assert pool.admit(closed.slot("10.0.0.1"), 0.2) is None
+    assert dict(pool.per) == {"10.0.0.1": 1}
+
+
+@pytest.mark.parametrize(
+    ("peer", "address"),
+    [
+        (("192.168.1.20", 50000), "192.168.1.20"),
+        (("2001:db8:1:2:aaaa:bbbb:cccc:dddd", 50000, 0, 0), "2001:db8:1:2::/64"),
+        (("2001:db8:1:2::1", 50000, 0, 0), "2001:db8:1:2::/64"),
+        (("::ffff:10.0.0.7", 50000, 0, 0), "10.0.0.7"),
+        (("fe80::1%eth0", 50000, 0, 2), "fe80::/64"),
+        ("", "local"),
+        (None, "local"),
+    ],
+)
+def test_client_address_counts_ipv6_by_its_64(peer: object, address: str) -> None:
+    assert client_address(peer) == address
