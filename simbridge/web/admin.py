@@ -180,26 +180,40 @@ class _Admin:
         self.roles = roles
 
     def state(self) -> dict[str, Any]:
+        """The console's document, in one pass over what it reports.
+
+        Each subscription, client and robot is visited a bounded number of times (the topics'
+        subscriptions once, grouped by client; the clients once, grouped by robot), so the cost
+        grows with the size of the answer, never with clients x topics x subscriptions.
+        """
         params = self.graph.params.node(ROBOT_NODE)
-        topics = self.graph.topics.topics.values()
+        subscribed: dict[object, set[str]] = {}
+        for topic in self.graph.topics.topics.values():
+            for peer, _spelling in topic.subscriptions:
+                subscribed.setdefault(peer, set()).add(topic.name)
         clients: list[dict[str, Any]] = []
+        drivers: dict[str, list[str]] = {}
         for c in sorted(self.clients(), key=lambda c: c.session.client_id):
-            subs = sorted(t.name for t in topics if any(p is c for p, _ in t.subscriptions))
             robots = self.roles.robots_of(c)
+            any_robot = connection_rights(c)[0] == "*"
+            name = describe_peer(c)
             clients.append(
                 {
                     "id": c.session.client_id,
                     "label": c.label,
-                    "name": describe_peer(c),
+                    "name": name,
                     "robots": robots,
-                    "any_robot": connection_rights(c)[0] == "*",
-                    "subscriptions": subs,
+                    "any_robot": any_robot,
+                    "subscriptions": sorted(subscribed.get(c, ())),
                     "publishing": sorted(c.session.advertisements),
                     "frames_sent": c.frames_sent,
                     "queued": len(c.queue),
                     "dropped": c.queue.dropped,
                 }
             )
+            if not any_robot:
+                for robot_name in robots:
+                    drivers.setdefault(robot_name, []).append(name)
         values = params.read()
         robot_rows: dict[str, dict[str, Any]] = {}
         for name, robot in sorted(self.world.robots.items()):
@@ -208,9 +222,7 @@ class _Admin:
                 "own": _own(robot),
                 "pose": [round(s.x, 3), round(s.y, 3), round(s.theta, 3)],
                 "held": self.world.halted(name),
-                "clients": [
-                    c["name"] for c in clients if name in c["robots"] and not c["any_robot"]
-                ],
+                "clients": drivers.get(name, []),
             }
         return {
             "clients": clients,
@@ -361,7 +373,10 @@ def install_admin(
     estop: EStop,
     roles: Roles,
 ) -> None:
-    """Add the ``/api/admin/*`` routes (and ``/api/access``) to ``web``.
+    """Add the ``/api/admin/*`` routes (and ``/api/access``) to ``web``; set its ``privileged``.
+
+    A request whose headers carry the admin token is the instructor's: the HTTP server makes
+    room for it whatever fills its pool (:mod:`simbridge.web.pool`).
 
     Args:
         web: where the routes go.
@@ -381,6 +396,15 @@ def install_admin(
         "/api/admin/estop": admin.estop,
         "/api/admin/robot": admin.robot,
     }
+
+    def privileged(headers: Mapping[str, str]) -> bool:
+        """Whether the headers carry the admin token (then the HTTP pool always has room)."""
+        token, expected = token_from_headers(headers), settings.admin_token
+        if not expected or not token:
+            return False
+        return hmac.compare_digest(expected.encode(), token.encode())
+
+    web.privileged = privileged
 
     def route(request: HttpRequest) -> HttpResponse:
         path = request.path.rstrip("/")
