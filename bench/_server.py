@@ -20,7 +20,21 @@ from bench.procs import stop
 @contextmanager
 def server(*options: str) -> Iterator[tuple[int, psutil.Process]]:
     """Run ``simbridge --host 127.0.0.1 --port 0 --no-http OPTIONS``; yield its port and process."""
-    cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0", "--no-http"]
+    with _run("--no-http", *options) as (port, _http, proc):
+        yield port, proc
+
+
+@contextmanager
+def http_server(*options: str) -> Iterator[tuple[int, int, psutil.Process]]:
+    """Run ``simbridge --host 127.0.0.1 --port 0 --http-port 0 OPTIONS``; yield both ports."""
+    with _run("--http-port", "0", *options) as (port, http, proc):
+        assert http is not None, "the server did not open its HTTP port"
+        yield port, http, proc
+
+
+@contextmanager
+def _run(*options: str) -> Iterator[tuple[int, int | None, psutil.Process]]:
+    cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0"]
     proc = subprocess.Popen(
         [*cmd, "--log-level", "warning", *options],
         stdout=subprocess.PIPE,
@@ -34,7 +48,8 @@ def server(*options: str) -> Iterator[tuple[int, psutil.Process]]:
         if match is None:
             msg = f"simbridge did not start: {line!r}"
             raise RuntimeError(msg)
-        yield int(match.group(1)), psutil.Process(proc.pid)
+        page = re.search(r"http://[^:]+:(\d+)/", line)
+        yield int(match.group(1)), int(page.group(1)) if page else None, psutil.Process(proc.pid)
     finally:
         stop(proc)
 

@@ -41,8 +41,8 @@ import psutil
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
-from bench import stateattacks
-from bench._server import server
+from bench import httpattacks, stateattacks
+from bench._server import http_server, server
 from bench.procs import ROOT, percentile
 
 
@@ -78,6 +78,8 @@ class Target:
     proc: psutil.Process
     #: Attack until this time (``time.monotonic()``).
     until: float
+    #: The HTTP port (page, /healthz, /api/admin), 0 when the attack does not use it.
+    http_port: int = 0
 
     def url(self, token: str | None = None) -> str:
         """The rosbridge URL, with ``?token=`` when given."""
@@ -104,6 +106,8 @@ class Attack:
     run: Callable[[Target], str]
     #: Extra server options.
     options: tuple[str, ...] = ()
+    #: The attack needs the HTTP port (``Target.http_port``).
+    http: bool = False
 
 
 #: Every attack, in the order they run.
@@ -424,6 +428,15 @@ for _row, (_title, _run) in stateattacks.ATTACKS.items():
     attack_async(f"state{_row}", _row, _run)
 
 
+# the HTTP rows of issue 29 (2, 3, 7, 11): bench/httpattacks.py, against the HTTP port
+def _http_attack(run: httpattacks.HttpAttack) -> Callable[[Target], str]:
+    return lambda target: run(target.http_port, target.port, ADMIN, target.until)
+
+
+for _name, (_row, _http) in httpattacks.ATTACKS.items():
+    ATTACKS[_name] = Attack(_name, _row, _http_attack(_http), http=True)
+
+
 # -- the run --------------------------------------------------------------------------------
 
 
@@ -527,7 +540,19 @@ def _cpu(proc: psutil.Process) -> float:
     return float(times.user + times.system)
 
 
-def run_one(name: str, run: Callable[[Target], str] | None, options: tuple[str, ...]) -> Row:
+@contextmanager
+def _server(args: tuple[str, ...], http: bool) -> Iterator[tuple[int, int, psutil.Process]]:
+    if http:
+        with http_server(*args) as ports:
+            yield ports
+    else:
+        with server(*args) as (port, proc):
+            yield port, 0, proc
+
+
+def run_one(
+    name: str, run: Callable[[Target], str] | None, options: tuple[str, ...], http: bool = False
+) -> Row:
     """Run one attack (``run`` None: the quiet baseline) on a fresh server."""
     row = Row(name, ATTACKS[name].row if name in ATTACKS else "-")
     files = Path(tempfile.mkdtemp(prefix="bench-hostile-"))
@@ -540,14 +565,14 @@ def run_one(name: str, run: Callable[[Target], str] | None, options: tuple[str, 
         *("--client-tokens", str(tokens), "--admin-token", ADMIN),
         *options,
     )
-    with server(*args) as (port, proc), observer(port) as finish:
+    with _server(args, http) as (port, http_port, proc), observer(port) as finish:
         sampler = RssSampler(proc)
         sampler.start()
         time.sleep(2.0)  # the observer settles; r2's first probe
         row.rss_start = proc.memory_info().rss / 2**20
         start = time.time()
         cpu = _cpu(proc)
-        target = Target(port, proc, time.monotonic() + WINDOW)
+        target = Target(port, proc, time.monotonic() + WINDOW, http_port)
         try:
             row.note = run(target) if run is not None else "no attack"
         except Exception as err:  # an attack that breaks is a figure too
@@ -620,7 +645,7 @@ def main(names: list[str] | None = None) -> int:
     rows = [run_one("quiet", None, ())]
     for name in chosen:
         a = ATTACKS[name]
-        rows.append(run_one(name, a.run, a.options))
+        rows.append(run_one(name, a.run, a.options, a.http))
     return 0 if report(rows) else 1
 
 
