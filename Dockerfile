@@ -29,7 +29,8 @@ ENV PYTHONDONTWRITEBYTECODE=1 \
 RUN python3 -m venv /opt/simbridge
 
 # Optional extras, comma-separated: SIMBRIDGE_EXTRAS=zenoh adds ROS 2 over Zenoh (--zenoh, zenohd;
-# docker-compose.classroom.yml builds it so).
+# docker-compose.classroom.yml builds it so), SIMBRIDGE_EXTRAS=foxglove the Foxglove WebSocket
+# protocol (--foxglove-port).
 ARG SIMBRIDGE_EXTRAS=""
 
 # Dependencies first, from pyproject.toml alone: this layer stays cached while the code changes.
