@@ -41,7 +41,7 @@ import psutil
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 from websockets.sync.client import ClientConnection, connect
 
-from bench import httpattacks, stateattacks
+from bench import budgetattacks, httpattacks, stateattacks
 from bench._server import http_server, server
 from bench.procs import ROOT, percentile
 
@@ -137,7 +137,7 @@ def attack_async(name: str, row: str, run: AsyncAttack, *options: str) -> None:
 
     def who(target: Target) -> Callable[[str | None], str]:
         tokens = {"student": "student-r1", "admin": ADMIN}
-        return lambda kind: target.url(tokens[kind] if kind is not None else None)
+        return lambda kind: target.url(tokens.get(kind, kind) if kind is not None else None)
 
     def sync(target: Target) -> str:
         async def go() -> str:
@@ -435,6 +435,11 @@ def _http_attack(run: httpattacks.HttpAttack) -> Callable[[Target], str]:
 
 for _name, (_row, _http) in httpattacks.ATTACKS.items():
     ATTACKS[_name] = Attack(_name, _row, _http_attack(_http), http=True)
+
+
+# what one student makes the server hold or do (issue 29): bench/budgetattacks.py
+for _name, (_title, _run) in budgetattacks.ATTACKS.items():
+    attack_async(_name, "29", _run)
 
 
 # -- the run --------------------------------------------------------------------------------
