@@ -736,6 +736,26 @@ class ServerSettings(Record, frozen=True):
     tf_transforms_total: Rate = 10000.0
     #: Longest ``timeout`` of a ``/republish_tfs`` topic without subscribers, seconds.
     tf_max_timeout: Seconds = 60.0
+    # -- issue 29: what a client makes the server hold, in length, count and age, and what one
+    # token's connections may take together (docs/security.md, "Ids, goals, answers, latches
+    # and tokens") --
+    #: Length of an op's ``id`` (characters of a string, digits of an integer): ids are kept
+    #: (subscriptions, advertisements, calls, goals) and echoed; a longer one is refused.
+    max_id_length: Count = 1_000
+    #: Goals of one client in flight, and of all clients; the longest a goal to an action that
+    #: a client serves may wait for its result, seconds (then it is aborted).
+    max_pending_goals: Count = 100
+    global_pending_goals: Count = 2_000
+    max_goal_timeout: Seconds = 600.0
+    #: Names (parameters, prefixes) in one request to a node's parameter services: each answer
+    #: is bounded before it is built.
+    max_parameter_names: Count = 1_000
+    #: E-stop latches kept at once; past it, a stop of robots that are held already is
+    #: answered without a new latch (a stop of a robot that is not held always latches).
+    max_estop_latches: Count = 200
+    #: WebSocket connections of one token at once; they share one ``client_work_share``. The
+    #: connections of a token with admin rights are not counted in ``max_clients``.
+    max_connections_per_token: Count = 20
     #: Client tokens (query parameter ``?token=``): token -> scope. A scope is ``"*"`` (any
     #: topic) or a robot name (publish only under ``/<name>/``). Empty: no client tokens.
     client_tokens: dict[str, str] = setting(default_factory=dict)

@@ -31,6 +31,7 @@ that would take it over for everyone, and it would be gone when that client left
 
 from __future__ import annotations
 
+import heapq
 import itertools
 import logging
 import uuid
@@ -111,6 +112,8 @@ class Goal:
     #: The action type the sender named (``""``: none), as written; an in-process server may
     #: serve several types under one name and answer in the one the goal was sent with.
     sent_type: str = ""
+    #: The goal counts against its caller's pending-goal budget (a rosbridge client's goal).
+    counted: bool = False
 
     def feedback(self, values: Any) -> None:
         """Send feedback to the goal's sender (if it asked for feedback)."""
@@ -128,6 +131,8 @@ class Goal:
         self.done = True
         self.status = status
         self.table.goals.pop(self.server_id, None)
+        if self.counted:
+            self.caller.session.end_goal()
         body: dict[str, Any] = {
             "op": "action_result",
             "action": self.written,
@@ -166,6 +171,8 @@ class ActionTable:
         self.actions: dict[str, Action] = {}
         #: Goals in flight by server id.
         self.goals: dict[str, Goal] = {}
+        #: When counted goals to client-served actions time out: (deadline, server id), a heap.
+        self.deadlines: list[tuple[float, str]] = []
         self._counter = itertools.count(1)
 
     def handlers(self) -> dict[type, Callable[[Peer, Any, float], None]]:
@@ -245,6 +252,8 @@ class ActionTable:
         for goal in [g for g in self.goals.values() if g.caller is peer]:
             goal.done = True
             del self.goals[goal.server_id]
+            if goal.counted:
+                peer.session.end_goal()
             self._forward_cancel(goal)
 
     def _fail_goals(self, action: Action, reason: str) -> None:
@@ -277,13 +286,23 @@ class ActionTable:
         feedback: bool,
         goal_uuid: bytes | None = None,
         sent_type: str = "",
+        now: float | None = None,
     ) -> Goal:
         """Send an admitted goal of ``peer`` (``message`` validated) to ``action``.
 
         ``goal_uuid`` is the goal's id when the sender chose one (a ROS 2 client does);
-        ``sent_type`` the action type it named (``send_action_goal``'s ``action_type``).
+        ``sent_type`` the action type it named (``send_action_goal``'s ``action_type``). Given
+        ``now`` (a rosbridge client's goal), the goal counts against the sender's pending-goal
+        budget until it ends, and a goal to an action that a client serves is aborted when it
+        has no result after the sender's ``goal_timeout``. Its message is not kept once it went
+        to a client's server (only an in-process server reads it later).
+
+        Raises:
+            Refusal: the sender's pending-goal budget is spent (nothing was sent).
         """
         name = action.name
+        if now is not None:
+            peer.session.start_goal(name, op_id)
         server_id = f"action_goal:{name}:{next(self._counter)}"
         goal = Goal(
             server_id,
@@ -297,12 +316,19 @@ class ActionTable:
             self.graph.stamp(),
             self,
             sent_type=sent_type,
+            counted=now is not None,
         )
         self.goals[server_id] = goal
         if action.server is not None:
             action.server.goal(goal)
             return goal
         assert action.provider is not None
+        if now is not None:
+            heap = self.deadlines
+            if len(heap) > 2 * len(self.goals) + 64:  # goals that ended early: drop them
+                heap[:] = [entry for entry in heap if entry[1] in self.goals]
+                heapq.heapify(heap)
+            heapq.heappush(heap, (now + peer.session.limits.goal_timeout, server_id))
         action.provider.send(
             json_frame(
                 {
@@ -315,7 +341,31 @@ class ActionTable:
                 }
             )
         )
+        goal.args = None  # sent: a 900 kB goal is not kept while it runs
         return goal
+
+    def expire(self, now: float) -> None:
+        """Abort the goals to client-served actions that have had no result in time.
+
+        The sender gets a failed ``action_result`` (status 6) naming the limit; the server gets
+        a ``cancel_action_goal``.
+        """
+        heap = self.deadlines
+        while heap and heap[0][0] <= now:
+            _deadline, server_id = heapq.heappop(heap)
+            goal = self.goals.get(server_id)
+            if goal is None:
+                continue  # finished before its deadline
+            limit = goal.caller.session.limits.goal_timeout
+            goal.finish(
+                ABORTED,
+                f"goal of {goal.action.name} timed out: its action server gave no result within "
+                f"{limit:g} s (the server's max_goal_timeout)",
+                result=False,
+            )
+            self._forward_cancel(goal)
+        if not self.goals:
+            heap.clear()
 
     def _find_own(self, peer: Peer, op_id: OpId | None, name: str) -> Goal | None:
         for goal in self.goals.values():

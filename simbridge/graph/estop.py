@@ -145,6 +145,8 @@ class EStop:
         self.world = world
         #: Latched stops by id.
         self.latches: dict[int, Latch] = {}
+        #: Latches past which a stop of robots already held makes no new one.
+        self.max_latches = graph.settings.max_estop_latches
         #: Connected peers by client id (to tell whether a latch's connection is still there).
         self.connected: set[int] = set()
         self._ids = itertools.count(1)
@@ -240,28 +242,70 @@ class EStop:
     def latch_for(self, peer: Peer | None, robot: str | None) -> Latch:
         """Latch a stop for ``peer``: of ``robot``, or of every robot it may drive.
 
+        Latches are counted: a stop ``peer`` has latched already (the same robots) is not
+        latched again, its latch is returned; one whose connection has gone and that ``peer``
+        may release (a reconnected page of the same token, an administrator) becomes
+        ``peer``'s. Past ``max_estop_latches`` latches, a stop of robots that are all held
+        already returns a latch that holds them (nothing new is kept, nothing is logged); a
+        stop of a robot that is not held always latches.
+
         Raises:
             ServiceError: ``peer`` may drive no robot (its robot does not exist).
         """
         scope, admin = connection_rights(peer)
-        by = INSTRUCTOR if peer is None else describe_peer(peer)
-        owner = None if peer is None else peer.session.client_id
+        robots: frozenset[str] | None
         if robot is None and admin:
-            latch = Latch(next(self._ids), by, owner, _credential(peer), None, self._now())
-            return self._add(latch)
-        if robot is not None:
+            robots = None
+        elif robot is not None:
             robots = frozenset({robot})
         elif scope == "*":
             robots = frozenset(self.world.robots)
         else:
             robots = frozenset({scope}) & frozenset(self.world.robots)
-        if not robots and scope == NO_ROBOT:
+        if robots is not None and not robots and scope == NO_ROBOT:
             msg = f"{ESTOP_SERVICE}: this connection may drive no robot, so it stops none"
             raise ServiceError(msg)
-        if not robots:
+        if robots is not None and not robots:
             msg = f"{ESTOP_SERVICE}: this connection's robot '{scope}' does not exist"
             raise ServiceError(msg)
+        kept = self._kept(peer, robots)
+        if kept is not None:
+            return kept
+        if peer is not None and len(self.latches) >= self.max_latches:
+            holding = self._holding(robots)
+            if holding is not None:
+                return holding
+        by = INSTRUCTOR if peer is None else describe_peer(peer)
+        owner = None if peer is None else peer.session.client_id
         return self._add(Latch(next(self._ids), by, owner, _credential(peer), robots, self._now()))
+
+    def _kept(self, peer: Peer | None, robots: frozenset[str] | None) -> Latch | None:
+        """Return ``peer``'s latch of exactly ``robots``, if it has one (or may take one over)."""
+        for latch in self.latches.values():
+            if latch.robots != robots:
+                continue
+            if peer is None:
+                if latch.owner is None:
+                    return latch
+                continue
+            client = peer.session.client_id
+            if latch.owner == client:
+                return latch
+            gone = latch.owner is not None and latch.owner not in self.connected
+            if gone and self.may_release(peer, latch):
+                # it could release it: it takes it over rather than add one more
+                latch.owner, latch.by = client, describe_peer(peer)
+                latch.credential = _credential(peer)
+                return latch
+        return None
+
+    def _holding(self, robots: frozenset[str] | None) -> Latch | None:
+        """Return a latch holding ``robots`` if latches hold all of them (None: every robot)."""
+        if robots is None:
+            return next((latch for latch in self.latches.values() if latch.robots is None), None)
+        if not all(self.held_by(name) for name in robots):
+            return None
+        return self.held_by(min(robots))[0]
 
     def may_release(self, peer: Peer | None, latch: Latch) -> bool:
         """Whether ``peer`` (None: the instructor) may release ``latch``."""
@@ -340,8 +384,17 @@ class EStop:
     def _latch(self, args: Any, robot: str | None) -> dict[str, Any]:
         service = ESTOP_SERVICE if robot is None else f"/{robot}/estop"
         request_fields(args, (), service)
-        latch = self.latch_for(caller.get(), robot)
+        peer = caller.get()
+        latch = self.latch_for(peer, robot)
         release = ESTOP_RESET_SERVICE if robot is None else f"/{robot}/estop/reset"
+        mine = latch.owner == (None if peer is None else peer.session.client_id)
+        if not mine:
+            message = (
+                f"emergency stop: {latch.scope_text()} is held already by {latch.by} (past "
+                f"{self.max_latches} latches, the server's max_estop_latches, a stop of held "
+                "robots makes no new latch); only that connection or the instructor releases it"
+            )
+            return {"success": True, "message": message}
         message = (
             f"emergency stop latched for {latch.scope_text()}"
             + (" (global)" if latch.robots is None else "")

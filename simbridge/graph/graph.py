@@ -101,6 +101,9 @@ def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
         advertise_ids=s.max_advertise_ids,
         pending_calls=s.max_pending_calls,
         call_timeout=s.max_call_timeout,
+        id_length=s.max_id_length,
+        pending_goals=s.max_pending_goals,
+        goal_timeout=s.max_goal_timeout,
         fragment_sets=s.max_fragment_sets,
         fragment_bytes=s.max_message_size,
         frame_values=s.max_frame_values,
@@ -116,6 +119,7 @@ def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
             "subscribe_ids": s.global_subscribe_ids,
             "advertise_ids": s.global_advertise_ids,
             "pending_calls": s.global_pending_calls,
+            "pending_goals": s.global_pending_goals,
             "fragment_bytes": s.global_fragment_bytes,
             "latched_bytes": s.global_latched_bytes,
         }
@@ -323,9 +327,11 @@ class Graph:
             handlers[type(effect)](peer, effect)
 
     def tick(self, now: float) -> None:
-        """Expire what waits on time (service calls)."""
+        """Expire what waits on time (service calls, goals to client-served actions)."""
         if self.services.pending:
             self.services.expire(now)
+        if self.actions.deadlines:
+            self.actions.expire(now)
 
     # -- in-process API (the simulated nodes) ---------------------------------------------
 
@@ -462,6 +468,7 @@ class Graph:
             written=op.action,
             feedback=op.feedback,
             sent_type=op.action_type,
+            now=now,
         )
 
     def _action_feedback(self, peer: Peer, update: GoalUpdate, now: float) -> None:

@@ -35,6 +35,12 @@ class Limits:
     pending_calls: int = 100
     #: Longest a call waits for a client provider, seconds (``timeout: 0`` waits this long).
     call_timeout: float = 60.0
+    #: Length of an op's id (characters of a string, digits of an integer).
+    id_length: int = 1_000
+    #: Goals of this client in flight (to any action server).
+    pending_goals: int = 100
+    #: Longest a goal to an action served by a client waits for its result, seconds.
+    goal_timeout: float = 600.0
     #: Incomplete fragmented messages at once.
     fragment_sets: int = 16
     #: Bytes of incomplete fragments (UTF-8), and the largest reassembled message.
@@ -67,6 +73,7 @@ GLOBAL_LIMITS: dict[str, int] = {
     "subscribe_ids": 20_000,
     "advertise_ids": 20_000,
     "pending_calls": 2_000,
+    "pending_goals": 2_000,
     "fragment_bytes": 40_000_000,
     "latched_bytes": 64_000_000,
 }
@@ -126,4 +133,13 @@ class TokenBucket:
         """Spend ``cost`` tokens even into debt; return seconds until the balance is positive."""
         self.refill(now)
         self.tokens -= cost
+        return 0.0 if self.tokens >= 0 else -self.tokens / self.rate
+
+    def owed(self, now: float) -> float:
+        """Return seconds until the balance is positive again (0: it is; nothing is spent).
+
+        A bucket shared by several spenders (one token's connections) may have been charged by
+        the others while one waited: it asks again before it spends.
+        """
+        self.refill(now)
         return 0.0 if self.tokens >= 0 else -self.tokens / self.rate

@@ -29,11 +29,12 @@ The session changes in no other way than through these methods: :meth:`Session.p
 in), the op methods (:meth:`~Session.subscribe`, :meth:`~Session.unsubscribe`,
 :meth:`~Session.advertise`, :meth:`~Session.unadvertise`, :meth:`~Session.publish`,
 :meth:`~Session.latch`, :meth:`~Session.provide`, :meth:`~Session.withdraw`,
-:meth:`~Session.call`, :meth:`~Session.set_level`, :meth:`~Session.refused`,
-:meth:`~Session.close`), and what the graph reports about the client: its access
-(:meth:`~Session.connect`, :meth:`~Session.admit`, decided by the guard), a latched message
-dropped (:meth:`~Session.unlatch`), a call answered (:meth:`~Session.end_call`), a name taken
-over by another provider (:meth:`~Session.disown`). Everything else is read-only outside
+:meth:`~Session.call`, :meth:`~Session.start_goal`, :meth:`~Session.set_level`,
+:meth:`~Session.refused`, :meth:`~Session.close`), and what the graph reports about the client:
+its access (:meth:`~Session.connect`, :meth:`~Session.admit`, decided by the guard), a latched
+message dropped (:meth:`~Session.unlatch`), a call answered (:meth:`~Session.end_call`), a goal
+ended (:meth:`~Session.end_goal`), a name taken over by another provider
+(:meth:`~Session.disown`). Everything else is read-only outside
 :mod:`simbridge.protocol` (the access is exposed as properties).
 """
 
@@ -41,6 +42,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import re
 from dataclasses import dataclass, field
 from typing import Literal, TypeAlias
 
@@ -302,6 +304,8 @@ class Session:
         self.actions: dict[str, str] = {}
         #: Calls of this client waiting for a client provider.
         self.pending_calls = 0
+        #: Goals of this client in flight.
+        self.pending_goals = 0
         #: Bytes of the latched message this client published last, by topic.
         self.latched: dict[str, int] = {}
         self.latched_bytes = 0
@@ -413,6 +417,10 @@ class Session:
         for value in values:
             try:
                 op = parse_op(value)
+                refused = self._long_id(op)
+                if refused is not None:
+                    out.append(refused)
+                    continue
                 if isinstance(op, Fragment):
                     text = self.defrag.add(op, now)
                     if text is not None:
@@ -464,6 +472,34 @@ class Session:
             "message"
         )
         return Refusal(msg, cause="max_frame_values")
+
+    def _long_id(self, op: Op) -> Refusal | None:
+        """Refuse an op whose ``id`` is longer than ``id_length`` (ids are kept and echoed).
+
+        A subscribe, advertise, call or goal keeps its id as long as it lasts: 1,000
+        subscribes with distinct 1 MB ids held 1 GB. The id is not echoed in the refusal (a
+        call's failed answer has none): a client that needs its answer uses short ids.
+        """
+        op_id = getattr(op, "id", None)
+        if op_id is None:
+            return None
+        limit = self.limits.id_length
+        if isinstance(op_id, str):
+            size = len(op_id) if op_id.isascii() else len(op_id.encode("utf-8", "replace"))
+        elif op_id.bit_length() <= 64:
+            return None  # up to 20 digits
+        else:
+            size = len(str(op_id))
+        if size <= limit:
+            return None
+        name = re.sub(r"(?<!^)(?=[A-Z])", "_", type(op).__name__).lower()  # CallService
+        unit = "characters" if isinstance(op_id, str) else "digits"
+        msg = (
+            f"{name}: refused, its id is {size} {unit} long: more than {limit} (the server's "
+            "max_id_length; ids are kept while the op lasts); use a shorter id"
+        )
+        target = getattr(op, "service", None) or getattr(op, "action", None) or ""
+        return Refusal(msg, op=name, target=target, cause="max_id_length")
 
     def _parse_unadmitted(self, data: str | bytes) -> list[Op | ProtocolError]:
         limit = self.limits.unauthenticated_frame_bytes
@@ -815,6 +851,44 @@ class Session:
             self.pending_calls -= 1
             self.pool.give("pending_calls")
 
+    def start_goal(self, action: str, op_id: OpId | None) -> None:
+        """Count a goal of this client in flight against the pending-goal budgets.
+
+        The graph reports its end (finished, timed out, dropped) with :meth:`end_goal`.
+
+        Raises:
+            Refusal: the budget is spent (answered as a failed ``action_result``).
+        """
+        limit = self.limits.pending_goals
+        if self.pending_goals >= limit:
+            msg = (
+                f"send_action_goal {action}: refused, this client already has {limit} goals in "
+                "flight (the server's max_pending_goals); wait for their results or cancel some"
+            )
+            raise Refusal(
+                msg, op="send_action_goal", target=action, op_id=op_id, cause="max_pending_goals"
+            )
+        if not self.pool.take("pending_goals"):
+            msg = (
+                f"send_action_goal {action}: refused, the server has its limit of "
+                f"{self.pool.limit('pending_goals')} goals in flight for all clients "
+                "(global_pending_goals); try again later"
+            )
+            raise Refusal(
+                msg,
+                op="send_action_goal",
+                target=action,
+                op_id=op_id,
+                cause="global_pending_goals",
+            )
+        self.pending_goals += 1
+
+    def end_goal(self) -> None:
+        """A goal of this client finished, timed out or was dropped."""
+        if self.pending_goals > 0:
+            self.pending_goals -= 1
+            self.pool.give("pending_goals")
+
     def latch(self, name: str, size: int) -> None:
         """Charge the latched message (``size`` bytes) this client leaves on topic ``name``.
 
@@ -877,6 +951,8 @@ class Session:
         self.actions.clear()
         while self.pending_calls:
             self.end_call()
+        while self.pending_goals:
+            self.end_goal()
         return effects
 
     def _take(

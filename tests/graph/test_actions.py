@@ -6,6 +6,7 @@ from typing import Any
 
 import pytest
 
+from simbridge.config import ServerSettings
 from simbridge.graph import Graph, install_rosapi
 from tests.helpers import RecordingPeer
 
@@ -180,3 +181,41 @@ def test_goal_list_args_follow_the_same_positional_rule_as_calls(graph: Graph) -
         refused["result"] is False
         and "1 fields (order), got 2 positional args" in refused["values"]
     )
+
+
+def test_goals_are_counted_per_client_and_their_arguments_are_not_kept() -> None:
+    """Past max_pending_goals a goal fails by name; results give the budget back."""
+    graph = Graph(settings=ServerSettings(max_pending_goals=2))
+    server, caller = served(graph)
+    for k in range(3):
+        goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": f"g{k}"}
+        graph.receive(caller, json.dumps(goal), 0.0)
+    (refused,) = caller.take()
+    assert refused["id"] == "g2" and refused["result"] is False
+    assert "max_pending_goals" in refused["values"]
+    assert caller.session.pending_goals == 2 == graph.pool.used["pending_goals"]
+    assert all(g.args is None for g in graph.actions.goals.values())  # sent on, not kept
+    first = server.take()[0]
+    result = {"op": "action_result", "action": "fib", "id": first["id"], "values": {}}
+    graph.receive(server, json.dumps(result | {"status": 4, "result": True}), 0.0)
+    assert caller.session.pending_goals == 1
+    graph.remove_peer(caller)
+    assert graph.pool.used["pending_goals"] == 0 and not graph.actions.goals
+
+
+def test_a_goal_without_result_times_out_and_is_cancelled() -> None:
+    """A client-served goal with no result after max_goal_timeout: aborted, server told."""
+    graph = Graph(settings=ServerSettings(max_goal_timeout=30.0))
+    server, caller = served(graph)
+    goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": "g"}
+    graph.receive(caller, json.dumps(goal), 10.0)
+    (sent,) = server.take()
+    graph.tick(39.0)
+    assert not caller.take()
+    graph.tick(40.0)
+    (result,) = caller.take()
+    assert result["id"] == "g" and result["result"] is False and result["status"] == 6
+    assert "max_goal_timeout" in result["values"]
+    (cancel,) = server.take()
+    assert cancel == {"op": "cancel_action_goal", "id": sent["id"], "action": "fib"}
+    assert caller.session.pending_goals == 0 and not graph.actions.deadlines

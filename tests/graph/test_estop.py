@@ -187,3 +187,33 @@ def test_a_robot_estop_covers_that_robot_and_a_reconnected_page_may_release_it(
     again = student(graph, guard, "token-for-r1-aaaa")
     reply = call(again, graph, "/r1/estop/reset")
     assert reply["values"]["success"] is True and not world.halted("r1")
+
+
+def test_latches_are_counted_a_repeated_stop_keeps_one_latch(classroom: Any) -> None:
+    """15,000 /r1/estop calls of one student are one latch; a reconnected page takes it over.
+
+    Past max_estop_latches, a stop of a held robot makes no new latch; one of a robot that is
+    not held still latches (a stop is never refused).
+    """
+    graph, world, estop, guard = classroom
+    alice = student(graph, guard, "token-for-r1-aaaa")
+    for _ in range(50):
+        reply = call(alice, graph, "/r1/estop")
+        assert reply["result"] is True and "latched for r1" in reply["values"]["message"]
+    assert len(estop.latches) == 1
+    graph.remove_peer(alice)
+    again = student(graph, guard, "token-for-r1-aaaa")
+    call(again, graph, "/estop")  # her robot again: the gone page's latch becomes hers
+    (latch,) = estop.latches.values()
+    assert latch.owner == again.session.client_id
+    # the cap: other connections' stops of r1 (held already) add nothing past it
+    estop.max_latches = 3
+    taken = [student(graph, guard, ADMIN) for _ in range(4)]
+    for peer in taken:
+        call(peer, graph, "/r1/estop")
+    assert len(estop.latches) == 3
+    reply = call(taken[-1], graph, "/r1/estop")
+    assert "held already by" in reply["values"]["message"]
+    assert "max_estop_latches" in reply["values"]["message"]
+    reply = call(taken[-1], graph, "/r2/estop")  # r2 is not held: it latches
+    assert world.halted("r2") and len(estop.latches) == 4

@@ -75,3 +75,24 @@ def test_describe_parameters_gives_the_declared_bounds(graph: Graph) -> None:
     assert mass["description"] == Params.describe()["robot.mass"]
     assert noise["floating_point_range"] == [{"from_value": 0.0, "to_value": 1.0, "step": 0.0}]
     assert mount["additional_constraints"] == flag["additional_constraints"] == ""
+
+
+def test_a_request_of_too_many_names_is_refused_before_its_answer_is_built(
+    graph: Graph,
+) -> None:
+    """Past max_parameter_names, each service refuses by name; at the limit it answers."""
+    limit = graph.settings.max_parameter_names
+    for service, args in (
+        ("describe_parameters", {"names": ["x"] * (limit + 1)}),
+        ("get_parameters", {"names": ["x"] * (limit + 1)}),
+        ("get_parameter_types", {"names": ["x"] * (limit + 1)}),
+        ("list_parameters", {"prefixes": ["x"] * (limit + 1)}),
+    ):
+        peer = RecordingPeer(graph)
+        body = {"op": "call_service", "service": f"/virtual_robot/{service}", "args": args}
+        graph.receive(peer, json.dumps(body), 0.0)
+        (reply,) = peer.take()
+        assert reply["result"] is False, service
+        assert f"{limit + 1} " in reply["values"] and "max_parameter_names" in reply["values"]
+    values = call(graph, "/virtual_robot/describe_parameters", {"names": ["x"] * limit})
+    assert len(values["descriptors"]) == limit

@@ -394,3 +394,44 @@ def test_the_publish_rate_is_the_clients_token_bucket() -> None:
     assert session.take_publish(0.0) and session.take_publish(0.0)
     assert not session.take_publish(0.0)
     assert session.take_publish(1.0)
+
+
+def test_ids_longer_than_the_budget_are_refused_before_anything_keeps_them() -> None:
+    """A long id is refused for every op (a call gets its failed answer, without the id)."""
+    session, _pool = budgeted(id_length=10)
+    ok, sub, call, big = session.parse(
+        '{"op":"subscribe","topic":"/a","id":"0123456789"}'
+        '{"op":"subscribe","topic":"/a","id":"0123456789x"}'
+        '{"op":"call_service","service":"/s","id":"\\u00e9\\u00e9\\u00e9\\u00e9\\u00e9\\u00e96"}'
+        '{"op":"advertise","topic":"/a","type":"std_msgs/String","id":12345678901234567890123}',
+        0.0,
+    )
+    assert isinstance(ok, o.Subscribe) and ok.id == "0123456789"
+    assert isinstance(sub, Refusal) and sub.cause == "max_id_length"
+    assert "subscribe: refused, its id is 11 characters long: more than 10" in str(sub)
+    assert isinstance(call, Refusal) and (call.op, call.target, call.op_id) == (
+        "call_service",
+        "/s",
+        None,
+    )
+    assert "13 characters" in str(call)  # UTF-8 bytes: 6 x 2 + 1
+    assert isinstance(big, Refusal) and "23 digits" in str(big)
+
+
+def test_goals_in_flight_are_budgeted_per_client_and_globally() -> None:
+    """start_goal past either budget refuses by name; end_goal and close give back."""
+    session, pool = budgeted(pending_goals=2)
+    session.start_goal("/a", "g1")
+    session.start_goal("/a", "g2")
+    with pytest.raises(Refusal, match="max_pending_goals") as refused:
+        session.start_goal("/a", "g3")
+    assert refused.value.op == "send_action_goal" and refused.value.op_id == "g3"
+    session.end_goal()
+    assert session.pending_goals == 1 == pool.used["pending_goals"]
+    shared = Pool({"pending_goals": 2})
+    Session(ClientId(9), pool=shared).start_goal("/a", 1)
+    Session(ClientId(10), pool=shared).start_goal("/a", 1)
+    with pytest.raises(Refusal, match="global_pending_goals"):
+        Session(ClientId(11), pool=shared).start_goal("/a", 1)
+    session.close()
+    assert pool.used["pending_goals"] == 0
