@@ -86,7 +86,13 @@ def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
 class Client:
     """One connected WebSocket client (a :class:`~simbridge.graph.Peer`)."""
 
-    def __init__(self, ws: ServerConnection, session: Session, settings: ServerSettings) -> None:
+    def __init__(
+        self,
+        ws: ServerConnection,
+        session: Session,
+        settings: ServerSettings,
+        work: TokenBucket | None = None,
+    ) -> None:
         #: The connection.
         self.ws = ws
         #: Protocol state.
@@ -117,9 +123,11 @@ class Client:
         self.auth_timer: asyncio.TimerHandle | None = None
         #: Incoming-message rate limit.
         self.messages = TokenBucket(settings.message_rate, settings.message_burst)
-        #: Share of the loop's time its frames may take (seconds of work per second).
-        share = session.limits.work_share
-        self.work = TokenBucket(share, WORK_BURST)
+        #: Share of the loop's time its frames may take (seconds of work per second): its own,
+        #: or the one its token's connections share (``work``).
+        self.work = work or TokenBucket(session.limits.work_share, WORK_BURST)
+        #: It connected with a token with admin rights (not counted in ``max_clients``).
+        self.reserved = False
 
     def close_soon(self, code: int, reason: str) -> None:
         """Close the connection after what is queued (e.g. a failed ``auth``)."""
@@ -205,6 +213,10 @@ class BridgeServer:
         self._watcher: asyncio.Task[None] | None = None
         #: Connections admitted without a token that have not authenticated yet.
         self._unauthenticated: weakref.WeakSet[ServerConnection] = weakref.WeakSet()
+        #: Connections admitted with each token (``max_connections_per_token``).
+        self._by_token: dict[str, weakref.WeakSet[ServerConnection]] = {}
+        #: The loop share each token's connections share, and how many use it.
+        self._shares: dict[str, tuple[TokenBucket, int]] = {}
         #: Clients with corked frames, and the callback that writes them.
         self._corked: list[Client] = []
         self._uncork_handle: asyncio.Handle | None = None
@@ -311,7 +323,8 @@ class BridgeServer:
         """
         s = self.settings
         token = _query_token(request.path)
-        if token is not None and token_access(s, token) is None:
+        granted = None if token is None else token_access(s, token)
+        if token is not None and granted is None:
             self.refused_total += 1
             logger.warning("refused a client: invalid token")
             return connection.respond(401, "invalid token\n")
@@ -332,14 +345,61 @@ class BridgeServer:
                 )
             self._unauthenticated.add(connection)
             return None
-        admitted = sum(1 for c in self.clients if not c.unauthenticated)
-        if admitted >= s.max_clients:
-            self.refused_total += 1
-            logger.warning("refused a client: %d clients connected (max_clients)", s.max_clients)
-            return connection.respond(
-                503, f"simbridge is full: {s.max_clients} clients connected; try again later\n"
-            )
+        if token is not None:
+            same = self._by_token.get(token)
+            held = 0 if same is None else sum(1 for c in same if c.state is not State.CLOSED)
+            if held >= s.max_connections_per_token:
+                self.refused_total += 1
+                logger.warning(
+                    "refused a client: its token has %d connections (max_connections_per_token)",
+                    held,
+                )
+                return connection.respond(
+                    503,
+                    f"simbridge refuses more connections with this token: it has {held} "
+                    "(the server's max_connections_per_token); close some first\n",
+                )
+        # the instructor's connections (a token with admin rights) are not counted: students
+        # that fill max_clients never lock the instructor out
+        if granted is None or not granted[1]:
+            admitted = sum(1 for c in self.clients if not (c.unauthenticated or c.reserved))
+            if admitted >= s.max_clients:
+                self.refused_total += 1
+                logger.warning(
+                    "refused a client: %d clients connected (max_clients)", s.max_clients
+                )
+                return connection.respond(
+                    503,
+                    f"simbridge is full: {s.max_clients} clients connected; try again later\n",
+                )
+        if token is not None:
+            self._by_token.setdefault(token, weakref.WeakSet()).add(connection)
         return None
+
+    def _share(self, token: str | None, session: Session) -> TokenBucket | None:
+        """Return the loop share the connections of ``token`` spend together (None: no token).
+
+        Every connection of a token counts against one ``client_work_share``: 24 connections
+        of one student sending 400 kB frames took 24 shares of the loop (98 % of a core).
+        """
+        if token is None or token_access(self.settings, token) is None:
+            return None
+        bucket, users = self._shares.get(token, (None, 0))
+        if bucket is None:
+            bucket = TokenBucket(session.limits.work_share, WORK_BURST)
+        self._shares[token] = (bucket, users + 1)
+        return bucket
+
+    def _unshare(self, token: str | None) -> None:
+        if token is None or token not in self._shares:
+            return
+        bucket, users = self._shares[token]
+        if users <= 1:
+            del self._shares[token]
+            if not self._by_token.get(token):
+                self._by_token.pop(token, None)
+        else:
+            self._shares[token] = (bucket, users - 1)
 
     def _owes_token(self, client: Client) -> None:
         """Give a connection that owes a token its deadline and small frames."""
@@ -418,8 +478,11 @@ class BridgeServer:
 
     async def _handler(self, ws: ServerConnection) -> None:
         graph = self.graph
-        session = graph.new_session(_query_token(ws.request.path) if ws.request else None)
-        client = Client(ws, session, self.settings)
+        token = _query_token(ws.request.path) if ws.request else None
+        session = graph.new_session(token)
+        client = Client(ws, session, self.settings, self._share(token, session))
+        granted = None if token is None else token_access(self.settings, token)
+        client.reserved = granted is not None and granted[1]
         _read_chunk(ws)
         self.clients.add(client)
         self.connections_total += 1
@@ -454,7 +517,9 @@ class BridgeServer:
                 # slows it down) while the loop and the other clients run
                 wait = client.work.charge(done, done - now)
                 if wait > 0:
-                    await asyncio.sleep(wait)
+                    while wait > 0:  # its token's other connections may spend it meanwhile
+                        await asyncio.sleep(wait)
+                        wait = client.work.owed(loop.time())
                     yielded = loop.time()
                 elif handled % BATCH == 0 or done - yielded > SLICE:
                     await asyncio.sleep(0)  # a flood must not hold the loop: let ticks run
@@ -472,6 +537,7 @@ class BridgeServer:
             with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
                 await writer
             self.clients.discard(client)
+            self._unshare(token)
             graph.remove_peer(client)
             logger.info("%s disconnected (code %s)", client.label, ws.close_code)
 
