@@ -224,8 +224,9 @@ class Outgoing:
         self.cdr = cdr
         self._body: bytes | None = None
         self._frames: dict[tuple[str, str], Frame] = {}
-        #: Per-encoding caches of encoders (e.g. the CBOR body shared by every topic spelling).
-        self.cache: dict[str, bytes] = {}
+        #: Per-encoding caches of encoders (e.g. the CBOR body shared by every topic spelling,
+        #: the PNG rows before the topic).
+        self.cache: dict[str, Any] = {}
 
     def json_body(self) -> bytes:
         """Return the JSON of the message itself, computed once."""

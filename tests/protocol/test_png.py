@@ -44,3 +44,19 @@ def test_png_frame_decodes_to_the_publish_message() -> None:
     body = json.loads(frame.data)
     _w, _h, pixels = _pixels(base64.b64decode(body["data"]))
     assert json.loads(pixels) == {"op": "publish", "topic": "t", "msg": {"data": "hello"}}
+
+
+def test_every_spelling_of_a_topic_shares_one_compression_of_the_message() -> None:
+    """/t, t, /t/ and t/: one compression of the rows before the topic; each frame decodes.
+
+    The topic comes last in the message, so the shared rows are the same for every spelling.
+    """
+    out = Outgoing("/t", None, {"data": "x" * 100_000})
+    frames = {t: out.frame("png", t) for t in ("/t", "t", "/t/", "t/")}
+    shared = out.cache["png"]
+    assert len(shared.compressed) > 0 and out.cache["png"] is shared
+    for spelling, frame in frames.items():
+        _w, _h, pixels = _pixels(base64.b64decode(json.loads(frame.data)["data"]))
+        decoded = json.loads(pixels)
+        assert decoded == {"op": "publish", "topic": spelling, "msg": {"data": "x" * 100_000}}
+        assert next(iter(json.loads(pixels.decode()))) == "op"
