@@ -10,6 +10,7 @@ separate server process for the figures.
 from __future__ import annotations
 
 import asyncio
+import base64
 import contextlib
 import itertools
 import json
@@ -20,12 +21,22 @@ from typing import Any
 
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
-from websockets.exceptions import ConnectionClosed
+from websockets.exceptions import ConnectionClosed, InvalidStatus
 
+from simbridge.config import load_world
 from simbridge.protocol.fragments import MESSAGE_COST, PIECE_COST
 from simbridge.runner import App
 from tests.conftest import AppFactory
-from tests.helpers import TIMEOUT_FACTOR, recv_until, send_json, stalled_client, wait_for, ws_url
+from tests.helpers import (
+    ROOT,
+    TIMEOUT_FACTOR,
+    recv_until,
+    send_json,
+    stalled_client,
+    wait_for,
+    ws_url,
+)
+from tests.protocol.test_png import _pixels
 
 
 pytestmark = pytest.mark.e2e
@@ -37,8 +48,9 @@ TOKENS = {STUDENT: "r1", "teacher-token-xyz": "admin"}
 class Observer:
     """A well-behaved client: the header stamps of every /odom it receives (wall seconds)."""
 
-    def __init__(self, ws: ClientConnection) -> None:
+    def __init__(self, ws: ClientConnection, topic: str = "/odom") -> None:
         self.ws = ws
+        self.topic = topic
         self.stamps: list[float] = []
         self.others: list[Any] = []
 
@@ -46,7 +58,7 @@ class Observer:
         with contextlib.suppress(ConnectionClosed):
             async for data in self.ws:
                 msg = json.loads(data)
-                if msg.get("topic") == "/odom":
+                if msg.get("topic") == self.topic:
                     s = msg["msg"]["header"]["stamp"]
                     self.stamps.append(s["sec"] + s["nanosec"] * 1e-9)
                 else:
@@ -65,12 +77,12 @@ class Observer:
 
 
 @contextlib.asynccontextmanager
-async def observed(app: App) -> AsyncIterator[Callable[[], Awaitable[None]]]:
+async def observed(app: App, topic: str = "/odom") -> AsyncIterator[Callable[[], Awaitable[None]]]:
     """Watch /odom while the block runs; the yielded coroutine asserts it stayed at 20 Hz."""
     async with connect(f"{ws_url(app)}/?token=teacher-token-xyz", max_size=None) as ws:
-        observer = Observer(ws)
+        observer = Observer(ws, topic)
         task = asyncio.create_task(observer.run())
-        await send_json(ws, {"op": "subscribe", "topic": "/odom"})
+        await send_json(ws, {"op": "subscribe", "topic": topic})
         await wait_for(lambda: len(observer.stamps) >= 2)
         start = time.time()
 
@@ -515,3 +527,145 @@ async def test_refusals_are_budgeted_one_status_per_cause_per_second(
             session = server_side(app, 1).session
             await wait_for(lambda: session.refusals_untold == 2_999)
         await steady()
+
+
+# -- issue 29: ids by length, goals by count, answers bounded, latches counted, one token one
+# share, one png compression per topic (bench/budgetattacks.py runs them full size) ---------
+
+
+async def test_issue29_long_ids_are_refused_and_goals_to_its_own_action_are_capped(
+    make_app: AppFactory,
+) -> None:
+    """Subscribe, advertise and call ids of 5,000 characters: refused by name, nothing kept.
+
+    Goals with 200 kB arguments to the student's own action, never answered: max_pending_goals
+    wait (their arguments not kept), the next one fails by name; leaving gives them back.
+    """
+    app = await student_app(make_app, max_pending_goals=5)
+    async with observed(app) as steady:
+        async with connect(f"{ws_url(app)}/?token={STUDENT}", max_size=None) as ws:
+            long = "i" * 5_000
+            await send_json(ws, {"op": "subscribe", "topic": "/odom", "id": long})
+            await send_json(ws, {"op": "advertise", "topic": "/r1/a", "type": "std_msgs/String"})
+            await send_json(ws, {"op": "advertise_service", "service": "/r1/s", "type": "p/S"})
+            await send_json(ws, {"op": "call_service", "service": "/r1/s", "id": long})
+            reply = await recv_until(ws, lambda m: m.get("op") == "service_response")
+            assert reply["result"] is False and "id" not in reply
+            assert "its id is 5000 characters long" in reply["values"]
+            assert "max_id_length" in reply["values"]
+            session = server_side(app, 1).session
+            assert not session.subscriptions and session.pending_calls == 0
+            await send_json(ws, {"op": "advertise_action", "action": "/r1/act", "type": "p/A"})
+            args = {"blob": "g" * 200_000}
+            for k in range(6):
+                goal = {"op": "send_action_goal", "action": "/r1/act", "action_type": "p/A"}
+                await send_json(ws, goal | {"id": f"g{k}", "args": args})
+            refused = await recv_until(ws, lambda m: m.get("op") == "action_result")
+            assert refused["id"] == "g5" and "max_pending_goals" in refused["values"]
+            goals = app.graph.actions.goals.values()
+            assert len(goals) == 5 and all(g.args is None for g in goals)
+        await wait_for(lambda: app.graph.pool.used["pending_goals"] == 0)
+        assert not app.graph.actions.goals
+        await steady()
+
+
+async def test_issue29_a_parameter_request_of_99000_names_is_refused_before_it_is_answered(
+    make_app: AppFactory,
+) -> None:
+    """describe/get/list_parameters of 99,000 names: each refused by name, the loop untouched."""
+    app = await student_app(make_app)
+    async with observed(app) as steady:
+        async with connect(f"{ws_url(app)}/?token={STUDENT}", max_size=None) as ws:
+            names = ["x"] * 99_000
+            for service, args in (
+                ("describe_parameters", {"names": names}),
+                ("get_parameters", {"names": names}),
+                ("list_parameters", {"prefixes": names}),
+            ):
+                call = {"op": "call_service", "service": f"/virtual_robot/{service}"}
+                await send_json(ws, call | {"id": service, "args": args})
+                reply = await recv_until(ws, lambda m, s=service: m.get("id") == s)
+                assert reply["result"] is False and "max_parameter_names" in reply["values"]
+        await steady()
+
+
+async def test_issue29_one_token_is_capped_its_connections_share_one_loop_share(
+    make_app: AppFactory,
+) -> None:
+    """r1's token past max_connections_per_token: 503 by name; r3 and the admin still get in.
+
+    r1's connections spend one loop share together; 2,000 calls to /r1/estop keep one latch.
+    """
+    world = load_world(ROOT / "config" / "worlds" / "classroom.yaml")
+    tokens = TOKENS | {"student-token-r3": "r3"}
+    app = await make_app(
+        world=world,
+        client_tokens=tokens,
+        admin_token="teacher-token-xyz",
+        max_clients=4,
+        max_connections_per_token=3,
+    )
+    async with observed(app, "/r1/odom") as steady, contextlib.AsyncExitStack() as stack:
+        r1 = [
+            await stack.enter_async_context(connect(f"{ws_url(app)}/?token={STUDENT}"))
+            for _ in range(3)
+        ]
+        with pytest.raises(InvalidStatus) as refused:
+            await connect(f"{ws_url(app)}/?token={STUDENT}")
+        assert refused.value.response.status_code == 503
+        assert b"max_connections_per_token" in refused.value.response.body
+        r3 = await stack.enter_async_context(connect(f"{ws_url(app)}/?token=student-token-r3"))
+        # max_clients (4) is full of students: the instructor is not counted in it
+        admin = await stack.enter_async_context(connect(f"{ws_url(app)}/?token=teacher-token-xyz"))
+        for ws in (r3, admin):
+            await send_json(ws, {"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+            assert (await recv_until(ws, lambda m: m.get("id") == "t"))["result"] is True
+        clients = {c.session.token: c for c in server_side(app)}
+        shares = {id(c.work) for c in server_side(app) if c.session.token == STUDENT}
+        assert len(shares) == 1 and clients["student-token-r3"].work is not clients[STUDENT].work
+        call = json.dumps({"op": "call_service", "service": "/r1/estop", "id": "e"})
+        for _ in range(40):
+            await r1[0].send(call * 50)
+        answered = 0
+        async with asyncio.timeout(10 * TIMEOUT_FACTOR):
+            while answered < 2_000:
+                answered += json.loads(await r1[0].recv()).get("id") == "e"
+        assert len(app.estop.latches) == 1
+        await steady()
+    await wait_for(lambda: not app.server._shares)
+
+
+async def test_issue29_png_under_four_spellings_decodes_to_each_spelling(
+    make_app: AppFactory,
+) -> None:
+    """One topic subscribed with png as /r1/big, r1/big, /r1/big/ and r1/big/: one frame each.
+
+    Each decodes to the publish under its own spelling (the message is compressed once for
+    all four: tests/protocol/test_png.py).
+    """
+    app = await student_app(make_app)
+    async with observed(app) as steady:
+        async with (
+            connect(f"{ws_url(app)}/?token={STUDENT}", max_size=None) as pub,
+            connect(f"{ws_url(app)}/?token=teacher-token-xyz", max_size=None) as sub,
+        ):
+            spellings = ("/r1/big", "r1/big", "/r1/big/", "r1/big/")
+            for spelling in spellings:
+                await send_json(sub, {"op": "subscribe", "topic": spelling, "compression": "png"})
+            await send_json(sub, {"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+            await recv_until(sub, lambda m: m.get("id") == "t")
+            data = "p" * 300_000
+            msg = {"op": "publish", "topic": "/r1/big", "type": "std_msgs/String"}
+            await send_json(pub, msg | {"msg": {"data": data}})
+            seen = []
+            for _ in spellings:
+                frame = await recv_until(sub, lambda m: m.get("op") == "png")
+                seen.append(_png_message(frame["data"]))
+            assert sorted(m["topic"] for m in seen) == sorted(spellings)
+            assert all(m["msg"] == {"data": data} for m in seen)
+        await steady()
+
+
+def _png_message(data: str) -> Any:
+    _w, _h, pixels = _pixels(base64.b64decode(data))
+    return json.loads(pixels)
