@@ -154,7 +154,9 @@ async def token_slots(url: Url, stop: asyncio.Event) -> str:
             except InvalidStatus as err:
                 got_in.append(f"{who} HTTP {err.response.status_code}")
         said = ", ".join(f"{n} x {k}" for k, n in refused.items()) or "none refused"
-        return f"r1 held {len(held)} connections ({said}); {'; '.join(got_in)}"
+        text = f"r1 held {len(held)} connections ({said}); {'; '.join(got_in)}"
+        locked_out = any("HTTP" in t for t in got_in)
+        return f"BREACH: {text}" if locked_out else text
     finally:
         for ws in held:
             with contextlib.suppress(Exception):
