@@ -9,12 +9,16 @@ stalled client therefore never delays the simulation loop or any other client.
 
 Hostile or broken clients are bounded here (``docs/security.md``): upgrades from a foreign
 ``Origin``, over ``max_clients`` or with a wrong ``?token=`` are refused with an HTTP status
-before the handshake; where a token is required, connections without one wait in a small pool
-of their own (``max_unauthenticated``), have ``auth_timeout`` seconds to authenticate and may
-send only small frames until they do; incoming messages are rate limited per client (excess
-ones are dropped with one ``status`` a second); a client that reads nothing for
-``stall_timeout`` seconds while messages wait for it (timed from when they began to wait) is
-disconnected; keepalive pings evict dead peers.
+before the handshake, and so is one more connection of a token that has
+``max_connections_per_token`` (the connections of a token with admin rights are not counted
+in ``max_clients``: students who fill it never lock the instructor out); where a token is
+required, connections without one wait in a small pool of their own (``max_unauthenticated``),
+have ``auth_timeout`` seconds to authenticate and may send only small frames until they do;
+incoming messages are rate limited per client (excess ones are dropped with one ``status`` a
+second) and the connections of one token spend one share of the loop's time together
+(``client_work_share``); a client that reads nothing for ``stall_timeout`` seconds while
+messages wait for it (timed from when they began to wait) is disconnected; keepalive pings
+evict dead peers.
 """
 
 from __future__ import annotations
