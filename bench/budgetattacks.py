@@ -235,6 +235,19 @@ async def _reply(ws: ClientConnection, op_id: str) -> Any:
                 return msg
 
 
+#: The item of issue 29 each attack reproduces.
+ROWS = {
+    "ids_subscribe": "4",
+    "ids_advertise": "4",
+    "calls_own": "4",
+    "goals_own": "4",
+    "params": "5",
+    "token_slots": "6",
+    "token_share": "6",
+    "png_spellings": "10",
+    "estop_latches": "12",
+}
+
 ATTACKS: dict[str, tuple[str, Attack]] = {
     "ids_subscribe": ("subscribes with 900 kB ids", ids_subscribe),
     "ids_advertise": ("advertises with 900 kB ids", ids_advertise),

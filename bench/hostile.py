@@ -437,9 +437,9 @@ for _name, (_row, _http) in httpattacks.ATTACKS.items():
     ATTACKS[_name] = Attack(_name, _row, _http_attack(_http), http=True)
 
 
-# what one student makes the server hold or do (issue 29): bench/budgetattacks.py
+# what one student makes the server hold or do (issue 29, 4-6, 10, 12): bench/budgetattacks.py
 for _name, (_title, _run) in budgetattacks.ATTACKS.items():
-    attack_async(_name, "29", _run)
+    attack_async(_name, budgetattacks.ROWS[_name], _run)
 
 
 # -- the run --------------------------------------------------------------------------------
