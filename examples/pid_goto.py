@@ -6,6 +6,11 @@ Works unchanged against simbridge and against rosbridge on the real robot:
     pip install roslibpy          # or, in make run's venv: .venv/bin/pip install roslibpy
     python examples/pid_goto.py --url ws://127.0.0.1:9090 --goal 1.0 0.5 --heading 1.57
 
+The gains are options (``--position-gains KP KI KD``, ``--heading-gains KP KI KD``) so that a
+tuning can be graded: ``simbridge grade config/tasks/goto_position.yaml -- python
+examples/pid_goto.py --position-gains 3 2 0`` (the URL comes from ``SIMBRIDGE_URL``, which
+``simbridge grade`` sets for the command it starts).
+
 Reads /odom (nav_msgs/msg/Odometry), publishes /cmd_vel every 100 ms
 (geometry_msgs/msg/Twist, or TwistStamped when the robot's /cmd_vel has that type):
 
@@ -23,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import threading
 import time
@@ -88,13 +94,27 @@ def velocity_publisher(ros: roslibpy.Ros, name: str = "/cmd_vel") -> Callable[[f
 def main() -> int:
     """Run the example; return the exit code."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--url", default="ws://127.0.0.1:9090", help="rosbridge URL")
+    parser.add_argument(
+        "--url",
+        default=os.environ.get("SIMBRIDGE_URL", "ws://127.0.0.1:9090"),
+        help="rosbridge URL (default: $SIMBRIDGE_URL or ws://127.0.0.1:9090)",
+    )
     parser.add_argument("--goal", nargs=2, type=float, default=[1.0, 0.5], metavar=("X", "Y"))
     parser.add_argument("--heading", type=float, default=None, help="final yaw, radians")
     parser.add_argument("--tolerance", type=float, default=0.05, help="metres (default 0.05)")
     parser.add_argument("--heading-tolerance", type=float, default=0.05, help="radians")
     parser.add_argument("--max-speed", type=float, default=0.3, help="m/s (default 0.3)")
     parser.add_argument("--timeout", type=float, default=30.0, help="seconds (default 30)")
+    parser.add_argument(
+        "--heading-gains", nargs=3, type=float, default=[2.0, 0.1, 0.1], metavar=("KP", "KI", "KD")
+    )
+    parser.add_argument(
+        "--position-gains",
+        nargs=3,
+        type=float,
+        default=[0.8, 0.05, 0.05],
+        metavar=("KP", "KI", "KD"),
+    )
     args = parser.parse_args()
 
     url = urlparse(args.url)
@@ -122,8 +142,8 @@ def main() -> int:
         print(json.dumps({"reached": False, "error": "no /odom within 10 s"}))
         return 1
 
-    heading_pid = PID(kp=2.0, ki=0.1, kd=0.1, limit=1.5)
-    position_pid = PID(kp=0.8, ki=0.05, kd=0.05, limit=args.max_speed)
+    heading_pid = PID(*args.heading_gains, limit=1.5)
+    position_pid = PID(*args.position_gains, limit=args.max_speed)
     gx, gy = args.goal
     period = 0.1  # 10 Hz
     start = time.monotonic()

@@ -423,6 +423,20 @@ def _run_parser(env: Environment) -> argparse.ArgumentParser:
         help="topics --record records (default: every topic, also later ones)",
     )
     parser.add_argument(
+        "--results",
+        metavar="FILE",
+        default=env.results,
+        help="the class's grading results: a journal of JSON lines, appended and read back "
+        "at start (default: none, results are lost on restart) [SIMBRIDGE_RESULTS]",
+    )
+    parser.add_argument(
+        "--tasks",
+        metavar="DIR",
+        default=env.tasks,
+        help="directory of the instructor's task files (*.yaml) that /admin publishes "
+        "(default: the bundled config/tasks) [SIMBRIDGE_TASKS]",
+    )
+    parser.add_argument(
         "--log-level",
         default=env.log_level or "info",
         choices=["debug", "info", "warning", "error"],
@@ -457,6 +471,10 @@ async def _serve(
         else:
             print(f"simbridge: cannot listen: {err}", file=sys.stderr)
         return 2
+    if app.grader.bags is not None:  # the runs' bags, beside the results file
+        from simbridge.tools.bag import BagWriter
+
+        app.grader.recorder = lambda path: BagWriter(path, app.graph.registry)
     recorder = None
     if record is not None:
         from pathlib import Path
@@ -582,9 +600,18 @@ def _cmd_run(argv: Sequence[str]) -> int:
             http_port=None if args.no_http else args.http_port,
             use_sim_time=args.use_sim_time,
             demo_nodes=args.demo_nodes,
+            results_file=args.results,
+            tasks_dir=args.tasks,
             **_security_settings(args),
             **_foxglove_settings(args),
         )
+        if args.tasks:
+            from simbridge.grading import load_tasks
+
+            if not Path(args.tasks).is_dir():
+                msg = f"--tasks: '{args.tasks}' is not a directory of task files"
+                raise ConfigError(msg)
+            load_tasks(args.tasks)
         # validate before binding anything, so a bad file fails fast and clearly
         load_world(args.world)
         load_params(args.params)
@@ -696,6 +723,12 @@ def _cmd_replay(argv: Sequence[str]) -> int:
     return replay_main(argv)
 
 
+def _cmd_grade(argv: Sequence[str]) -> int:
+    from simbridge.tools.grade import grade_main
+
+    return grade_main(argv)
+
+
 def _cmd_compare(argv: Sequence[str]) -> int:
     from simbridge.tools.compare import compare_main
 
@@ -719,6 +752,7 @@ COMMANDS: dict[str, tuple[str, Callable[[Sequence[str]], int]]] = {
     "replay": ("replay a bag's /cmd_vel into a server or a headless simulation", _cmd_replay),
     "compare": ("compare the odometry of a simulated and a real run (RMSE, drift)", _cmd_compare),
     "fit": ("fit the realism profile to a real robot's /cmd_vel and /odom bag", _cmd_fit),
+    "grade": ("run a task file on a server or headless; report.json, report.html", _cmd_grade),
     "zenohd": (
         "run a Zenoh router for ROS 2 over Zenoh (as rmw_zenohd; [zenoh] extra)",
         _cmd_zenohd,

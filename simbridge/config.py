@@ -790,6 +790,12 @@ class ServerSettings(Record, frozen=True):
     #: stays closed unless this opens it; without them, None gives what a rosbridge client
     #: without a token gets.
     foxglove_scope: str | None = setting(default=None, before=_foxglove_scope)
+    # -- grading (simbridge.grading): tasks, and the journal of the class's attempts --
+    #: The results journal (JSON lines, appended, read back at start); None: results are
+    #: kept in memory only. The runs' bags go beside it, in ``<name>-bags/``.
+    results_file: str | None = None
+    #: Directory of the instructor's task files (``*.yaml``); None: the bundled config/tasks.
+    tasks_dir: str | None = None
 
     def check(self) -> None:
         """Check that a Foxglove port in a class was opened on purpose (``foxglove_scope``)."""
@@ -864,6 +870,8 @@ class Environment(Record, frozen=True):
     log_level: LogLevel | None = None
     foxglove_port: Port | None = None
     foxglove_scope: str | None = None
+    results: str | None = None
+    tasks: str | None = None
 
     @classmethod
     def read(cls, environ: Mapping[str, str]) -> Environment:

@@ -27,6 +27,7 @@ from simbridge.config import (
     load_world,
     resource_dir,
 )
+from simbridge.grading import install_grader
 from simbridge.graph.assembly import build_robot_graph
 from simbridge.graph.bridge import ROBOT_NODE
 from simbridge.graph.graph import Graph
@@ -36,6 +37,7 @@ from simbridge.server import BridgeServer, tls_context
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
 from simbridge.web.admin import install_admin
+from simbridge.web.grading import install_grading_admin
 
 
 if TYPE_CHECKING:
@@ -200,6 +202,10 @@ class App:
             estop=self.estop,
             roles=self.roles,
         )
+        #: The grader: task runs scored on the true pose, the class's results (/admin).
+        self.grader = install_grader(self.graph, self.world, self.settings)
+        self.tick_hooks.append(self.grader.tick)
+        install_grading_admin(self.web, self.grader, self.settings)
         #: Loop timing.
         self.stats = LoopStats()
         self._http: asyncio.Server | None = None
@@ -298,6 +304,7 @@ class App:
             self._loop_task.cancel()
             with contextlib.suppress(asyncio.CancelledError):
                 await self._loop_task
+        self.grader.close()  # runs in progress are recorded as interrupted
         if self.zenoh is not None:
             await self.zenoh.close()
         if self.foxglove is not None:

@@ -72,6 +72,10 @@ MESSAGES: dict[str, str] = {
 #: Services: canonical name -> request and response text separated by ``---``.
 SERVICES: dict[str, str] = {
     "std_srvs/srv/Empty": "---",
+    # simbridge's grader (simbridge.grading.grader): one shape for every /simbridge/grade/*
+    "simbridge_msgs/srv/Grade": (
+        f"string task\nstring robot\nstring attempt\nstring task_yaml\n---\n{_STATUS}"
+    ),
     "std_srvs/srv/Trigger": f"---\n{_STATUS}",
     "std_srvs/srv/SetBool": f"bool data\n---\n{_STATUS}",
     "example_interfaces/srv/AddTwoInts": "int64 a\nint64 b\n---\nint64 sum",

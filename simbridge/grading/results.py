@@ -1,0 +1,173 @@
+"""The class's results: an append-only journal of JSON lines, read back at start.
+
+Every event is one line, written with a single ``write`` on a file opened for appending and
+flushed to disk (``fsync``) before the call returns, so that a crash or ``kill -9`` can at worst
+leave the last line incomplete, never an earlier one:
+
+* ``{"kind": "start", "attempt": "a7", "task": ..., "robot": ..., "student": ..., "time": ...}``
+  when a run begins;
+* ``{"kind": "result", "attempt": "a7", "status": "passed" | "failed" | "interrupted" | ...,
+  ...}`` when it ends (the whole report);
+* ``{"kind": "publish" | "withdraw", "task": ID, "time": ...}`` when the instructor publishes
+  or withdraws a task.
+
+Reading back (:meth:`ResultsLog.open`): a line that does not parse (the torn last line of a
+crash) is skipped and counted; the file is first ended with a newline so that the next line
+starts clean. A ``start`` without its ``result`` is an attempt the restart cut: it is recorded
+(appended) as ``interrupted``.
+"""
+
+from __future__ import annotations
+
+import logging
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+import orjson
+
+
+__all__ = ["ResultsLog"]
+
+logger = logging.getLogger(__name__)
+
+#: Attempt statuses that end a run.
+FINISHED = frozenset({"passed", "failed", "interrupted", "no_controller", "cancelled", "error"})
+
+
+class ResultsLog:
+    """The attempts and published tasks, kept in memory and (with a path) in a journal file.
+
+    Args:
+        path: the journal; None keeps results in memory only (lost on restart).
+        clock: wall-clock seconds (Unix time), for the lines' ``time``.
+    """
+
+    def __init__(self, path: Path | None = None, *, clock: Any = time.time) -> None:
+        self.path = path
+        self.clock = clock
+        #: Attempts by id, oldest first: their start line merged with their result line.
+        self.attempts: dict[str, dict[str, Any]] = {}
+        #: Task ids published, in the order they were published.
+        self.published: list[str] = []
+        #: Lines that did not parse when the file was read.
+        self.bad_lines = 0
+        self._next = 1
+        self._fd: int | None = None
+
+    # -- the file -------------------------------------------------------------------------
+
+    def open(self) -> list[str]:
+        """Read the journal back and open it for appending; return the attempts it cut short.
+
+        Raises:
+            OSError: the file cannot be read or created.
+        """
+        if self.path is None:
+            return []
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        if self.path.exists():
+            data = self.path.read_bytes()
+            for raw in data.splitlines():
+                if not raw.strip():
+                    continue
+                try:
+                    line = orjson.loads(raw)
+                except orjson.JSONDecodeError:
+                    self.bad_lines += 1
+                    continue
+                if isinstance(line, dict):
+                    self._apply(line)
+                else:
+                    self.bad_lines += 1
+            torn = bool(data) and not data.endswith(b"\n")
+        else:
+            torn = False
+        self._fd = os.open(self.path, os.O_WRONLY | os.O_APPEND | os.O_CREAT, 0o644)
+        if torn:
+            os.write(self._fd, b"\n")  # the torn line stays a line of its own
+        if self.bad_lines:
+            logger.warning(
+                "results file %s: %d line(s) did not parse and were skipped (a crash mid-write)",
+                self.path,
+                self.bad_lines,
+            )
+        cut = [a for a, rec in self.attempts.items() if rec.get("status") == "running"]
+        for attempt in cut:
+            self.finish(
+                attempt,
+                {
+                    "status": "interrupted",
+                    "passed": False,
+                    "reason": "the server stopped during this attempt",
+                },
+            )
+        logger.info(
+            "results file %s: %d attempts read back (%d interrupted by the restart)",
+            self.path,
+            len(self.attempts),
+            len(cut),
+        )
+        return cut
+
+    def close(self) -> None:
+        """Close the journal."""
+        if self._fd is not None:
+            os.close(self._fd)
+            self._fd = None
+
+    def _append(self, line: dict[str, Any]) -> None:
+        self._apply(line)
+        if self._fd is None:
+            return
+        data = orjson.dumps(line, option=orjson.OPT_SERIALIZE_NUMPY) + b"\n"
+        os.write(self._fd, data)  # one write on an O_APPEND file: never interleaved
+        os.fsync(self._fd)
+
+    def _apply(self, line: dict[str, Any]) -> None:
+        kind = line.get("kind")
+        if kind == "start":
+            attempt = str(line.get("attempt"))
+            self.attempts[attempt] = {**line, "status": "running"}
+            self._bump(attempt)
+        elif kind == "result":
+            attempt = str(line.get("attempt"))
+            self.attempts[attempt] = {**self.attempts.get(attempt, {}), **line}
+            self._bump(attempt)
+        elif kind == "publish":
+            task = str(line.get("task"))
+            if task not in self.published:
+                self.published.append(task)
+        elif kind == "withdraw":
+            task = str(line.get("task"))
+            if task in self.published:
+                self.published.remove(task)
+
+    def _bump(self, attempt: str) -> None:
+        digits = attempt.lstrip("a")
+        if digits.isdigit():
+            self._next = max(self._next, int(digits) + 1)
+
+    # -- events ---------------------------------------------------------------------------
+
+    def new_id(self) -> str:
+        """Return an attempt id not used before (also across restarts)."""
+        attempt = f"a{self._next}"
+        self._next += 1
+        return attempt
+
+    def start(self, attempt: str, fields: dict[str, Any]) -> None:
+        """Record that ``attempt`` began."""
+        self._append({"kind": "start", "attempt": attempt, "time": self.clock(), **fields})
+
+    def finish(self, attempt: str, fields: dict[str, Any]) -> None:
+        """Record how ``attempt`` ended (``fields`` holds its ``status`` and report)."""
+        self._append({"kind": "result", "attempt": attempt, "ended": self.clock(), **fields})
+
+    def publish(self, task: str, published: bool) -> None:
+        """Record that the instructor published (or withdrew) ``task``."""
+        if (task in self.published) == published:
+            return
+        kind = "publish" if published else "withdraw"
+        self._append({"kind": kind, "task": task, "time": self.clock()})
