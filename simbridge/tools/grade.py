@@ -58,7 +58,7 @@ def _with_token(url: str, token: str | None) -> str:
         return url
     parts = urlsplit(url)
     query = [(k, v) for k, v in parse_qsl(parts.query) if k != "token"] + [("token", token)]
-    return urlunsplit(parts._replace(query=urlencode(query)))
+    return urlunsplit(parts._replace(path=parts.path or "/", query=urlencode(query)))
 
 
 def write_report(record: dict[str, Any], out: Path) -> tuple[Path, Path]:
