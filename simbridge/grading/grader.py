@@ -76,26 +76,31 @@ Phase = Literal["waiting", "running"]
 
 
 def apply_robot_params(world: World, robot: str, params: dict[str, Any]) -> None:
-    """Give ``robot`` the task's parameters (dotted names: ``robot.mass``...), all or nothing.
+    """Give ``robot`` the task's parameters (dotted names), all or nothing per section.
 
-    Every per-robot parameter of the world is accepted (:data:`PER_ROBOT_PARAMS`, by the
-    names :meth:`World.set_robot_params` takes); a name the world cannot give one robot is
-    refused with the reason.
+    ``robot.*``: the per-robot parameters (:data:`PER_ROBOT_PARAMS`, the bonus task's heavier
+    robot); ``realism.*``: the robot's own realism profile (``realism.enabled: true``,
+    ``realism.slip``...). Anything else is refused with the reason.
 
     Raises:
         ValueError: a parameter is unknown, shared by every robot, or out of range.
     """
-    changes: dict[str, Any] = {}
+    own: dict[str, Any] = {}
+    realism: dict[str, Any] = {}
     for key, value in params.items():
         section, _, name = key.partition(".")
         if section == "robot" and name in PER_ROBOT_PARAMS:
-            changes[name] = value
+            own[name] = value
+        elif section == "realism":
+            realism[name] = value
         else:
             allowed = ", ".join(f"robot.{n}" for n in sorted(PER_ROBOT_PARAMS))
-            msg = f"robot_params.{key}: not a parameter one robot may have ({allowed})"
+            msg = f"robot_params.{key}: not a parameter one robot may have ({allowed}, realism.*)"
             raise ValueError(msg)
-    if changes:
-        world.set_robot_params(robot, changes)
+    if own:
+        world.set_robot_params(robot, own)
+    if realism:
+        world.set_robot_realism(robot, realism)
 
 
 def _thin(values: list[Any]) -> list[Any]:
@@ -119,6 +124,7 @@ class Run:
     official: bool
     start: tuple[float, float, float]
     saved: dict[str, float]
+    saved_realism: dict[str, object]
     started: float
     phase: Phase = "waiting"
     #: Sim seconds waited for the controller, and run since its first command.
@@ -271,11 +277,13 @@ class Grader:
         body = self.world.robots[robot]
         start = task.start or body.start
         saved = dict(body.overrides)
+        saved_realism = dict(body.realism_own)
         try:
             self.world.teleport(robot, start)
             apply_robot_params(self.world, robot, task.robot_params)
         except (ValueError, KeyError) as err:
             body.overrides, body.cached = saved, None
+            body.realism_own, body.realism_cached = saved_realism, None
             raise ServiceError(f"task '{task.id}': {err}") from None
         if official is None:
             published = self.tasks.get(task.id)
@@ -291,6 +299,7 @@ class Grader:
             official=official,
             start=(start[0], start[1], start[2]),
             saved=saved,
+            saved_realism=saved_realism,
             started=self.clock(),
         )
         self._subscribe(run)
@@ -429,6 +438,7 @@ class Grader:
             if run.phase == "running":
                 self.world.command(run.robot, 0.0, 0.0)  # stopped at the time limit
             body.overrides, body.cached = dict(run.saved), None
+            body.realism_own, body.realism_cached = dict(run.saved_realism), None
         metrics, response = score(run.goal, run.trace)
         passed, lines = evaluate(run.task.rubric, metrics)
         if status is None:

@@ -10,6 +10,7 @@ A task is a YAML file validated like the world files (one line naming the file a
       tolerance: 0.05             #   [[x, y], ...], wall {segment: [x1, y1, x2, y2], distance: d}
     time_limit: 10                # seconds from the controller's first command
     robot_params: {robot.mass: 3.0}   # optional: this robot's parameters during the run
+                                      # (robot.* per-robot parameters, realism.*)
     rubric:                       # thresholds on the metrics (simbridge.grading.metrics)
       overshoot_pct: {max: 10}
       settling_time_s: {max: 4}
@@ -172,14 +173,18 @@ def _robot_params(value: Any) -> Any:
     if not isinstance(value, dict):
         msg = f"must map parameter names to values, e.g. {{robot.mass: 3.0}}, got {value!r}"
         raise ValueError(msg)
+    out = {}
     for key, v in value.items():
         if not isinstance(key, str) or "." not in key:
             msg = f"{key}: a parameter name with its section, e.g. robot.mass"
             raise ValueError(msg)
+        if isinstance(v, bool):
+            v = float(v)  # realism.enabled: true (a boolean setting reads 1.0 as true)
         if not finite_number(v):
-            msg = f"{key}: must be a number, got {v!r}"
+            msg = f"{key}: must be a number or a boolean, got {v!r}"
             raise ValueError(msg)
-    return value
+        out[key] = v
+    return out
 
 
 class Task(Record):
