@@ -8,8 +8,9 @@ Works unchanged against simbridge and against rosbridge on the real robot:
 
 The gains are options (``--position-gains KP KI KD``, ``--heading-gains KP KI KD``) so that a
 tuning can be graded: ``simbridge grade config/tasks/goto_position.yaml -- python
-examples/pid_goto.py --position-gains 3 2 0`` (the URL comes from ``SIMBRIDGE_URL``, which
-``simbridge grade`` sets for the command it starts).
+examples/pid_goto.py --position-gains 3 2 0`` (the URL and the goal come from
+``SIMBRIDGE_URL`` and ``SIMBRIDGE_GOAL``, which ``simbridge grade`` sets for the command it
+starts).
 
 Reads /odom (nav_msgs/msg/Odometry), publishes /cmd_vel every 100 ms
 (geometry_msgs/msg/Twist, or TwistStamped when the robot's /cmd_vel has that type):
@@ -91,6 +92,15 @@ def velocity_publisher(ros: roslibpy.Ros, name: str = "/cmd_vel") -> Callable[[f
     return publish
 
 
+def goal_from_env() -> list[float] | None:
+    """Return the goal position ``simbridge grade`` gives its command ($SIMBRIDGE_GOAL), if any."""
+    try:
+        goal = json.loads(os.environ.get("SIMBRIDGE_GOAL", "null"))
+        return [float(v) for v in goal["position"]]
+    except (ValueError, TypeError, KeyError):
+        return None
+
+
 def main() -> int:
     """Run the example; return the exit code."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
@@ -99,7 +109,14 @@ def main() -> int:
         default=os.environ.get("SIMBRIDGE_URL", "ws://127.0.0.1:9090"),
         help="rosbridge URL (default: $SIMBRIDGE_URL or ws://127.0.0.1:9090)",
     )
-    parser.add_argument("--goal", nargs=2, type=float, default=[1.0, 0.5], metavar=("X", "Y"))
+    parser.add_argument(
+        "--goal",
+        nargs=2,
+        type=float,
+        default=goal_from_env() or [1.0, 0.5],
+        metavar=("X", "Y"),
+        help="goal position (default: the position of $SIMBRIDGE_GOAL, else 1.0 0.5)",
+    )
     parser.add_argument("--heading", type=float, default=None, help="final yaw, radians")
     parser.add_argument("--tolerance", type=float, default=0.05, help="metres (default 0.05)")
     parser.add_argument("--heading-tolerance", type=float, default=0.05, help="radians")

@@ -23,7 +23,7 @@ def test_bundled_tasks_load_with_their_file_names_as_ids() -> None:
     tasks = load_tasks(default_tasks_dir())
     assert {"heading_step", "goto_position", "wall_follow"} <= set(tasks)
     assert tasks["heading_step"].goal.kind == "heading"
-    assert tasks["goto_position"].goal.position == (1.0, 0.5)
+    assert tasks["goto_position"].goal.position == (1.0, 0.0)
 
 
 @pytest.mark.parametrize(

@@ -24,9 +24,11 @@ from tests.helpers import ROOT, finish_process, ws_url
 SENSIBLE = ["--tolerance", "0.02"]
 #: Gains that carry the robot past the goal (the integral holds the command at the limit), and
 #: a tolerance it cannot meet on the way through (it would stop there and hide the overshoot).
+#: At 0.45 m/s the kinematic steps are 2.25 cm: it passes the goal by 1.25 cm at least before
+#: it sees that it did, and by up to 7 cm (its 10 Hz period and the link's latency).
 OVERSHOOTING = [
-    *("--position-gains", "3", "2", "0", "--heading-gains", "4", "0", "0"),
-    *("--max-speed", "0.5", "--tolerance", "0.0001"),
+    *("--position-gains", "3", "2", "0"),
+    *("--max-speed", "0.45", "--tolerance", "0.0001"),
 ]
 KEYS = ("task", "robot", "passed", "metrics", "thresholds")
 METRICS = (
@@ -42,7 +44,7 @@ METRICS = (
 
 
 def short_task(tmp_path: Path) -> Path:
-    """The bundled position task with a shorter time limit (the robot is there in ~4 s)."""
+    """The bundled position task with a shorter time limit (the robot is there in ~3 s)."""
     text = (default_tasks_dir() / "goto_position.yaml").read_text()
     path = tmp_path / "goto_position.yaml"
     path.write_text(text.replace("time_limit: 20", "time_limit: 7"))
@@ -83,11 +85,11 @@ async def test_pid_goto_passes_with_its_gains_and_fails_on_overshoot_with_others
     for report in (good1, good2, bad):
         assert all(k in report for k in KEYS)
         assert set(METRICS) <= set(report["metrics"])
-        assert report["thresholds"]["overshoot_pct"] == {"max": 2.0, "min": None}
+        assert report["thresholds"]["overshoot_pct"] == {"max": 1.0, "min": None}
     assert (tmp_path / "run0" / "report.html").read_text().count("<svg") == 1
     failed = [line for line in bad["rubric"] if not line["passed"]]
     assert [line["metric"] for line in failed] == ["overshoot_pct"], failed
-    assert failed[0]["value"] == bad["metrics"]["overshoot_pct"] > 2.0
+    assert failed[0]["value"] == bad["metrics"]["overshoot_pct"] > 1.0
     assert "FAIL overshoot_pct" in out3
     # the same controller twice: the loop's timing (10 Hz controller, 20 Hz simulation, a
     # loaded machine) is all that differs
