@@ -245,6 +245,8 @@ async def test_admin_state_of_a_crowded_class_keeps_the_loop_at_20_hz(
     listed = [c for c in state["clients"] if c["name"].endswith("(r1's token)")]
     assert len(listed) == 120
     assert all(c["subscriptions"] == sorted(f"/idle_{k}" for k in range(120)) for c in listed)
+    assert state["robots"]["r1"]["clients"] == [c["name"] for c in listed]
+    assert state["robots"]["r2"]["clients"] == []  # the observer's token drives any robot
     assert max(took) < 0.25 * TIMEOUT_FACTOR, took
     for ws in clients:
         await ws.close()
