@@ -436,6 +436,10 @@ class _Exchange:
                 if slot.reserved:
                     refused = pool.claim(slot, admin, now)
                     if refused is not None:
+                        if pool.refused == 1 or pool.refused % 100 == 0:
+                            logger.warning(
+                                "HTTP: %d requests refused so far: %s", pool.refused, refused
+                            )
                         await self.refuse(503, refused, {"Retry-After": "1"})
                         return
                 slot.admin = slot.admin or admin
@@ -456,12 +460,7 @@ async def _serve_connection(
     exchange = _Exchange(app, reader, writer, head_timeout, body_timeout)
     slot = Slot(client_address(writer.get_extra_info("peername")), exchange.close)
     try:
-        refusal = pool.admit(slot, asyncio.get_running_loop().time())
-        if refusal is not None:
-            if pool.refused == 1 or pool.refused % 100 == 0:
-                logger.warning("HTTP: %d connections refused so far: %s", pool.refused, refusal)
-            await exchange.refuse(503, refusal, {"Retry-After": "1"})
-            return
+        pool.admit(slot, asyncio.get_running_loop().time())
         await exchange.serve(pool, slot)
     except (ConnectionError, TimeoutError):
         return

@@ -14,8 +14,9 @@ instructor's console usable whatever they do (``docs/security.md``, "HTTP"):
   each) until its request's head shows whether it carries the admin token. The instructor's
   request is then admitted, making room if it must (any client's idle or unfinished request
   gives way); anyone else's gets the 503 naming the budget. So an admin request is never refused
-  because students or outsiders filled the pool; the reserve itself is bounded per address, so
-  one machine flooding it only pushes out its own connections.
+  because students or outsiders filled the pool. The reserve is bounded per address (one
+  machine flooding it pushes out only its own waiters) and in all: when it is full, the oldest
+  waiter of the address with the most gives way, and a newcomer always gets to show its head.
 
 :class:`Pool` only keeps the books and decides; the server (:mod:`simbridge.web.http`) reads,
 answers and closes. Each decision costs at most one pass over the open connections.
@@ -91,30 +92,33 @@ class Pool:
     per: Counter[str] = field(default_factory=Counter)
     #: Connections in the reserve, oldest first.
     waiting: dict[Slot, None] = field(default_factory=dict)
-    #: Connections refused (503) and closed to make room, since the start.
+    #: Connections refused (503: :meth:`claim`) and closed to make room, since the start.
     refused: int = 0
     evicted: int = 0
 
-    def admit(self, slot: Slot, now: float) -> str | None:
-        """Give a new connection a place; return the refusal when there is none (503).
+    def admit(self, slot: Slot, now: float) -> None:
+        """Give a new connection a place: a member's, or else one in the reserve.
 
-        ``None`` means it is served: a member, or (``slot.reserved``) in the reserve until its
-        first request's head says whose it is (:meth:`claim`).
+        A reserved slot (``slot.reserved``) waits for its first request's head to say whose it
+        is (:meth:`claim`); the reserve always takes a newcomer, pushing out an older waiter.
         """
         slot.phase, slot.since = "idle", now
         refusal = self._room(slot.address, now)
         if refusal is None:
             self._join(slot)
-            return None
+            return
         ahead = [s for s in self.waiting if s.address == slot.address]
         if len(ahead) >= self.reserve_per_address:
             self._evict(ahead[0], 503, ahead[0].refusal)  # this address's own oldest waiter
         elif len(self.waiting) >= self.reserve:
-            self.refused += 1
-            return refusal
+            # the oldest waiter of the address with the most: a waiter that has not shown its
+            # head for the longest is not the instructor's (a browser sends it at once)
+            counts = Counter(s.address for s in self.waiting)
+            most = max(counts.values())
+            victim = next(s for s in self.waiting if counts[s.address] == most)
+            self._evict(victim, 503, victim.refusal)
         slot.reserved, slot.refusal = True, refusal
         self.waiting[slot] = None
-        return None
 
     def claim(self, slot: Slot, admin: bool, now: float) -> str | None:
         """A reserved connection's first head is here: admit it if ``admin``, else refuse it.

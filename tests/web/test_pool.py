@@ -17,53 +17,63 @@ class Closed:
         return Slot(address, lambda status, text: self.log.append((name, status, text)))
 
 
-def test_a_newcomer_over_its_address_budget_is_refused_by_name_when_nothing_gives_way() -> None:
-    pool, closed = Pool(limit=10, per_address=2, reserve=0), Closed()
+def test_a_newcomer_over_its_address_budget_waits_for_its_head_then_gets_the_503_by_name() -> None:
+    pool, closed = Pool(limit=10, per_address=2), Closed()
     for _ in range(2):
         slot = closed.slot("10.0.0.1")
-        assert pool.admit(slot, 0.0) is None
+        pool.admit(slot, 0.0)
         pool.mark(slot, "request", 0.0)
-    refusal = pool.admit(closed.slot("10.0.0.1"), 0.5)
+    newcomer = closed.slot("10.0.0.1")
+    pool.admit(newcomer, 0.5)
+    assert newcomer.reserved and newcomer not in pool.members
+    refusal = pool.claim(newcomer, admin=False, now=0.5)
     assert refusal is not None and "max_http_connections_per_address" in refusal
-    assert pool.admit(closed.slot("10.0.0.2"), 0.5) is None  # another address still gets in
-    assert not closed.log
+    other = closed.slot("10.0.0.2")
+    pool.admit(other, 0.5)
+    assert other in pool.members and not other.reserved  # another address still gets in
+    assert not closed.log and pool.refused == 1
 
 
 def test_at_its_address_budget_a_newcomer_takes_the_place_of_its_own_idle_connection() -> None:
     pool, closed = Pool(limit=3, per_address=2), Closed()
     other = closed.slot("10.0.0.9", "other")
-    assert pool.admit(other, 0.0) is None  # idle, and older than the address's own
+    pool.admit(other, 0.0)  # idle, and older than the address's own
     mine = [closed.slot("10.0.0.1", f"mine{n}") for n in range(2)]
     for n, slot in enumerate(mine):
-        assert pool.admit(slot, 1.0 + n) is None
-    assert pool.admit(closed.slot("10.0.0.1", "new"), 3.0) is None
+        pool.admit(slot, 1.0 + n)
+    pool.admit(closed.slot("10.0.0.1", "new"), 3.0)
     assert closed.log == [("mine0", 0, "")]  # its own longest idle, not the other address's
     assert other in pool.members and mine[0].evicted
 
 
 def test_when_full_a_slow_request_gives_way_with_408_and_a_young_one_does_not() -> None:
-    pool, closed = Pool(limit=2, per_address=10, reserve=0, slow=1.0), Closed()
+    pool, closed = Pool(limit=2, per_address=10, slow=1.0), Closed()
     old, young = closed.slot("10.0.0.1", "old"), closed.slot("10.0.0.2", "young")
     pool.admit(old, 0.0)
     pool.mark(old, "request", 0.0)
     pool.admit(young, 0.9)
     pool.mark(young, "request", 0.9)
     newcomer = closed.slot("10.0.0.3")
-    assert pool.admit(newcomer, 1.5) is None
+    pool.admit(newcomer, 1.5)
+    assert newcomer in pool.members
     pool.mark(newcomer, "busy", 1.5)
     assert [(name, status) for name, status, _ in closed.log] == [("old", 408)]
-    refusal = pool.admit(closed.slot("10.0.0.4"), 1.6)  # young's request is 0.7 s old
+    last = closed.slot("10.0.0.4")
+    pool.admit(last, 1.6)  # young's request is 0.7 s old: nothing gives way
+    assert last.reserved and len(closed.log) == 1
+    refusal = pool.claim(last, admin=False, now=1.6)
     assert refusal is not None and "(max_http_connections)" in refusal
-    assert pool.refused == 1
 
 
 def test_busy_connections_never_give_way() -> None:
-    pool, closed = Pool(limit=1, per_address=10, reserve=0), Closed()
+    pool, closed = Pool(limit=1, per_address=10), Closed()
     busy = closed.slot("10.0.0.1")
     pool.admit(busy, 0.0)
     pool.mark(busy, "busy", 0.0)
-    assert pool.admit(closed.slot("10.0.0.2"), 60.0) is not None
-    assert not closed.log
+    newcomer = closed.slot("10.0.0.2")
+    pool.admit(newcomer, 60.0)
+    assert pool.claim(newcomer, admin=False, now=60.0) is not None
+    assert not closed.log and busy in pool.members
 
 
 def test_the_instructor_gets_in_from_the_reserve_and_anyone_else_gets_the_503() -> None:
@@ -73,8 +83,9 @@ def test_the_instructor_gets_in_from_the_reserve_and_anyone_else_gets_the_503() 
         pool.admit(slot, 0.0)
         pool.mark(slot, "request", 0.0)
     student, instructor = closed.slot("10.0.0.2", "s"), closed.slot("10.0.0.3", "i")
-    assert pool.admit(student, 0.5) is None and student.reserved
-    assert pool.admit(instructor, 0.5) is None and instructor.reserved
+    pool.admit(student, 0.5)
+    pool.admit(instructor, 0.5)
+    assert student.reserved and instructor.reserved
     refusal = pool.claim(student, admin=False, now=0.6)
     assert refusal is not None and "(max_http_connections)" in refusal
     assert pool.claim(instructor, admin=True, now=0.6) is None  # young requests give way to it
@@ -89,7 +100,8 @@ def test_the_instructor_gets_in_even_over_the_budget_when_everyone_is_busy() -> 
     pool.admit(busy, 0.0)
     pool.mark(busy, "busy", 0.0)
     instructor = closed.slot("10.0.0.1")  # the same address: over both budgets
-    assert pool.admit(instructor, 0.1) is None and instructor.reserved
+    pool.admit(instructor, 0.1)
+    assert instructor.reserved
     assert pool.claim(instructor, admin=True, now=0.1) is None
     assert len(pool.members) == 2 and not closed.log
 
@@ -103,24 +115,31 @@ def test_one_address_flooding_the_reserve_pushes_out_only_its_own_waiters() -> N
     pool.admit(instructor, 0.1)
     flood = [closed.slot("10.0.0.6", f"flood{n}") for n in range(10)]
     for slot in flood:
-        assert pool.admit(slot, 0.2) is None
+        pool.admit(slot, 0.2)
     assert instructor in pool.waiting and len(pool.waiting) == 3
     assert {name for name, status, _ in closed.log} == {f"flood{n}" for n in range(8)}
     assert all(status == 503 for _, status, _ in closed.log)
-    others = [closed.slot(f"10.1.0.{n}") for n in range(4)]
-    results = [pool.admit(slot, 0.3) for slot in others]
-    assert results[:3] == [None] * 3  # the reserve's 6 places
-    assert results[3] is not None and "(max_http_connections_per_address)" not in results[3]
+    others = [closed.slot(f"10.1.0.{n}", f"other{n}") for n in range(4)]
+    for slot in others:
+        pool.admit(slot, 0.3)
+    # the reserve's 6 places; then the oldest waiter of the address with the most gives way
+    assert closed.log[-1][0] == "flood8" and len(pool.waiting) == 6
+    assert instructor in pool.waiting and all(slot in pool.waiting for slot in others)
 
 
 def test_leaving_frees_the_place() -> None:
-    pool, closed = Pool(limit=1, per_address=1, reserve=0), Closed()
+    pool, closed = Pool(limit=1, per_address=1), Closed()
     slot = closed.slot("10.0.0.1")
     pool.admit(slot, 0.0)
     pool.mark(slot, "busy", 0.0)
-    assert pool.admit(closed.slot("10.0.0.1"), 0.1) is not None
+    waiter = closed.slot("10.0.0.1")
+    pool.admit(waiter, 0.1)
+    assert waiter.reserved
+    pool.leave(waiter)
     pool.leave(slot)
-    assert pool.admit(closed.slot("10.0.0.1"), 0.2) is None
+    again = closed.slot("10.0.0.1")
+    pool.admit(again, 0.2)
+    assert not again.reserved and not pool.waiting
     assert dict(pool.per) == {"10.0.0.1": 1}
 
 
