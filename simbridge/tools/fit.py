@@ -326,6 +326,13 @@ def fit(drive: Drive, params: Params | None = None) -> FitResult:
     k = float(scale_f[best_f])
     sxx_k = _sxx_at(drive, base, fine, best_f)
     k_half = math.sqrt(variance / sxx_k) if sxx_k > 0 else math.inf
+    # and what the finest grid's step in latency and time constant leaves open
+    near = [
+        g[max(0, i - 1) : i + 2] if axis != 1 else g[i : i + 1]
+        for axis, (g, i) in enumerate(zip(fine, best_f, strict=True))
+    ]
+    _, scales = _search(drive, base, *near)
+    k_half = max(k_half, float(np.max(np.abs(scales - k))))
     estimates["wheel_speed_scale"] = Estimate(
         "wheel_speed_scale", "", k, k - k_half, k + k_half, sxx_k > 0, "no wheel ever turned"
     )
