@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import itertools
 import json
 import time
 from collections import Counter
@@ -223,9 +224,22 @@ def admin_state(port: int, ws_port: int, admin: str, until: float) -> str:
             await ws.send("".join(json.dumps(s) for s in subs))
         return ws
 
+    async def watch(stamps: list[float]) -> None:
+        """/r1/odom's header stamps while the console polls (the table's window has the setup)."""
+        async with connect(f"ws://{HOST}:{ws_port}/?token=bench-ta", max_size=None) as ws:
+            await ws.send(json.dumps({"op": "subscribe", "topic": "/r1/odom"}))
+            async for data in ws:
+                stamp = json.loads(data).get("msg", {}).get("header", {}).get("stamp")
+                if stamp:
+                    stamps.append(stamp["sec"] + stamp["nanosec"] * 1e-9)
+
     async def go() -> str:
         clients = [c for c in await asyncio.gather(*(client(n) for n in range(150))) if c]
         await asyncio.sleep(1.0)  # the subscriptions are made
+        stamps: list[float] = []
+        watching = asyncio.create_task(watch(stamps))
+        await asyncio.sleep(0.5)
+        polling = time.time()
         times: list[float] = []
         statuses: Counter[str] = Counter()
         size = 0
@@ -242,12 +256,15 @@ def admin_state(port: int, ws_port: int, admin: str, until: float) -> str:
             statuses[_status(data)] += 1
             size = len(data)
             await asyncio.sleep(max(0.0, start + 2.0 - time.monotonic()))
+        watching.cancel()
+        polled = [t for t in stamps if t >= polling]
+        gap = max((b - a for a, b in itertools.pairwise(polled)), default=float("nan"))
         for ws in clients:
             await ws.close()
         shown = ", ".join(f"{t * 1e3:.0f}" for t in times)
         return (
             f"{len(clients)} clients x 130 subscriptions; state GETs {_note(statuses)}, "
-            f"{size // 1000} kB, ms: {shown}"
+            f"{size // 1000} kB, ms: {shown}; worst /r1/odom gap while polling {gap * 1e3:.0f} ms"
         )
 
     return asyncio.run(go())

@@ -46,7 +46,7 @@ from urllib.parse import parse_qs, unquote, urlsplit
 import httptools
 import orjson
 
-from simbridge.web.pool import Pool, Slot, client_address
+from simbridge.web.pool import Phase, Pool, Slot, client_address
 
 
 if TYPE_CHECKING:
@@ -302,7 +302,7 @@ class _Parsed:
         request = HttpRequest(method, path, query, self._headers, b"".join(self._body))
         self.ready.append((request, self.parser.should_keep_alive()))
 
-    def feed(self, piece: bytes) -> tuple[int, str] | None:
+    def feed(self, piece: bytes | memoryview) -> tuple[int, str] | None:
         """Parse ``piece``; return the refusal ``(status, text)`` when the request is refused.
 
         Raises:
@@ -381,7 +381,7 @@ class _Exchange:
         now = loop.time()
         idle_until = now + (_RESERVE_TIMEOUT if slot.reserved else _IDLE_TIMEOUT)
         head_until = body_until = 0.0
-        pending = b""  # read and not parsed yet
+        pending = memoryview(b"")  # read and not parsed yet (sliced without copies)
         while True:
             if parsed.ready:
                 request, keep_alive = parsed.ready.popleft()
@@ -397,7 +397,8 @@ class _Exchange:
                 idle_until = now + _IDLE_TIMEOUT
                 continue
             if not pending:
-                pool.mark(slot, "request" if parsed.in_message else "idle", now)
+                phase: Phase = "request" if parsed.in_message else "idle" if parsed.begun else "new"
+                pool.mark(slot, phase, now)
                 deadline, late = idle_until, ""
                 if parsed.in_message:
                     deadline = body_until if parsed.in_body else head_until
@@ -406,7 +407,7 @@ class _Exchange:
                     late = f"request {what} not received within {limit:g} s\n"
                 try:
                     async with asyncio.timeout_at(deadline):
-                        pending = await self.reader.read(65536)
+                        pending = memoryview(await self.reader.read(65536))
                 except TimeoutError:
                     if late:
                         await self.refuse(408, late)

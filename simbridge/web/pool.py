@@ -1,14 +1,15 @@
 """The HTTP port's connections and their budgets (sans-I/O: no sockets, no event loop).
 
-Three budgets bound what HTTP clients can make the server hold, and one promise keeps the
-instructor's console usable whatever they do (``docs/security.md``, "HTTP"):
+Two budgets bound how many connections HTTP clients can make the server hold, and one promise
+keeps the instructor's console usable whatever they do (``docs/security.md``, "HTTP"):
 
 - ``limit`` connections in all (``max_http_connections``) and ``per_address`` from one client
   address (``max_http_connections_per_address``; an IPv6 address counts by its /64, the block
   one machine gets). A newcomer over a budget takes the place of a connection that holds a slot
-  for nothing: the longest idle keep-alive one (closed; the browser reconnects), else one whose
-  request has been arriving for longer than ``slow`` seconds (408: a browser sends a request's
-  head in one go). Within the per-address budget only that address's own connections give way.
+  for nothing: the longest idle keep-alive one (closed; the browser reconnects), else one that
+  has been connected for longer than ``slow`` seconds without a request (closed) or whose
+  request has been arriving for that long (408): a browser sends a request's head in one go.
+  Within the per-address budget only that address's own connections give way.
 - When no place can be made, the newcomer is not refused at once: it waits in a small
   **reserve** (``reserve`` connections, ``reserve_per_address`` from one address, a few seconds
   each) until its request's head shows whether it carries the admin token. The instructor's
@@ -33,9 +34,10 @@ from typing import Literal
 
 __all__ = ["Phase", "Pool", "Slot", "client_address"]
 
-#: What a connection is doing: waiting for a request (``idle``, also before its first), receiving
-#: one (``request``: its head or body is on its way) or being answered (``busy``).
-Phase = Literal["idle", "request", "busy"]
+#: What a connection is doing: waiting for its first request (``new``), waiting for its next
+#: one (``idle``: keep-alive), receiving one (``request``: its head or body is on its way) or
+#: being answered (``busy``).
+Phase = Literal["new", "idle", "request", "busy"]
 
 
 def client_address(peername: object) -> str:
@@ -63,7 +65,7 @@ class Slot:
     #: Closes the connection, answering ``status`` with ``text`` first (``status`` 0: nothing).
     close: Callable[[int, str], None]
     #: What it is doing, and since when (the pool's clock).
-    phase: Phase = "idle"
+    phase: Phase = "new"
     since: float = 0.0
     #: One of its requests carried the admin token: it gives way last.
     admin: bool = False
@@ -102,7 +104,7 @@ class Pool:
         A reserved slot (``slot.reserved``) waits for its first request's head to say whose it
         is (:meth:`claim`); the reserve always takes a newcomer, pushing out an older waiter.
         """
-        slot.phase, slot.since = "idle", now
+        slot.phase, slot.since = "new", now
         refusal = self._room(slot.address, now)
         if refusal is None:
             self._join(slot)
@@ -174,8 +176,8 @@ class Pool:
                 )
         else:
             return None
-        if victim.phase == "idle":
-            self._evict(victim, 0, "")
+        if victim.phase in ("idle", "new"):
+            self._evict(victim, 0, "")  # it has nothing on its way: closed quietly
         else:
             self._evict(victim, 408, "request not received in time while the server is full\n")
         return None
@@ -183,9 +185,11 @@ class Pool:
     def _victim(self, slots: Iterable[Slot], now: float, any_request: bool = False) -> Slot | None:
         """The connection to close for a newcomer: the longest idle, else the slowest request.
 
-        Requests younger than ``slow`` seconds are spared unless ``any_request`` (for the
-        instructor); connections being answered, and the instructor's while others remain,
-        never give way.
+        An idle keep-alive connection (served, waiting for its next request) gives way at once;
+        a new connection that has not begun its first request, or a request on its way, only
+        after ``slow`` seconds (a browser sends its request at once; a newcomer must have the
+        time to), unless ``any_request`` (for the instructor). Connections being answered, and
+        the instructor's, never give way.
         """
         idle: Slot | None = None
         slowest: Slot | None = None
@@ -196,7 +200,7 @@ class Pool:
                 if idle is None or s.since < idle.since:
                     idle = s
             elif (
-                s.phase == "request"
+                s.phase != "busy"
                 and (any_request or now - s.since > self.slow)
                 and (slowest is None or s.since < slowest.since)
             ):

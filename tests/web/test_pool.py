@@ -38,9 +38,11 @@ def test_at_its_address_budget_a_newcomer_takes_the_place_of_its_own_idle_connec
     pool, closed = Pool(limit=3, per_address=2), Closed()
     other = closed.slot("10.0.0.9", "other")
     pool.admit(other, 0.0)  # idle, and older than the address's own
+    pool.mark(other, "idle", 0.0)
     mine = [closed.slot("10.0.0.1", f"mine{n}") for n in range(2)]
     for n, slot in enumerate(mine):
         pool.admit(slot, 1.0 + n)
+        pool.mark(slot, "idle", 1.0 + n)  # served, waiting for its next request
     pool.admit(closed.slot("10.0.0.1", "new"), 3.0)
     assert closed.log == [("mine0", 0, "")]  # its own longest idle, not the other address's
     assert other in pool.members and mine[0].evicted
@@ -63,6 +65,18 @@ def test_when_full_a_slow_request_gives_way_with_408_and_a_young_one_does_not() 
     assert last.reserved and len(closed.log) == 1
     refusal = pool.claim(last, admin=False, now=1.6)
     assert refusal is not None and "(max_http_connections)" in refusal
+
+
+def test_a_new_connection_has_a_second_to_begin_its_request_before_it_gives_way() -> None:
+    pool, closed = Pool(limit=1, per_address=10, slow=1.0), Closed()
+    first = closed.slot("10.0.0.1", "first")
+    pool.admit(first, 0.0)  # connected, nothing sent yet
+    early = closed.slot("10.0.0.2")
+    pool.admit(early, 0.5)
+    assert early.reserved and not closed.log  # the first has not had its second yet
+    late = closed.slot("10.0.0.3")
+    pool.admit(late, 1.5)
+    assert late in pool.members and closed.log == [("first", 0, "")]  # closed quietly
 
 
 def test_busy_connections_never_give_way() -> None:
