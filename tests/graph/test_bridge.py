@@ -8,7 +8,7 @@ from typing import Any
 import pytest
 
 from simbridge.config import Params, WorldSpec, load_world
-from simbridge.graph import Graph, RobotBridge
+from simbridge.graph import Graph, RobotBridge, install_rosapi
 from simbridge.sim import World
 from tests.helpers import RecordingPeer
 
@@ -201,3 +201,52 @@ def test_a_steps_odom_is_flushed_before_its_scans_are_cast(setup: Any) -> None:
         bridge.publish(0.0)
     # every step /odom; every other step (10 Hz LiDAR, 20 Hz steps) a flush, then /scan
     assert seen == ["/odom", "flush", "/scan", "/odom"] * 2, seen
+
+
+def test_ground_truth_is_odom_by_default_and_odom_drifts_from_it_under_a_profile(
+    setup: Any,
+) -> None:
+    """/ground_truth beside /odom; the profile is ROS 2 parameters of /virtual_robot."""
+    graph, world, bridge = setup
+    install_rosapi(graph)
+    peer = RecordingPeer(graph)
+    for topic in ("/odom", "/ground_truth", "/tf"):
+        sub(peer, graph, topic)
+
+    def drive() -> dict[str, Any]:
+        world.command("", 0.2, 0.4)
+        for _ in range(20):
+            world.step()
+        peer.take()
+        bridge.publish(0.0)
+        return {m["topic"]: m["msg"] for m in peer.take()}
+
+    first = drive()
+    assert first["/ground_truth"]["pose"] == first["/odom"]["pose"]
+    assert first["/ground_truth"]["child_frame_id"] == "base_link"
+    (slip,) = _service(graph, "/virtual_robot/describe_parameters", {"names": ["realism.slip"]})[
+        "descriptors"
+    ]
+    assert slip["floating_point_range"] == [{"from_value": 0.0, "to_value": 1.0, "step": 0.0}]
+    assert slip["description"] == Params.describe()["realism.slip"]
+    changes = [
+        {"name": "realism.enabled", "value": {"type": 1, "bool_value": True}},
+        {"name": "realism.slip", "value": {"type": 3, "double_value": 0.2}},
+    ]
+    done = _service(graph, "/virtual_robot/set_parameters_atomically", {"parameters": changes})
+    assert done["result"]["successful"] is True
+    second = drive()
+    truth, odom = (second[t]["pose"]["pose"]["position"] for t in ("/ground_truth", "/odom"))
+    assert math.hypot(truth["x"] - odom["x"], truth["y"] - odom["y"]) > 0.01
+    tf = second["/tf"]["transforms"][0]["transform"]["translation"]
+    assert (tf["x"], tf["y"]) == (odom["x"], odom["y"])
+    assert truth["x"] == world.robots[""].state.x
+
+
+def _service(graph: Graph, service: str, args: Any) -> dict[str, Any]:
+    peer = RecordingPeer(graph)
+    body = {"op": "call_service", "service": service, "id": 1, "args": args}
+    graph.receive(peer, json.dumps(body), 0.0)
+    (reply,) = peer.take()
+    assert reply["result"] is True, reply
+    return dict(reply["values"])
