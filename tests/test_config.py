@@ -186,6 +186,16 @@ def test_a_world_may_list_named_robots(tmp_path: Path) -> None:
         ("robots: [{name: a}, {name: a}]\n", "robots[1]: name 'a' is used twice"),
         ("robots: [{name: 'r-1'}]\n", "robots[0].name: robot name 'r-1' is not a valid ROS name"),
         ("robots: [{pose: [0, 0, 0]}]\n", "robots[0].name: required, but missing"),
+        (
+            "robots: [{name: a, realism: {slip: 2}}]\n",
+            "robots[0].realism.slip: must be less than or equal to 1",
+        ),
+        ("robot: {realism: {slipp: 0.1}}\n", "robot.realism.slipp: unknown key"),
+        (
+            "floor: [{polygon: [[0, 0], [1, 0]], slip: 0.1}]\n",
+            "floor[0].polygon: must be a list of at least 3 corners",
+        ),
+        ("floor: [{polygon: [[0, 0], [1, 0], [1, 1]]}]\n", "floor[0].slip: required"),
     ],
 )
 def test_bad_robot_lists_fail_naming_the_key(tmp_path: Path, text: str, error: str) -> None:
