@@ -237,15 +237,15 @@ async def _reply(ws: ClientConnection, op_id: str) -> Any:
 
 #: The item of issue 29 each attack reproduces.
 ROWS = {
-    "ids_subscribe": "4",
-    "ids_advertise": "4",
-    "calls_own": "4",
-    "goals_own": "4",
-    "params": "5",
-    "token_slots": "6",
-    "token_share": "6",
-    "png_spellings": "10",
-    "estop_latches": "12",
+    "ids_subscribe": "29.4",
+    "ids_advertise": "29.4",
+    "calls_own": "29.4",
+    "goals_own": "29.4",
+    "params": "29.5",
+    "token_slots": "29.6",
+    "token_share": "29.6",
+    "png_spellings": "29.10",
+    "estop_latches": "29.12",
 }
 
 ATTACKS: dict[str, tuple[str, Attack]] = {
