@@ -69,6 +69,8 @@ PRIMITIVES: frozenset[str] = frozenset(
     }
 )
 
+#: The longest type string read (a ROS name is at most 256 characters here too).
+MAX_TYPE_LENGTH = 256
 _PKG = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 _NAME = re.compile(r"^[A-Za-z][A-Za-z0-9_]*$")
 
@@ -86,6 +88,12 @@ def normalize_type(name: object, kind: InterfaceKind = "msg") -> str:
     """
     if not isinstance(name, str):
         msg = f"type must be a string such as 'std_msgs/msg/String', got {name!r}"
+        raise TypeNotFoundError(msg)
+    if len(name) > MAX_TYPE_LENGTH:  # a topic keeps its type: 900 kB ones held 90 MB a client
+        msg = (
+            f"a type string of {len(name)} characters is not a valid type: at most "
+            f"{MAX_TYPE_LENGTH}, e.g. 'std_msgs/msg/String'"
+        )
         raise TypeNotFoundError(msg)
     parts = [p for p in name.strip().split("/") if p]
     if len(parts) == 2:

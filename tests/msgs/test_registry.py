@@ -25,7 +25,9 @@ def test_both_type_spellings_normalise_to_pkg_msg_type(given: str, canonical: st
     assert normalize_type(given) == canonical
 
 
-@pytest.mark.parametrize("bad", ["Twist", "a/b/c/d", "pkg/foo/Type", "pkg/1Type", "", 3])
+@pytest.mark.parametrize(
+    "bad", ["Twist", "a/b/c/d", "pkg/foo/Type", "pkg/1Type", "", 3, "a/" + "b" * 300]
+)
 def test_malformed_type_strings_are_refused(bad: object) -> None:
     """Anything but pkg/Type or pkg/{msg,srv,action}/Type is an error with the expected form."""
     with pytest.raises(TypeNotFoundError, match="type"):
