@@ -74,6 +74,9 @@ class Roles:
                 "max_angular_velocity": p.max_angular_velocity,
                 "radius": p.radius,
                 "own_params": bool(robot.overrides),
+                #: Under a realism profile (its own or the shared one): /odom drifts from
+                #: /ground_truth, and the profile takes the place of the motion model.
+                "realism": robot.realism(self.world.params.realism) is not None,
             }
         return out
 

@@ -269,9 +269,10 @@ function showRobotInfo() {
   const info = a && a.robot_info ? a.robot_info[state.ns] : null;
   if (!info) { $('robotInfo').textContent = a ? `model ${a.motion_model}` : 'model – · mass –'; return; }
   const own = info.own_params ? ' (this robot’s own)' : '';
-  $('robotInfo').textContent = `model ${a.motion_model} · mass ${info.mass} kg${own} · `
+  const model = info.realism ? 'realism profile (/odom drifts: see the ghost)' : a.motion_model;
+  $('robotInfo').textContent = `model ${model} · mass ${info.mass} kg${own} · `
     + `limits ${info.max_linear_velocity} m/s, ${info.max_angular_velocity} rad/s`
-    + (a.motion_model === 'kinematic' ? ' · mass matters in the dynamic model only' : '');
+    + (model === 'kinematic' ? ' · mass matters in the dynamic model only' : '');
   $('putBack').hidden = !mayDrive(state.ns) || !info.start;
   if (info.radius > 0) view.radius = info.radius;
 }

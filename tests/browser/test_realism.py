@@ -56,6 +56,9 @@ async def test_admin_worn_profile_on_one_robot_shows_its_ghost_and_error_plot(
     await page.wait_for_function(
         "window.simbridge.state.ns === 'r2' && window.simbridge.state.pose"
     )
+    await page.wait_for_function(
+        "document.getElementById('robotInfo').textContent.includes('realism profile')"
+    )
     world.command("r2", 0.2, 0.5)
     # the encoders believe the nominal geometry: odometry drifts from the truth
     await page.wait_for_function(

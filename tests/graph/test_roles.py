@@ -34,12 +34,14 @@ def access(graph: Graph, guard: Guard, token: str | None) -> Any:
 def test_access_tells_a_student_its_robot_and_that_it_is_not_admin() -> None:
     graph, guard, world = setup(client_tokens=TOKENS, admin_token="the-admin-token")
     world.set_robot_params("r3", {"mass": 3.0})
+    world.set_robot_realism("r3", {"enabled": True})
     reply = access(graph, guard, "token-for-r3-cccc")
     info = json.loads(reply["values"]["message"])
     assert info["robots"] == ["r3"] and info["admin"] is False and info["any_robot"] is False
     assert info["client"].endswith("(r3's token)")
     assert info["robot_info"]["r3"]["mass"] == 3.0 and info["robot_info"]["r3"]["own_params"]
-    assert info["robot_info"]["r1"]["mass"] == 1.5
+    assert info["robot_info"]["r3"]["realism"]
+    assert info["robot_info"]["r1"]["mass"] == 1.5 and not info["robot_info"]["r1"]["realism"]
     assert info["robot_info"]["r3"]["start"] == [-2.0, 1.0, 0.0]
     assert info["motion_model"] == "kinematic" and info["estop"]["held"] == []
     admin = json.loads(access(graph, guard, "the-admin-token")["values"]["message"])
