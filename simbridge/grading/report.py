@@ -108,8 +108,13 @@ def response_svg(report: dict[str, Any]) -> str:
             f'<line x1="{px(v):.1f}" x2="{px(v):.1f}" y1="{_T}" y2="{_H - _B}" '
             f'stroke="{colour}" stroke-dasharray="4 3"/>'
         )
+        right = px(v) > _W - _R - 110  # near the right edge: the label goes left of the line
+        x = px(v) - 3 if right else px(v) + 3
+        anchor = "end" if right else "start"
+        ty = _T + 12 + 12 * vlines.index((label, v, colour))
         out.append(
-            f'<text x="{px(v) + 3:.1f}" y="{_T + 12}" fill="{colour}">{html.escape(label)}</text>'
+            f'<text x="{x:.1f}" y="{ty}" text-anchor="{anchor}" fill="{colour}">'
+            f"{html.escape(label)}</text>"
         )
     if t and y:
         points = " ".join(f"{px(a):.1f},{py(b):.1f}" for a, b in zip(t, y, strict=False))

@@ -103,3 +103,16 @@ async def test_pid_goto_passes_with_its_gains_and_fails_on_overshoot_with_others
         "overshooting:",
         bad["metrics"]["overshoot_pct"],
     )
+
+
+def test_grade_headless_runs_a_simulation_controller_in_sim_time(tmp_path: Path) -> None:
+    """``--headless``: the controller of examples/grade_headless.py, no server, report written."""
+    from simbridge.tools.grade import grade_main
+
+    task = str(default_tasks_dir() / "heading_step.yaml")
+    controller = str(ROOT / "examples" / "grade_headless.py") + ":heading"
+    assert grade_main([task, "--headless", "--controller", controller, "-o", str(tmp_path)]) == 0
+    report = json.loads((tmp_path / "report.json").read_text())
+    assert report["passed"] is True and all(k in report for k in KEYS)
+    assert report["metrics"]["settling_time_s"] < 4
+    assert grade_main([task, "--headless", "--controller", "nowhere.py:x"]) == 2
