@@ -796,6 +796,9 @@ class ServerSettings(Record, frozen=True):
     results_file: str | None = None
     #: Directory of the instructor's task files (``*.yaml``); None: the bundled config/tasks.
     tasks_dir: str | None = None
+    #: Attempts one robot may have in the results (each is kept with its response, ~15 kB);
+    #: past it a start is refused naming this setting.
+    grading_max_attempts: Count = 200
 
     def check(self) -> None:
         """Check that a Foxglove port in a class was opened on purpose (``foxglove_scope``)."""

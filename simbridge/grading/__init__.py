@@ -72,4 +72,6 @@ def install_grader(graph: Graph, world: World, settings: ServerSettings) -> Grad
         msg = f"results_file: '{path}' cannot be read or created ({err.strerror})"
         raise ConfigError(msg) from None
     bags = path.with_name(f"{path.stem}-bags") if path is not None else None
-    return Grader(graph, world, results, tasks, bags=bags)
+    return Grader(
+        graph, world, results, tasks, bags=bags, max_attempts=settings.grading_max_attempts
+    )

@@ -67,8 +67,12 @@ logger = logging.getLogger(__name__)
 GRADE_TYPE = "simbridge_msgs/srv/Grade"
 NODE = "/simbridge_grader"
 PREFIX = "/simbridge/grade"
-#: Points of a stored response or path (a run's steps are thinned to this many).
-MAX_POINTS = 400
+#: Points of a stored response (a run's steps are thinned to this many: an attempt is kept in
+#: memory and in the results file with them, about 15 kB; the run's bag has every step).
+MAX_POINTS = 250
+#: Attempts one robot may have in the results by default (the budget of what a student can
+#: make the server keep; ServerSettings.grading_max_attempts).
+MAX_ATTEMPTS = 200
 #: Attempts one results call answers (the newest).
 MAX_LISTED = 500
 
@@ -175,6 +179,7 @@ class Grader:
         *,
         bags: Path | None = None,
         recorder: Callable[[Path], Any] | None = None,
+        max_attempts: int = MAX_ATTEMPTS,
         clock: Callable[[], float] = time.time,
     ) -> None:
         self.graph = graph
@@ -183,6 +188,7 @@ class Grader:
         self._tasks_source = tasks
         self._tasks_loaded: dict[str, Task] | None = tasks if isinstance(tasks, dict) else None
         self.bags = bags
+        self.max_attempts = max_attempts
         #: Makes a run's bag writer (see the arguments); set by whoever records.
         self.recorder = recorder
         self.clock = clock
@@ -264,6 +270,13 @@ class Grader:
         if robot in self.runs:
             busy = self.runs[robot].attempt
             msg = f"robot '{robot or '(default)'}' is already running attempt {busy}"
+            raise ServiceError(msg)
+        done = sum(1 for r in self.results.attempts.values() if r.get("robot") == robot)
+        if done >= self.max_attempts:
+            msg = (
+                f"robot '{robot or '(default)'}' has {done} attempts recorded, the most a robot "
+                f"may have (grading_max_attempts {self.max_attempts}); ask the instructor"
+            )
             raise ServiceError(msg)
         if task.world is not None and Path(task.world).stem != self.world.spec.name:
             msg = (
@@ -461,9 +474,6 @@ class Grader:
             "thresholds": thresholds(run.task),
             "rubric": lines,
             "response": response,
-            "path": _thin(
-                [[round(x, 4), round(y, 4)] for x, y in zip(run.trace.x, run.trace.y, strict=True)]
-            ),
             "start": list(run.start),
             "duration_s": round(run.elapsed, 3),
         }

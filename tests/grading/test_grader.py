@@ -92,7 +92,7 @@ def test_a_run_ends_at_its_time_limit_with_the_robot_stopped_and_its_params_back
 
 def test_a_controller_that_never_comes_is_recorded_as_no_controller() -> None:
     sim = Simulation()
-    grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
+    grader = Grader(sim.graph, sim.world, ResultsLog(None), {}, max_attempts=1)
     sim.robot.tick_hooks.append(grader.tick)
     task = parse_task(
         "goal: {heading: 1}\ntime_limit: 1\nwait_for_controller: 0.5\n"
@@ -102,3 +102,5 @@ def test_a_controller_that_never_comes_is_recorded_as_no_controller() -> None:
     run = grader.start(None, "", task)
     sim.run(1.0)
     assert grader.results.attempts[run.attempt]["status"] == "no_controller"
+    with pytest.raises(ServiceError, match=r"has 1 attempts .*grading_max_attempts 1"):
+        grader.start(None, "", task)  # the budget: what one robot's attempts may hold
