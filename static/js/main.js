@@ -647,6 +647,16 @@ $('pidForm').addEventListener('submit', (e) => {
   $('pidFigures').textContent = 'running…';
 });
 $('pidStop').addEventListener('click', () => lab.stop());
+// As teleop (releaseInputs): a page that loses focus, is hidden or goes away must not leave the
+// robot on the lab's last command (its timer is throttled or gone): stop, with one zero.
+function stopLabUnseen(why) {
+  if (!lab.running) return;
+  lab.stop();
+  $('pidFigures').textContent = `stopped: ${why} (Start runs the step again)`;
+}
+window.addEventListener('blur', () => stopLabUnseen('the window lost focus'));
+window.addEventListener('pagehide', () => stopLabUnseen('the page was left'));
+document.addEventListener('visibilitychange', () => { if (document.hidden) stopLabUnseen('the tab was hidden'); });
 $('copyExample').addEventListener('click', async () => {
   const text = $('example').textContent;
   try { await navigator.clipboard.writeText(text); toast('Example copied.'); } catch (err) {

@@ -480,3 +480,32 @@ async def test_pid_lab_position_mode_reaches_a_goal_1_m_ahead(
     await screenshot(page, "pid-position-step")
     await page.click("#pidStop")
     await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+
+
+async def test_pid_lab_stops_with_one_zero_on_blur_hidden_tab_and_page_hide(
+    app: App, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """A position step at full speed: each way of leaving the page stops the robot at once."""
+    page, _ = await open_connected(open_page, app)
+    await page.click("button[data-tab=pid]")
+    await page.select_option("#pidMode", "position")
+    await page.fill("#spY", "0.0")
+    await page.fill("#kp", "3")
+    hide = "Object.defineProperty(document, 'hidden', { value: true, configurable: true });"
+    leaving = {
+        "window.dispatchEvent(new Event('blur'))": "the window lost focus",
+        f"{hide} document.dispatchEvent(new Event('visibilitychange'))": "the tab was hidden",
+        "window.dispatchEvent(new Event('pagehide'))": "the page was left",
+    }
+    await page.fill("#spX", "2.0")
+    for event, why in leaving.items():
+        app.world.reset()  # back to x = 0, facing the goal 2 m ahead
+        await watcher.wait(lambda: watcher.odom()["x"] == 0.0)  # type: ignore[index]
+        await page.click("#pidStart")
+        await watcher.wait(lambda: watcher.odom()["v"] == pytest.approx(0.5))  # type: ignore[index]
+        await page.evaluate(event)
+        await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+        assert watcher.odom()["x"] < 1.5  # type: ignore[index]
+        assert not await page.evaluate("window.simbridge.lab.running")
+        assert why in (await page.text_content("#pidFigures") or "")
+        await page.evaluate("delete document.hidden")
