@@ -261,7 +261,7 @@ class SimParams(Record):
 
 
 class SafetyParams(Record):
-    """Server-side safety of the robots (``config/classroom_params.yaml`` turns it on)."""
+    """Server-side safety of the robots (``config/classroom_params.yaml`` turns all of it on)."""
 
     cmd_vel_timeout: float = setting(
         default=0.0,
@@ -272,6 +272,11 @@ class SafetyParams(Record):
     )
     stop_on_disconnect: bool = setting(
         default=False, description="stop a robot when the client that last commanded it disconnects"
+    )
+    stop_on_lost_link: bool = setting(
+        default=True,
+        description="stop a robot when the client that last commanded it is lost: gone without "
+        "closing its connection itself (killed, crashed, unreachable, its page closed)",
     )
 
 

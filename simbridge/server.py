@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Any
 from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
 from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
+from websockets.frames import Close, CloseCode
 from websockets.http11 import Request, Response
 from websockets.protocol import State
 from websockets.typing import Origin
@@ -85,6 +86,17 @@ def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
     context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
     context.load_cert_chain(certfile, keyfile)
     return context
+
+
+def closed_on_purpose(close: Close | None) -> bool:
+    """Whether a client ended its connection itself: a close frame with code 1000 or none.
+
+    Anything else counts as a lost link (``safety.stop_on_lost_link``): no close frame (a
+    killed script or browser, a crash, a peer dropped by the keepalive or the server), an error
+    code, or 1001 "going away" (RFC 6455 7.4.1), which a browser sends for a page that was
+    closed, left or whose browser died, never because its code chose to close.
+    """
+    return close is not None and close.code in (CloseCode.NORMAL_CLOSURE, CloseCode.NO_STATUS_RCVD)
 
 
 class Client:
@@ -542,8 +554,11 @@ class BridgeServer:
                 await writer
             self.clients.discard(client)
             self._unshare(token)
-            graph.remove_peer(client)
-            logger.info("%s disconnected (code %s)", client.label, ws.close_code)
+            lost = not closed_on_purpose(ws.protocol.close_rcvd)
+            graph.remove_peer(client, lost=lost)
+            logger.info(
+                "%s disconnected (code %s%s)", client.label, ws.close_code, ", lost" if lost else ""
+            )
 
     def stats(self) -> dict[str, Any]:
         """Return connection statistics for ``/healthz``."""

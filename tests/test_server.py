@@ -345,3 +345,29 @@ async def test_messages_of_one_turn_are_written_together_in_the_order_published(
         ("/corked_a", "3"),
     ]
     assert got[3]["op"] == "status" and got[3]["msg"] == "4"
+
+
+@pytest.mark.parametrize(
+    ("close_code", "keeps"),
+    [(1000, True), (None, True), (1001, False), (4000, False), ("no frame", False)],
+)
+async def test_a_robot_keeps_its_command_only_when_its_client_closed_on_purpose(
+    app: App, close_code: int | str | None, keeps: bool
+) -> None:
+    """1000 or no code: the course's robot. A page gone (1001), an error, no frame: stopped."""
+    ws = await connect(ws_url(app))
+    msg = {"linear": {"x": 0.2}, "angular": {"z": 0.0}}
+    await send_json(ws, {"op": "advertise", "topic": "/cmd_vel", "type": "geometry_msgs/Twist"})
+    await send_json(ws, {"op": "publish", "topic": "/cmd_vel", "msg": msg})
+    robot = app.world.robots[""]
+    await wait_for(lambda: robot.cmd_v == 0.2)
+    if close_code == "no frame":
+        ws.transport.abort()
+    elif close_code is None:  # an empty close frame, as roslibpy and ws.close() send
+        ws.transport.write(b"\x88\x80\x00\x00\x00\x00")  # FIN + close, masked, no payload
+    else:
+        assert isinstance(close_code, int)
+        await ws.close(code=close_code)
+    await wait_for(lambda: not app.server.clients)
+    assert robot.cmd_v == (0.2 if keeps else 0.0)
+    assert app.safety.stops == (0 if keeps else 1)

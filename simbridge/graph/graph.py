@@ -195,6 +195,9 @@ class Graph:
         }
         #: Called with each peer that leaves, after the graph cleaned up (extensions).
         self.on_disconnect: list[Callable[[Peer], None]] = []
+        #: Called before :attr:`on_disconnect` with each peer lost without closing its
+        #: connection (killed, crashed, unreachable; see :meth:`remove_peer`).
+        self.on_lost: list[Callable[[Peer], None]] = []
         #: Called with each peer that connects, before its first op (extensions).
         self.on_connect: list[Callable[[Peer], None]] = []
         #: Actions (client-served and in-process) and the goals in flight.
@@ -226,15 +229,19 @@ class Graph:
         for callback in self.on_connect:
             callback(peer)
 
-    def remove_peer(self, peer: Peer) -> None:
+    def remove_peer(self, peer: Peer, *, lost: bool = False) -> None:
         """Forget a client and everything it owned (subscriptions, publishers, services).
 
         Its session gives back its budgets and says what it held (effects, carried out here);
-        every callback runs, whatever an earlier one raised.
+        every callback runs, whatever an earlier one raised. ``lost``: the client went without
+        closing its connection itself (a killed browser or script, a crash, a peer the
+        keepalive or the server dropped); :attr:`on_lost` runs too.
         """
         self.peers.discard(peer)
+        callbacks: list[Callable[[Peer], None]] = [self._release, self.services.drop_peer]
+        callbacks += [*(self.on_lost if lost else []), *self.on_disconnect]
         # each part runs whatever failed before it: stop-on-disconnect must never be skipped
-        for callback in (self._release, self.services.drop_peer, *self.on_disconnect):
+        for callback in callbacks:
             try:
                 callback(peer)
             except Exception:

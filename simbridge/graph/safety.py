@@ -1,13 +1,21 @@
-"""Server-side safety of the robots: the ``/cmd_vel`` watchdog and stop-on-disconnect.
+"""Server-side safety of the robots: the ``/cmd_vel`` watchdog, stop on disconnect or lost link.
 
-Both are parameters of ``/virtual_robot`` (section ``safety`` of the parameter file), off by
-default: the course describes a robot that keeps its last command. ``config/classroom_params.yaml``
-turns them on.
+They are parameters of ``/virtual_robot`` (section ``safety`` of the parameter file). The
+course describes a robot that keeps its last command, so the watchdog and stop-on-disconnect
+are off by default (``config/classroom_params.yaml`` turns them on); a lost link stops the
+robot by default.
 
 * ``safety.cmd_vel_timeout`` > 0: a robot that is moving and has received no ``/cmd_vel`` for
   that many seconds is stopped (turtlesim does the same after 1 s), whatever its client does.
 * ``safety.stop_on_disconnect``: when the client that last commanded a robot disconnects
   (cleanly or not), that robot is stopped.
+* ``safety.stop_on_lost_link`` (on by default): when that client is lost, gone without closing
+  its connection itself (a killed browser or script, a crash, a laptop that left the Wi-Fi,
+  found by the keepalive; a page the browser closed for it: see
+  :func:`simbridge.server.closed_on_purpose`), that robot is stopped: nobody is left who could
+  stop it, and a page may never have sent its zero. A client that closes its connection (a
+  script that sent one command and ended, ``simbridge topic pub --once``) leaves the robot on
+  that command, as the course describes.
 
 Commands are observed as an in-process subscriber (of node ``/virtual_robot``) of each robot's
 ``cmd_vel`` topic and timed from when they arrived (not from the next tick: that made the
@@ -62,6 +70,7 @@ class Safety:
         self._callbacks: dict[str, tuple[str, InternalCallback]] = {}
         self._unwatched: set[str] = set()
         self._follow_robots()
+        graph.on_lost.append(self.lost)
         graph.on_disconnect.append(self.disconnected)
 
     def forget(self, name: str) -> None:
@@ -117,6 +126,16 @@ class Safety:
             last = self.last_command.setdefault(name, now)  # commanded some other way: start now
             if now - last > timeout:
                 self._stop(name, f"no /cmd_vel for {timeout:g} s (safety.cmd_vel_timeout)")
+
+    def lost(self, peer: Peer) -> None:
+        """Stop the robots ``peer`` commanded, when ``safety.stop_on_lost_link`` is on."""
+        if not self.world.params.safety.stop_on_lost_link:
+            return
+        for name in [name for name, p in self.commander.items() if p is peer]:
+            robot = self.world.robots.get(name)
+            if robot is not None and (robot.cmd_v or robot.cmd_omega):
+                why = f"its commanding {peer.label} was lost (gone without closing its connection)"
+                self._stop(name, why)
 
     def disconnected(self, peer: Peer) -> None:
         """Stop the robots that ``peer`` commanded, when ``safety.stop_on_disconnect`` is on."""

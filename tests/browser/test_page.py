@@ -13,8 +13,9 @@ import math
 import statistics
 from typing import Any
 
+import psutil
 import pytest
-from playwright.async_api import Page
+from playwright.async_api import Browser, Page
 
 from simbridge.runner import App
 from tests.browser.conftest import OpenPage, Watcher, screenshot
@@ -509,3 +510,25 @@ async def test_pid_lab_stops_with_one_zero_on_blur_hidden_tab_and_page_hide(
         assert not await page.evaluate("window.simbridge.lab.running")
         assert why in (await page.text_content("#pidFigures") or "")
         await page.evaluate("delete document.hidden")
+
+
+async def test_a_killed_browser_leaves_no_robot_driving(
+    app: App, browser: Browser, open_page: OpenPage, watcher: Watcher
+) -> None:
+    """Killed with a key held: no keyup, no page hide, no zero, no close frame.
+
+    The server finds the link lost and stops the robot (``safety.stop_on_lost_link``, on by
+    default); without it the robot would keep the page's last command.
+    """
+    page, _ = await open_connected(open_page, app)
+    await page.keyboard.down("ArrowUp")
+    await watcher.wait(lambda: watcher.odom()["v"] > 0)  # type: ignore[index]
+    (chromium,) = [
+        p
+        for p in psutil.Process().children(recursive=True)
+        if p.name() == "chromium" and not any(a.startswith("--type=") for a in p.cmdline())
+    ]
+    for process in [chromium, *chromium.children(recursive=True)]:  # its network service too
+        process.kill()  # SIGKILL: the browser says nothing more
+    await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
+    assert app.safety.stops == 1

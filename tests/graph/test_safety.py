@@ -79,6 +79,26 @@ def test_disconnect_leaves_the_robot_moving_when_the_option_is_off() -> None:
     assert world.robots[""].cmd_v == 0.2
 
 
+def test_a_lost_commander_stops_its_robot_by_default_a_closed_one_does_not() -> None:
+    """Lost (no close frame): nobody is left to stop the robot. Closed: the course's robot."""
+    graph, world, safety = make()
+    driver, other = RecordingPeer(graph), RecordingPeer(graph)
+    drive(graph, driver, 0.2, 0.0)
+    graph.remove_peer(other, lost=True)  # not the one whose command the robot follows
+    assert world.robots[""].cmd_v == 0.2
+    graph.remove_peer(driver, lost=True)
+    assert world.robots[""].cmd_v == 0.0 and safety.stops == 1
+    driver = RecordingPeer(graph)
+    drive(graph, driver, 0.2, 1.0)
+    graph.remove_peer(driver)
+    assert world.robots[""].cmd_v == 0.2 and safety.stops == 1
+    graph, world, safety = make(stop_on_lost_link=False)
+    driver = RecordingPeer(graph)
+    drive(graph, driver, 0.2, 0.0)
+    graph.remove_peer(driver, lost=True)
+    assert world.robots[""].cmd_v == 0.2
+
+
 def test_a_removed_robot_is_forgotten_and_its_topic_can_go() -> None:
     graph = Graph()
     spec = WorldSpec.parse(
