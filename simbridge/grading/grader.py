@@ -431,9 +431,10 @@ class Grader:
         return self._end(run, "cancelled", reason)
 
     def close(self) -> None:
-        """End every run (the server stops): recorded as interrupted."""
+        """End every run (the server stops): recorded as interrupted; close the journal."""
         for run in list(self.runs.values()):
             self._end(run, "interrupted", "the server stopped during this attempt")
+        self.results.close()
 
     def _end(self, run: Run, status: str | None, reason: str) -> dict[str, Any]:
         self.runs.pop(run.robot, None)

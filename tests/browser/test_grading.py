@@ -24,7 +24,7 @@ async def test_a_heading_step_from_the_pid_lab_is_graded_on_the_page_and_on_admi
     tasks = tmp_path / "tasks"
     tasks.mkdir()
     text = (resource_dir("config") / "tasks" / "heading_step.yaml").read_text()
-    (tasks / "heading_step.yaml").write_text(text.replace("time_limit: 8", "time_limit: 4"))
+    (tasks / "heading_step.yaml").write_text(text.replace("time_limit: 8", "time_limit: 2.5"))
     app = await make_app(
         admin_token=ADMIN, tasks_dir=str(tasks), results_file=str(tmp_path / "results.jsonl")
     )
