@@ -645,16 +645,28 @@ def _cmd_check_config(argv: Sequence[str]) -> int:
         print(f"simbridge: {err}", file=sys.stderr)
         return 2
     _add_config_options(parser, env)
+    parser.add_argument(
+        "--tasks", metavar="DIR", default=env.tasks, help="also the task files of DIR (*.yaml)"
+    )
     args = parser.parse_args(argv)
     try:
         world = load_world(args.world)
         params = load_params(args.params)
+        tasks = None
+        if args.tasks:
+            from simbridge.grading import load_tasks
+
+            if not Path(args.tasks).is_dir():
+                msg = f"--tasks: '{args.tasks}' is not a directory of task files"
+                raise ConfigError(msg)
+            tasks = load_tasks(args.tasks)
     except ConfigError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 2
     print(
         f"ok: world '{world.name}' ({_count(len(world.segments()), 'wall segment')}), robot "
         f"max {params.robot.max_linear_velocity} m/s, LiDAR {params.lidar.rays} rays"
+        + ("" if tasks is None else f", {_count(len(tasks), 'task')}")
     )
     return 0
 

@@ -62,6 +62,17 @@ def test_check_config_counts_in_english(tmp_path: Path) -> None:
     assert "(1 wall segment)," in run("check-config", "--world", str(one)).stdout
 
 
+def test_check_config_validates_task_files_naming_the_key(tmp_path: Path) -> None:
+    assert ", 3 tasks" in run("check-config", "--tasks", str(ROOT / "config" / "tasks")).stdout
+    (tmp_path / "lab.yaml").write_text("goal: {heading: 1}\ntime_limit: 5\nrubric: {x: {max: 1}}\n")
+    bad = run("check-config", "--tasks", str(tmp_path))
+    assert bad.returncode == 2
+    assert bad.stderr.startswith(
+        f"simbridge: task file '{tmp_path / 'lab.yaml'}': rubric: x: unknown"
+    )
+    assert bad.stderr.count("\n") == 1
+
+
 def test_the_readmes_sample_errors_are_what_simbridge_prints(tmp_path: Path) -> None:
     """The world-file and environment errors the README quotes, reproduced word for word."""
     readme = " ".join((ROOT / "README.md").read_text().split())  # quotes may span lines
