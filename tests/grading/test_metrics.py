@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from simbridge.grading.metrics import Trace, clearance, evaluate, resolve_goal, score
-from simbridge.grading.task import Goal, Threshold
+from simbridge.grading.task import Goal, Threshold, WallGoal
 
 
 def heading_trace(overshoot: float, dt: float = 0.05, seconds: float = 6.0) -> Trace:
@@ -83,3 +83,17 @@ def test_goal_in_the_start_frame_and_clearance_to_walls() -> None:
     walls = np.array([[0.0, -1.0, 0.0, 1.0]])
     assert clearance(0.5, 0.0, 0.1, walls) == pytest.approx(0.4)
     assert clearance(0.5, 3.0, 0.1, walls) == pytest.approx(math.hypot(0.5, 2.0) - 0.1)
+
+
+def test_a_wall_goal_measures_the_distance_from_the_walls_line() -> None:
+    trace = Trace()
+    for k in range(60):  # east along y = -2 + d, d from 0.9 m down to 0.5 m in 2 s, then held
+        d = max(0.5, 0.9 - 0.2 * k * 0.05)
+        trace.add(k * 0.05, -2.5 + 0.01 * k, -2.0 + d, 0.0, d - 0.105)
+    goal = Goal(wall=WallGoal(segment=(-3.0, -2.0, 3.0, -2.0), distance=0.5), tolerance=0.035)
+    metrics, response = score(goal, trace)
+    assert response["y0"] == pytest.approx(0.9) and response["ys"] == 0.5
+    assert metrics["overshoot_pct"] == 0.0
+    assert metrics["time_to_goal_s"] == pytest.approx(1.85)  # within 3.5 cm: d = 0.53
+    assert metrics["settling_time_s"] == pytest.approx(2.0)  # within 2 % of 0.4 m: d = 0.50
+    assert metrics["min_clearance_m"] == pytest.approx(0.395)
