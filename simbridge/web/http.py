@@ -17,8 +17,9 @@ else 408), at most 1 MB (else 413). Refusals close the connection. Pipelined req
 slice (4 KB) at a time and answered one at a time with a yield to the loop between two, so a
 write of 1,500 requests costs the 20 Hz loop no more than 1,500 clients would. Connections are
 budgeted in all (``max_http_connections``) and per client address
-(``max_http_connections_per_address``), and a request with the admin token is never refused for
-want of room: :mod:`simbridge.web.pool`. A path holding a control character (``/%00``) is a 400
+(``max_http_connections_per_address``), an address's requests take at most a quarter of the
+loop's time, and a request with the admin token is never refused for want of room:
+:mod:`simbridge.web.pool`. A path holding a control character (``/%00``) is a 400
 on both ports before it reaches a route or the disk.
 
 Static files are served read-only from one directory; a request path is resolved to a real path
@@ -46,7 +47,7 @@ from urllib.parse import parse_qs, unquote, urlsplit
 import httptools
 import orjson
 
-from simbridge.web.pool import Phase, Pool, Slot, client_address
+from simbridge.web.pool import Phase, Pool, Share, Slot, client_address
 
 
 if TYPE_CHECKING:
@@ -374,6 +375,22 @@ class _Exchange:
                         return
                     left -= len(chunk)
 
+    async def pay(self, share: Share, slot: Slot, spent: float, always_yield: bool = False) -> None:
+        """Charge ``spent`` seconds to the address's share; in debt, wait until it is paid.
+
+        The instructor's connection is charged but never waits (a student behind the same
+        address must not slow the console down).
+        """
+        loop = asyncio.get_running_loop()
+        wait = share.charge(loop.time(), spent)
+        if wait <= 0 or slot.admin:
+            if always_yield:
+                await asyncio.sleep(0)
+            return
+        while wait > 0:  # the address's other connections may spend it meanwhile
+            await asyncio.sleep(wait)
+            wait = share.owed(loop.time())
+
     async def serve(self, pool: Pool, slot: Slot) -> None:
         """Answer requests until the client closes, idles out, or sends what is refused."""
         loop = asyncio.get_running_loop()
@@ -382,17 +399,21 @@ class _Exchange:
         idle_until = now + (_RESERVE_TIMEOUT if slot.reserved else _IDLE_TIMEOUT)
         head_until = body_until = 0.0
         pending = memoryview(b"")  # read and not parsed yet (sliced without copies)
+        share = pool.share(slot.address, now)
         while True:
             if parsed.ready:
                 request, keep_alive = parsed.ready.popleft()
                 pool.mark(slot, "busy", now)
+                start = loop.time()
                 response = self.app.handle(request)
                 self.writer.write(_encode(response, request.method == "HEAD", keep_alive))
+                spent = loop.time() - start
                 await self.writer.drain()
                 if not keep_alive:
                     return
-                # the next pipelined request waits for the loop's other work (the 20 Hz tick)
-                await asyncio.sleep(0)
+                # the next pipelined request waits for the loop's other work (the 20 Hz tick),
+                # and for the address's share of the loop's time when it has spent it
+                await self.pay(share, slot, spent, always_yield=True)
                 now = loop.time()
                 idle_until = now + _IDLE_TIMEOUT
                 continue
@@ -419,11 +440,13 @@ class _Exchange:
                     return  # closed to make room for a new connection, or by the client
             piece, pending = pending[:_SLICE], pending[_SLICE:]
             begun, heads = parsed.begun, parsed.heads
+            start = loop.time()
             try:
                 refusal = parsed.feed(piece)
             except httptools.HttpParserError as err:
                 await self.refuse(400, f"bad request: {err}\n")
                 return
+            await self.pay(share, slot, loop.time() - start)
             if refusal is not None:
                 await self.refuse(*refusal)
                 return
@@ -466,7 +489,7 @@ async def _serve_connection(
     except (ConnectionError, TimeoutError):
         return
     finally:
-        pool.leave(slot)
+        pool.leave(slot, asyncio.get_running_loop().time())
         with contextlib.suppress(Exception):
             writer.close()
 

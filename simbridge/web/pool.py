@@ -32,7 +32,7 @@ from dataclasses import dataclass, field
 from typing import Literal
 
 
-__all__ = ["Phase", "Pool", "Slot", "client_address"]
+__all__ = ["Phase", "Pool", "Share", "Slot", "client_address"]
 
 #: What a connection is doing: waiting for its first request (``new``), waiting for its next
 #: one (``idle``: keep-alive), receiving one (``request``: its head or body is on its way) or
@@ -54,6 +54,31 @@ def client_address(peername: object) -> str:
             return str(ip.ipv4_mapped)
         return str(ipaddress.IPv6Network((ip, 64), strict=False))
     return str(ip)
+
+
+@dataclass(slots=True)
+class Share:
+    """One client address's share of the loop's time: ``rate`` seconds a second, ``burst`` ahead.
+
+    Parsing and answering its requests is charged here, by all of that address's connections
+    together; in debt, its connections wait (unread: TCP slows the client down) while the loop
+    and everyone else run, as a rosbridge client's frames do (``client_work_share``).
+    """
+
+    rate: float
+    burst: float
+    balance: float = 0.0
+    last: float = 0.0
+
+    def charge(self, now: float, spent: float) -> float:
+        """Spend ``spent`` seconds (into debt if need be); return seconds until out of debt."""
+        self.balance = min(self.burst, self.balance + (now - self.last) * self.rate) - spent
+        self.last = now
+        return 0.0 if self.balance >= 0 else -self.balance / self.rate
+
+    def owed(self, now: float) -> float:
+        """Return seconds until out of debt (nothing spent)."""
+        return self.charge(now, 0.0)
 
 
 @dataclass(eq=False, slots=True)
@@ -89,6 +114,11 @@ class Pool:
     reserve_per_address: int = 4
     #: Seconds a request may have been arriving before it gives way to a newcomer when full.
     slow: float = 1.0
+    #: Each address's share of the loop's time (:class:`Share`), and its burst (seconds).
+    work_share: float = 0.25
+    work_burst: float = 0.0125
+    #: The shares of the addresses with connections (or still in debt).
+    shares: dict[str, Share] = field(default_factory=dict)
     #: Admitted connections, oldest first, and how many per address.
     members: dict[Slot, None] = field(default_factory=dict)
     per: Counter[str] = field(default_factory=Counter)
@@ -141,19 +171,36 @@ class Pool:
         self._join(slot)
         return None
 
+    def share(self, address: str, now: float) -> Share:
+        """Return ``address``'s share of the loop's time (a new one starts with its burst)."""
+        share = self.shares.get(address)
+        if share is None:
+            share = self.shares[address] = Share(self.work_share, self.work_burst)
+            share.balance, share.last = self.work_burst, now
+        return share
+
     def mark(self, slot: Slot, phase: Phase, now: float) -> None:
         """``slot`` is now doing ``phase`` (its clock restarts only when the phase changes)."""
         if slot.phase != phase:
             slot.phase, slot.since = phase, now
 
-    def leave(self, slot: Slot) -> None:
-        """The connection closed: free its place."""
+    def leave(self, slot: Slot, now: float | None = None) -> None:
+        """The connection closed: free its place (and its address's share, if paid up)."""
         if slot in self.members:
             del self.members[slot]
             self.per[slot.address] -= 1
             if self.per[slot.address] <= 0:
                 del self.per[slot.address]
         self._unwait(slot)
+        share = self.shares.get(slot.address)
+        # an address in debt keeps it when it reconnects (the debts kept are bounded)
+        if (
+            share is not None
+            and now is not None
+            and slot.address not in self.per
+            and (share.owed(now) == 0 or len(self.shares) > 4 * (self.limit + self.reserve))
+        ):
+            del self.shares[slot.address]
 
     # -- the decisions ------------------------------------------------------------------
 

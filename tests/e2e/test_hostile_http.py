@@ -156,7 +156,7 @@ async def test_pipelined_requests_are_answered_while_the_loop_keeps_20_hz(
             pipeline(port, healthz, until), pipeline(port, missing, until)
         )
         await watch.steady_since(start, ATTACK)
-    assert min(answered) >= 1500, answered
+    assert min(answered) >= 300, answered  # served, at the address's share of the loop
     assert growth[0] < MAX_RSS_GROWTH_MB, f"RSS grew {growth[0]:.0f} MB"
 
 

@@ -171,3 +171,22 @@ def test_leaving_frees_the_place() -> None:
 )
 def test_client_address_counts_ipv6_by_its_64(peer: object, address: str) -> None:
     assert client_address(peer) == address
+
+
+def test_an_address_shares_one_budget_of_loop_time_kept_while_it_is_in_debt() -> None:
+    pool, closed = Pool(limit=10, per_address=10, work_share=0.25, work_burst=0.01), Closed()
+    a, b = closed.slot("10.0.0.1"), closed.slot("10.0.0.1")
+    pool.admit(a, 0.0)
+    pool.admit(b, 0.0)
+    share = pool.share("10.0.0.1", 0.0)
+    assert pool.share("10.0.0.1", 0.0) is share  # both connections spend the same share
+    assert share.charge(0.0, 0.005) == 0.0  # within the burst
+    assert share.charge(0.0, 0.015) == pytest.approx(0.04)  # 10 ms in debt at a quarter
+    pool.leave(a, 0.01)
+    pool.leave(b, 0.01)
+    assert pool.share("10.0.0.1", 0.01) is share  # reconnecting does not clear a debt
+    assert share.owed(0.05) == 0.0
+    again = closed.slot("10.0.0.1")
+    pool.admit(again, 0.05)
+    pool.leave(again, 0.05)
+    assert "10.0.0.1" not in pool.shares  # paid up and gone: forgotten
