@@ -38,6 +38,7 @@ from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
 from simbridge.web.admin import install_admin
 from simbridge.web.grading import install_grading_admin
+from simbridge.web.pool import Pool
 
 
 if TYPE_CHECKING:
@@ -209,6 +210,10 @@ class App:
         #: Loop timing.
         self.stats = LoopStats()
         self._http: asyncio.Server | None = None
+        #: The HTTP port's connections and their budgets (``/healthz`` ``http``).
+        self.http_pool = Pool(
+            self.settings.max_http_connections, self.settings.max_http_connections_per_address
+        )
         self._loop_task: asyncio.Task[None] | None = None
         self._started = time.monotonic()
         #: Set once the servers listen and the loop runs.
@@ -267,6 +272,7 @@ class App:
             "loop_rate_hz": self.world.params.sim.rate,
             **self.server.stats(),
             "loop": {**self.stats.summary(), "failures": self.robot.failures},
+            **({"http": self.http_pool.stats()} if self._http is not None else {}),
             **({"zenoh": self.zenoh.health()} if self.zenoh is not None else {}),
             **({"foxglove": self.foxglove.health()} if self.foxglove is not None else {}),
         }
@@ -280,12 +286,7 @@ class App:
         if s.http_port is not None:
             tls = tls_context(s.certfile, s.keyfile) if s.certfile else None
             self._http = await serve_http(
-                self.web,
-                s.host,
-                s.http_port,
-                ssl=tls,
-                max_connections=s.max_http_connections,
-                max_per_address=s.max_http_connections_per_address,
+                self.web, s.host, s.http_port, ssl=tls, pool=self.http_pool
             )
         loop = asyncio.get_running_loop()
         if not self.no_sim:

@@ -505,6 +505,7 @@ async def serve_http(
     head_timeout: float = HEAD_TIMEOUT,
     body_timeout: float = BODY_TIMEOUT,
     slow_request: float = SLOW_REQUEST,
+    pool: Pool | None = None,
 ) -> asyncio.Server:
     """Start the HTTP server (HTTPS with ``ssl``); return it (``sockets`` tells the port).
 
@@ -520,13 +521,18 @@ async def serve_http(
         body_timeout: seconds a request's body may take to arrive after its head (then 408).
         slow_request: when the pool is full, a request arriving for longer than this (seconds)
             is closed (408) to make room for a newcomer.
+        pool: the connections' books, made by the caller (who reads them: ``/healthz``);
+            then ``max_connections``, ``max_per_address`` and ``slow_request`` are its own.
     """
-    pool = Pool(max_connections, max_per_address, slow=slow_request)
+    if pool is None:
+        pool = Pool(max_connections, max_per_address, slow=slow_request)
+
+    connections = pool  # (narrowed for the closure)
 
     async def handler(reader: asyncio.StreamReader, writer: asyncio.StreamWriter) -> None:
         # a page's idle keep-alive connection is cancelled at shutdown (SIGTERM): end quietly
         # (asyncio's stream callback would log the cancellation as an error with a traceback)
         with contextlib.suppress(asyncio.CancelledError):
-            await _serve_connection(app, reader, writer, pool, head_timeout, body_timeout)
+            await _serve_connection(app, reader, writer, connections, head_timeout, body_timeout)
 
     return await asyncio.start_server(handler, host, port, ssl=ssl)

@@ -171,6 +171,16 @@ class Pool:
         self._join(slot)
         return None
 
+    def stats(self) -> dict[str, int]:
+        """Return the books in numbers (``/healthz``)."""
+        return {
+            "open": len(self.members),
+            "waiting": len(self.waiting),
+            "addresses": len(self.per),
+            "refused": self.refused,
+            "evicted": self.evicted,
+        }
+
     def share(self, address: str, now: float) -> Share:
         """Return ``address``'s share of the loop's time (a new one starts with its burst)."""
         share = self.shares.get(address)

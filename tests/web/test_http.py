@@ -49,6 +49,7 @@ async def test_healthz_reports_status_uptime_clients_and_loop_timing(app: App) -
     assert health["uptime_s"] >= 0
     assert health["clients"] == 0
     assert {"ticks", "lateness_ms_p99", "work_ms_p99"} <= set(health["loop"])
+    assert health["http"]["open"] >= 1 and health["http"]["refused"] == 0  # this request's
 
 
 @pytest.mark.parametrize(
