@@ -25,12 +25,37 @@ export function download(name, content, type = 'text/csv') {
   if (a.href.startsWith('blob:')) setTimeout(() => URL.revokeObjectURL(a.href), 1000);
 }
 
+/**
+ * Labels of axis ticks with as many decimals as the ticks need, so that no two read alike
+ * (the default shows at most 3: ticks 0.0001 apart all read "0"); "-0" reads "0".
+ */
+export function tickLabels(splits) {
+  let labels = [];
+  for (let d = 0; d <= 8; d++) {
+    labels = splits.map((v) => { const s = v.toFixed(d); return Number(s) === 0 ? s.replace('-', '') : s; });
+    if (splits.every((v, i) => Math.abs(Number(labels[i]) - v) <= 1e-9 * Math.max(1, Math.abs(v)))) break;
+  }
+  return labels;
+}
+
+/** An axis as wide as its longest tick label (uPlot's `size` callback): labels never run into the unit. */
+function axisSize(u, values, i, cycle) {
+  const axis = u.axes[i];
+  if (cycle > 1) return axis._size; // uPlot asks again after a resize: settle
+  const longest = (values ?? []).reduce((a, v) => (String(v).length > a.length ? String(v) : a), '');
+  u.ctx.font = axis.font[0];
+  const ratio = window.devicePixelRatio || 1;
+  return Math.ceil(axis.ticks.size + axis.gap + u.ctx.measureText(longest).width / ratio + 4);
+}
+
 export class LivePlot {
   /**
    * @param box     the element the plot lives in (a toolbar and the chart are added to it)
    * @param series  [{label, color, dash?, width?}]
    * @param opts    {title, unit, window (s shown while live), min (a floor of the y range),
-   *                 anchored (x from 0: a step response), maxPoints (kept for export),
+   *                 minSpan (the y range shown at least, default 0.02: a residual of 1e-4
+   *                 is not blown up to the plot's height), anchored (x from 0: a step response),
+   *                 maxPoints (kept for export),
    *                 file (CSV/PNG name stem), columns (extra CSV columns, e.g. ['stamp'])}
    */
   constructor(box, series, opts = {}) {
@@ -40,6 +65,7 @@ export class LivePlot {
     this.unit = opts.unit ?? '';
     this.window = opts.window ?? 20;
     this.floor = opts.min;
+    this.minSpan = opts.minSpan ?? 0.02;
     this.anchored = opts.anchored ?? false;
     this.maxPoints = opts.maxPoints ?? 6000;
     this.file = opts.file ?? 'plot';
@@ -79,7 +105,7 @@ export class LivePlot {
     this.chartBox = document.createElement('div');
     this.chartBox.className = 'chart';
     this.box.append(bar, this.chartBox);
-    const floor = this.floor;
+    const floor = this.floor, minSpan = this.minSpan;
     const opts = {
       width: Math.max(200, this.chartBox.clientWidth || 300),
       height: Math.max(80, this.chartBox.clientHeight || 130),
@@ -93,7 +119,9 @@ export class LivePlot {
             let a = Number.isFinite(lo) ? lo : -1, b = Number.isFinite(hi) ? hi : 1;
             for (const band of this.bands) { a = Math.min(a, band.lo); b = Math.max(b, band.hi); }
             if (floor !== undefined) a = Math.max(floor, Math.min(a, floor));
-            if (b - a < 1e-6) { a -= 0.5; b += 0.5; }
+            if (b - a < 1e-6) { a -= 0.5; b += 0.5; } else if (b - a < minSpan) {
+              const mid = (a + b) / 2; a = mid - minSpan / 2; b = mid + minSpan / 2;
+            }
             const pad = (b - a) * 0.08;
             const out = uPlot.rangeNum(a - pad, b + pad, 0.1, true);
             if (floor !== undefined && out[0] < floor) out[0] = floor;
@@ -103,7 +131,8 @@ export class LivePlot {
       },
       axes: [
         { label: 't (s)', labelSize: 16, size: 34, font: '11px system-ui', labelFont: '11px system-ui' },
-        { label: this.unit, labelSize: 16, size: 48, font: '11px system-ui', labelFont: '11px system-ui' },
+        { label: this.unit, labelSize: 16, size: axisSize, font: '11px system-ui', labelFont: '11px system-ui',
+          values: (u, splits) => tickLabels(splits) },
       ],
       series: [
         { label: 't (s)', value: (u, v) => (v === null || v === undefined ? '–' : v.toFixed(2)) },

@@ -532,3 +532,61 @@ async def test_a_killed_browser_leaves_no_robot_driving(
         process.kill()  # SIGKILL: the browser says nothing more
     await watcher.wait(lambda: watcher.odom()["v"] == 0.0)  # type: ignore[index]
     assert app.safety.stops == 1
+
+
+LAYOUT_CHECK = """async () => {
+  const box = (el) => el.getBoundingClientRect();
+  const stop = () => box(document.getElementById('estop'));
+  const covered = [], wrapped = [];
+  const parts = 'button, input, select, output, .u-legend, .uplot canvas, .figures, summary';
+  for (const details of document.querySelectorAll('.panel details')) details.open = true;
+  for (const tab of document.querySelectorAll('.tabs button')) {
+    tab.click();
+    const range = document.createRange();
+    range.selectNodeContents(tab);
+    if (range.getClientRects().length !== 1) wrapped.push(`tab ${tab.textContent}`);
+    for (const el of document.querySelectorAll(`.panel .tab:not([hidden]) :is(${parts})`)) {
+      if (!el.checkVisibility()) continue;
+      el.scrollIntoView({ block: 'nearest' });  // as a student scrolls to it
+      const s = box(el), t = stop();
+      if (s.bottom > t.top + 1 && s.top < t.bottom - 1 && s.right > t.left && s.left < t.right) {
+        covered.push(`${tab.textContent}: ${el.id || el.className || el.textContent}`);
+      }
+    }
+    for (const bar of document.querySelectorAll('.panel .tab:not([hidden]) .plotbar')) {
+      const tops = [...bar.querySelectorAll('button')].map((b) => Math.round(box(b).top));
+      if (new Set(tops).size > 1) wrapped.push(`${bar.textContent}: buttons on ${new Set(tops).size} rows`);
+    }
+  }
+  document.querySelector('.tabs button[data-tab=plots]').click();
+  // a residual 1e-4 rad/s: the axis must neither read "0" twice nor blow the residual up
+  const w = window.simbridge.plots.w;
+  w.clear();
+  for (let k = 0; k < 40; k++) w.push(k * 0.05, [0, k % 2 ? 0.0002 : -0.0001]);
+  w.draw();
+  const { tickLabels } = await import('./js/plots.js');
+  const ticks = tickLabels([-0.0002, -0.0001, 0, 0.0001, 0.0002]);
+  return { covered, wrapped, labels: w.u.axes[1]._values, ticks };
+}"""
+
+
+@pytest.mark.parametrize(
+    "context",
+    [
+        {"viewport": {"width": 1280, "height": 800}},
+        {"viewport": {"width": 390, "height": 844}, "is_mobile": True, "has_touch": True},
+    ],
+    ids=["1280x800", "phone"],
+)
+async def test_no_plot_legend_or_control_is_under_stop_and_plots_read_clearly(
+    app: App, open_page: OpenPage, context: dict[str, Any]
+) -> None:
+    """Every tab scrolled through: nothing under STOP, one-line tabs, plot bars on one row."""
+    page, log = await open_connected(open_page, app, **context)
+    await page.wait_for_timeout(300)  # the plots have their size
+    found = await page.evaluate(LAYOUT_CHECK)
+    assert found["covered"] == [] and found["wrapped"] == [], found
+    labels = found["labels"]
+    assert len(set(labels)) == len(labels) and len(labels) <= 5, labels
+    assert found["ticks"] == ["-0.0002", "-0.0001", "0.0000", "0.0001", "0.0002"]
+    assert log.errors == []
