@@ -555,7 +555,8 @@ LAYOUT_CHECK = """async () => {
     }
     for (const bar of document.querySelectorAll('.panel .tab:not([hidden]) .plotbar')) {
       const tops = [...bar.querySelectorAll('button')].map((b) => Math.round(box(b).top));
-      if (new Set(tops).size > 1) wrapped.push(`${bar.textContent}: buttons on ${new Set(tops).size} rows`);
+      const rows = new Set(tops).size;
+      if (rows > 1) wrapped.push(`${bar.textContent}: buttons on ${rows} rows`);
     }
   }
   document.querySelector('.tabs button[data-tab=plots]').click();
