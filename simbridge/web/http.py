@@ -400,7 +400,7 @@ class _Exchange:
         head_until = body_until = 0.0
         pending = memoryview(b"")  # read and not parsed yet (sliced without copies)
         share = pool.share(slot.address, now)
-        while True:
+        while not slot.evicted:  # closed to make room (while it waited for its share, too)
             if parsed.ready:
                 request, keep_alive = parsed.ready.popleft()
                 pool.mark(slot, "busy", now)
