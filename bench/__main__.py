@@ -67,6 +67,13 @@ ZENOH = {
 }
 
 
+#: The Foxglove port (issue 30), run by name (``python -m bench foxglove [SECONDS [N [ROUNDS]]]``).
+FOXGLOVE = {
+    "foxglove": "100 Foxglove vs 100 rosbridge clients on /odom + /scan: server CPU, p99, bytes/s; "
+    "idle RSS without and with --foxglove-port",
+}
+
+
 def runs(argv: list[str]) -> list[tuple[str, list[str]]]:
     """Split ``argv`` into benchmarks and their arguments.
 

@@ -3,6 +3,8 @@
     python -m bench.loadgen SPEC_JSON      (prints one JSON line of results on stdout)
 
 SPEC: ``{"url", "clients": [{"subscribe": [topics], "drive": topic or null}], "start", "end"}``
+(``"protocol": "foxglove"``: Foxglove WebSocket clients instead, subscribing to the channels of
+those topics on a Foxglove port: :class:`_FoxgloveClient`; ``drive`` is not taken there)
 with ``start``/``end`` wall-clock seconds (``time.time()``): only messages stamped inside the
 window are counted; a client reads until each of its topics has delivered a message stamped
 after the window (at most 60 s more). Each client subscribes (``queue_length`` 0: the server's
@@ -43,6 +45,7 @@ from websockets.client import ClientProtocol
 from websockets.frames import Frame, Opcode
 from websockets.http11 import Response
 from websockets.protocol import State
+from websockets.typing import Subprotocol
 from websockets.uri import parse_uri
 
 
@@ -125,6 +128,8 @@ class _Client(asyncio.Protocol):
         self.latencies: list[float] = []
         #: Reads of the socket inside the window (each a system call, and its CPU).
         self.reads = 0
+        #: Bytes read inside the window (frames and their WebSocket headers).
+        self.bytes = 0
         #: Topics that delivered a message stamped after the window (frames arrive in order).
         self.done: set[str] = set()
         self.finished = asyncio.get_running_loop().create_future()
@@ -148,6 +153,7 @@ class _Client(asyncio.Protocol):
         now = time.time()
         if self.start <= now < self.end:
             self.reads += 1
+            self.bytes += len(data)
         if self.frames is not None:
             self._frames_received(self.frames.feed(data), now)
             return
@@ -219,7 +225,9 @@ class _Client(asyncio.Protocol):
         if m is None or t is None:
             return
         stamp_ns = int(m.group(1)) * 1_000_000_000 + int(m.group(2))
-        topic = t.group(1).decode()
+        self._received(t.group(1).decode(), stamp_ns, now)
+
+    def _received(self, topic: str, stamp_ns: int, now: float) -> None:
         if stamp_ns / 1e9 >= self.end:
             self.done.add(topic)
             if len(self.done) >= len(self.stamps):
@@ -259,10 +267,60 @@ class _Client(asyncio.Protocol):
         }
 
 
+#: The Foxglove protocol's binary ``messageData``: opcode 1, subscription id, log time (LE).
+_MESSAGE_DATA = struct.Struct("<BIQ")
+#: A CDR message's header stamp: after the 4-byte encapsulation, ``int32 sec, uint32 nanosec``.
+_CDR_STAMP = struct.Struct("<iI")
+
+
+class _FoxgloveClient(_Client):
+    """One Foxglove WebSocket client (``foxglove.sdk.v1``): subscribes to the topics' channels.
+
+    The stamp is read from the CDR payload's header (every subscribed topic has one first).
+    """
+
+    def __init__(self, url: str, spec: dict[str, Any], start: float, end: float) -> None:
+        super().__init__(url, spec, start, end)
+        self.ws = ClientProtocol(
+            parse_uri(url), subprotocols=[Subprotocol("foxglove.sdk.v1")], max_size=None
+        )
+        self.subscriptions: dict[int, str] = {}
+
+    def _opened(self) -> None:
+        if self.ws.state is not State.OPEN:
+            self._finish(ConnectionError(f"handshake refused: {self.ws.handshake_exc}"))
+            return
+        self.open = True  # the server advertises its channels: subscribed in _message
+
+    def _message(self, raw: bytes, now: float) -> None:
+        if raw[:1] == b"{":
+            body = json.loads(raw)
+            if body.get("op") != "advertise":
+                return
+            subs = []
+            for channel in body["channels"]:
+                if channel["topic"] in self.stamps:
+                    sub_id = len(self.subscriptions) + 1
+                    self.subscriptions[sub_id] = channel["topic"]
+                    subs.append({"id": sub_id, "channelId": channel["id"]})
+            if subs:
+                self._send({"op": "subscribe", "subscriptions": subs})
+            return
+        if len(raw) < _MESSAGE_DATA.size + 12 or raw[0] != 1:
+            return
+        _, sub_id, _log_time = _MESSAGE_DATA.unpack_from(raw)
+        topic = self.subscriptions.get(sub_id)
+        if topic is None:
+            return
+        sec, nanosec = _CDR_STAMP.unpack_from(raw, _MESSAGE_DATA.size + 4)
+        self._received(topic, sec * 1_000_000_000 + nanosec, now)
+
+
 async def _one(url: str, spec: dict[str, Any], start: float, end: float) -> dict[str, Any]:
     loop = asyncio.get_running_loop()
     parts = urlsplit(url)
-    client = _Client(url, spec, start, end)
+    kind = _FoxgloveClient if spec.get("protocol") == "foxglove" else _Client
+    client = kind(url, spec, start, end)
     transport, _ = await loop.create_connection(
         lambda: client, parts.hostname or "127.0.0.1", parts.port or 80
     )
@@ -277,6 +335,7 @@ async def _one(url: str, spec: dict[str, Any], start: float, end: float) -> dict
         client.close()
         transport.close()
     result["reads"] = client.reads
+    result["bytes"] = client.bytes
     return result
 
 
@@ -284,6 +343,8 @@ async def _main(spec: dict[str, Any]) -> list[dict[str, Any]]:
     results: list[dict[str, Any]] = [{} for _ in spec["clients"]]
 
     async def one(i: int, c: dict[str, Any]) -> None:
+        if "protocol" in spec:
+            c = {**c, "protocol": spec["protocol"]}
         try:
             results[i] = await _one(spec["url"], c, spec["start"], spec["end"])
         except Exception as err:  # reported, not raised: the other clients carry on

@@ -417,6 +417,14 @@ class FoxgloveFront:
     ) -> None:
         """A client advertised a channel: a rosbridge ``advertise`` of its session."""
         client = self._client(client_id)
+        limit = self.graph.settings.max_advertisements
+        if len(client.channels) >= limit:  # each is an advertisement of the client's budget
+            self.status(
+                f"{client.label}: {topic}: too many client channels (at most {limit}: "
+                "max_advertisements)",
+                "error",
+            )
+            return
         if encoding not in CLIENT_ENCODINGS:
             self.status(
                 f"{client.label}: {topic}: encoding {encoding!r} is not taken; use "

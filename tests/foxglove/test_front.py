@@ -60,6 +60,7 @@ async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
     assert {"/reset", "/spawn", "/kill", "/estop", "/estop/reset"} <= set(got["services"])
     assert got["paramRead"] == 0.5
     assert got["paramFromRosbridge"] == 0.45
+    assert got["clientServiceSum"] == 42  # a service a rosbridge client provides, over CDR
     assert app.world.params.robot.max_linear_velocity == 0.45
     assert got["graph"] == {
         "odomPublishers": ["/virtual_robot"],
@@ -99,12 +100,14 @@ async def test_in_a_class_the_foxglove_port_drives_only_the_robot_it_was_opened_
         foxglove_port=0,
         foxglove_scope="r1",
         use_sim_time=True,
+        max_advertisements=4,
     )
     assert app.foxglove is not None
     args = {"robot": "r1", "refuse": {"topic": "/r2/cmd_vel", "type": "geometry_msgs/msg/Twist"}}
-    got = await _foxglove(f"ws://127.0.0.1:{app.foxglove.port}", {**args, "time": True})
+    got = await _foxglove(f"ws://127.0.0.1:{app.foxglove.port}", {**args, "time": True, "flood": 4})
     assert got["moved"] > 0.05
     assert any("/r2/cmd_vel" in s and "r1" in s for s in got["refusal"])
+    assert any("at most 4: max_advertisements" in s for s in got["flood"])  # its budget
     assert "time" in got["capabilities"] and got["times"] >= 2  # the sim clock, from /clock
     assert app.world.robots["r2"].state.x == pytest.approx(1.0, abs=1e-6)  # r2 never moved
 

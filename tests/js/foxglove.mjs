@@ -12,6 +12,7 @@
 //   params       true: read, set and subscribe robot.max_linear_velocity
 //   reset        true: call /reset
 //   time         true: wait for the server's time messages (use_sim_time)
+//   flood        N: advertise N client channels more (the server refuses past its budget)
 //   graph        true: subscribe to the connection graph (after driving: this client publishes)
 // stdout: one line, {"ok":true,"result":{...}} or {"ok":false,"error":"..."} (as run.mjs).
 
@@ -167,6 +168,12 @@ async function main() {
     await until('a status for the refused publish', () => statuses.length > before);
     result.refusal = statuses.slice(before).map((s) => s.message);
   }
+  if (args.flood) {
+    const before = statuses.length;
+    for (let k = 0; k < args.flood; k++) client.advertise({ topic: `${ns}/flood_${k}`, encoding: 'cdr', schemaName: 'std_msgs/msg/String' });
+    await until('the refusal of a channel too many', () => statuses.slice(before).some((s) => s.message.includes('too many client channels')));
+    result.flood = statuses.slice(before).map((s) => s.message);
+  }
   if (args.reset) {
     await call('/reset');
     result.reset = true;
@@ -189,6 +196,14 @@ async function main() {
       await new Promise((resolve, reject) => param.set(0.45, resolve, (e) => reject(new Error(String(e)))));
       await until('the update of the rosbridge set', () => paramValue(name, 0.45));
       result.paramFromRosbridge = 0.45;
+      // a service a rosbridge client provides: advertised here, called with CDR
+      const add = new ROSLIB.Service({ ros, name: '/foxtest/add_two_ints', serviceType: 'example_interfaces/srv/AddTwoInts' });
+      add.advertise((req, resp) => { resp.sum = req.a + req.b; return true; });
+      await until('the client-provided service', () => services.has('/foxtest/add_two_ints'));
+      const answer = await call('/foxtest/add_two_ints', { a: 2n, b: 40n });
+      const svc = services.get('/foxtest/add_two_ints');
+      const reader = new MessageReader(parse(svc.response?.schema ?? svc.responseSchema, { ros2: true }));
+      result.clientServiceSum = Number(reader.readMessage(new Uint8Array(answer.data.buffer, answer.data.byteOffset, answer.data.byteLength)).sum);
       ros.close();
     }
   }
