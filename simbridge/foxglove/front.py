@@ -60,6 +60,9 @@ import importlib
 import itertools
 import json
 import logging
+import os
+import socket
+import stat
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from typing import Any
@@ -98,6 +101,46 @@ GRAPH_PERIOD = 1.0
 CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
 #: Seconds a service call's SDK thread waits for the graph beyond the call's own timeout.
 CALL_MARGIN = 2.0
+
+
+def set_nodelay(port: int, done: set[tuple[int, int]]) -> int:
+    """Set ``TCP_NODELAY`` on this process's connected TCP sockets of local ``port``.
+
+    The SDK's server leaves Nagle's algorithm on for its clients' sockets: a message written
+    while the previous one waits for its ACK is held back until the client's delayed ACK comes,
+    up to 40 ms on Linux (asyncio, and so rosbridge, turns it off). The sockets are this
+    process's own, so simbridge turns it off on them (through a duplicate of each descriptor,
+    found in ``/proc/self/fd``; elsewhere this does nothing). ``done``: the (descriptor, peer
+    port) pairs already set, updated here. Returns how many were set now.
+    """
+    try:
+        names = os.listdir("/proc/self/fd")
+    except OSError:
+        return 0
+    count = 0
+    seen: set[tuple[int, int]] = set()
+    for name in names:
+        fd = int(name)
+        try:
+            if not stat.S_ISSOCK(os.fstat(fd).st_mode):
+                continue
+            sock = socket.socket(fileno=os.dup(fd))  # closing the duplicate leaves the SDK's
+        except OSError:
+            continue
+        with sock:
+            try:
+                if sock.type != socket.SOCK_STREAM or sock.getsockname()[1] != port:
+                    continue
+                key = (fd, int(sock.getpeername()[1]))
+                seen.add(key)
+                if key not in done:
+                    sock.setsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)
+                    count += 1
+            except (OSError, IndexError, TypeError):
+                continue  # the listening socket has no peer; a socket closed meanwhile
+    done.clear()
+    done.update(seen)
+    return count
 
 
 def import_foxglove() -> Any:
@@ -176,6 +219,9 @@ class FoxgloveFront:
         self._call_ids = itertools.count(1)
         self._tasks: set[asyncio.Task[None]] = set()
         self._graph_wanted = False
+        #: Clients subscribed to a channel, and the sockets already set to TCP_NODELAY.
+        self._receiving: set[int] = set()
+        self._nodelay: set[tuple[int, int]] = set()
         self._graph_sent: tuple[int, int] = (-1, -1)
         self._graph_next = 0.0
         #: Parameter values by Foxglove name, replaced whole by the loop (read by SDK threads).
@@ -373,6 +419,9 @@ class FoxgloveFront:
         if not entry.subscribers:
             self.graph.subscribe(entry.topic, entry.type, FOXGLOVE_NODE, self._marker)
         entry.subscribers.add(client_id)
+        if client_id not in self._receiving:  # a client that receives: no Nagle delays
+            self._receiving.add(client_id)
+            set_nodelay(self.port, self._nodelay)
         topic = self.graph.topics.topics.get(entry.topic)
         if topic is not None and topic.latched is not None:
             self._log(entry, topic.latched)
@@ -385,6 +434,8 @@ class FoxgloveFront:
         entry.subscribers.discard(client_id)
         if not entry.subscribers:
             self.graph.topics.unsubscribe_internal(entry.topic, self._marker)
+        if not any(client_id in c.subscribers for c in self._channels.values()):
+            self._receiving.discard(client_id)
 
     # -- clients: publish, calls ------------------------------------------------------------
 

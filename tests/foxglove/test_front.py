@@ -131,3 +131,20 @@ def test_the_option_without_the_extra_exits_with_the_install_command() -> None:
     out = subprocess.run([sys.executable, "-c", code], cwd=ROOT, capture_output=True, text=True)
     assert out.returncode == 2
     assert 'pip install "simbridge[foxglove]"' in out.stderr
+
+
+def test_set_nodelay_turns_nagle_off_on_this_process_s_sockets_of_the_port_once() -> None:
+    import socket
+
+    from simbridge.foxglove.front import set_nodelay
+
+    with socket.create_server(("127.0.0.1", 0)) as listener:
+        port = listener.getsockname()[1]
+        with socket.create_connection(("127.0.0.1", port)) as _client:
+            accepted, _ = listener.accept()
+            with accepted:
+                assert accepted.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 0
+                done: set[tuple[int, int]] = set()
+                assert set_nodelay(port, done) == 1  # the accepted socket, not the listener
+                assert accepted.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
+                assert set_nodelay(port, done) == 0
