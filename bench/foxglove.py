@@ -6,8 +6,10 @@ WebSocket clients (``foxglove.sdk.v1``, CDR; the same load generator's
 ``_FoxgloveClient``), two load-generator processes, the two kinds alternated. For each: server
 CPU (its own user + system seconds per second: the SDK's Rust threads count too), latency
 (arrival minus the header stamp), bytes per second all clients read, and losses (a message one
-client got must reach every client). Then the idle server's RSS without and with
-``--foxglove-port`` (the extra installed both times: without the option nothing of it loads).
+client got must reach every client). Then one more Foxglove row with 5 more Foxglove clients
+that subscribe and stop reading (their receive buffers made small): the others' p99 and losses.
+Then the idle server's RSS without and with ``--foxglove-port`` (the extra installed both
+times: without the option nothing of it loads).
 
 ``python -m bench.foxglove [SECONDS [N [ROUNDS]]]`` (default 10 s, 100 clients, 2 rounds).
 Target (issue 30): Foxglove clients cost no more server CPU than rosbridge clients.
@@ -18,6 +20,7 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import json
+import socket
 import statistics
 import subprocess
 import sys
@@ -27,7 +30,10 @@ from typing import Any
 
 import psutil
 from websockets.asyncio.client import connect
+from websockets.client import ClientProtocol
+from websockets.frames import Frame, Opcode
 from websockets.typing import Subprotocol
+from websockets.uri import parse_uri
 
 from bench.procs import (
     ROOT,
@@ -101,9 +107,45 @@ def _loadgens(
     return procs
 
 
-def phase(kind: str, n: int, seconds: float) -> dict[str, Any]:
-    """Run ``n`` clients of ``kind`` (``rosbridge`` or ``foxglove``) for ``seconds``."""
-    with server() as (proc, port, fox):
+def stalled_client(port: int) -> socket.socket:
+    """Open a Foxglove client that subscribes to /odom and /scan, then never reads again.
+
+    Its receive buffer is made small, so that the server's side of it fills within seconds.
+    """
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    ws = ClientProtocol(
+        parse_uri(f"ws://127.0.0.1:{port}"),
+        subprotocols=[Subprotocol("foxglove.sdk.v1")],
+        max_size=None,
+    )
+    ws.send_request(ws.connect())
+    for chunk in ws.data_to_send():
+        sock.sendall(chunk)
+    channels: list[dict[str, Any]] = []
+    while not channels:
+        ws.receive_data(sock.recv(65536))
+        for event in ws.events_received():
+            if isinstance(event, Frame) and event.opcode is Opcode.TEXT:
+                body = json.loads(event.data)
+                if body.get("op") == "advertise":
+                    channels = [c for c in body["channels"] if c["topic"] in TOPICS]
+    subs = [{"id": k + 1, "channelId": c["id"]} for k, c in enumerate(channels)]
+    ws.send_text(json.dumps({"op": "subscribe", "subscriptions": subs}).encode())
+    for chunk in ws.data_to_send():
+        sock.sendall(chunk)
+    return sock  # never read from again
+
+
+def phase(kind: str, n: int, seconds: float, stalled: int = 0) -> dict[str, Any]:
+    """Run ``n`` clients of ``kind`` (``rosbridge`` or ``foxglove``) for ``seconds``.
+
+    ``stalled``: Foxglove clients that subscribe and then stop reading, opened first.
+    """
+    with server() as (proc, port, fox), contextlib.ExitStack() as stack:
+        for _ in range(stalled):
+            stack.enter_context(stalled_client(fox))
         url = f"ws://127.0.0.1:{fox if kind == 'foxglove' else port}"
         start = time.time() + 3.0 + n / 60.0
         end = start + seconds
@@ -118,7 +160,7 @@ def phase(kind: str, n: int, seconds: float) -> dict[str, Any]:
     latencies = [x for r in results for x in r.get("latencies", [])]
     expected, missing, errors = losses(results, TOPICS)
     return {
-        "kind": kind,
+        "kind": kind + (f"+{stalled} stalled" if stalled else ""),
         "n": n,
         "cpu": (cpu1 - cpu0) / seconds,
         "p50": percentile(latencies, 0.5) * 1e3,
@@ -141,14 +183,14 @@ def idle_rss(*, foxglove: bool, settle: float = 4.0) -> float:
 
 
 HEADER = (
-    f"{'clients':<10} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'kB/s':>8} "
+    f"{'clients':<20} {'N':>4} {'CPU':>7} {'p50 ms':>7} {'p99 ms':>7} {'kB/s':>8} "
     f"{'received':>8} {'missing':>7} {'errors':>6} {'RSS MB':>6}"
 )
 
 
 def row(r: dict[str, Any]) -> str:
     return (
-        f"{r['kind']:<10} {r['n']:>4} {r['cpu'] * 100:>6.1f}% {r['p50']:>7.2f} {r['p99']:>7.2f} "
+        f"{r['kind']:<20} {r['n']:>4} {r['cpu'] * 100:>6.1f}% {r['p50']:>7.2f} {r['p99']:>7.2f} "
         f"{r['bytes'] / 1e3:>8.0f} {r['received']:>8} {r['missing']:>7} {r['errors']:>6} "
         f"{r['rss_mb']:>6.0f}  {r['load']}"
     )
@@ -178,6 +220,13 @@ def main(argv: list[str] | None = None) -> int:
         ros = statistics.median(r[key] for r in runs["rosbridge"]) * scale
         fox = statistics.median(r[key] for r in runs["foxglove"]) * scale
         print(f"  {unit:<7} rosbridge {ros:>9.2f}  foxglove {fox:>9.2f}  ratio {fox / ros:.2f}x")
+    stall = phase("foxglove", n, seconds, stalled=5)
+    print(row(stall), flush=True)
+    healthy = statistics.median(r["p99"] for r in runs["foxglove"])
+    print(
+        f"  with 5 Foxglove clients that stopped reading: p99 {stall['p99']:.2f} ms of the "
+        f"{n} others ({healthy:.2f} ms without), {stall['missing']} messages missing"
+    )
     without, with_port = idle_rss(foxglove=False), idle_rss(foxglove=True)
     print(
         f"idle RSS: {without:.1f} MB without --foxglove-port, {with_port:.1f} MB with it "
