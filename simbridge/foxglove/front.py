@@ -299,6 +299,8 @@ class FoxgloveFront:
             "channels": len(self._channels),
             "subscribed_channels": sum(1 for c in self._channels.values() if c.subscribers),
             "services": len(self._services),
+            # the SDK tells no connect or disconnect: clients are counted by what they do
+            "clients_subscribed": len(self._receiving),
             "clients_publishing_or_calling": len(self._clients),
             **self.stats,
         }
