@@ -22,30 +22,32 @@
   budget, the service table: in-process handlers and client providers alike).
 * **parameters**: the in-process nodes' parameters (``/virtual_robot.robot.mass``), read from
   a snapshot, set through ``/rosapi/set_param`` as a rosbridge client sets them (an
-  administrative service: admin rights needed), and every change, wherever it came from
-  (``/admin``, rosbridge, Foxglove), pushed to the clients that subscribed to it.
+  administrative service: admin rights needed); a change made elsewhere (``/admin``,
+  rosbridge) is pushed to the clients that subscribed to it;
 * **time**: with ``use_sim_time``, the ``/clock`` time is broadcast as the server's time (the
-  stamps are sim time then, and stop with the simulation);
-* **connection graph**: publishers, subscribers and services as rosapi lists them (rosbridge
-  clients as ``/rosbridge_websocket``, Foxglove clients as ``/foxglove_bridge``), published while
-  a client subscribed to it, at most once a second.
+  stamps are sim time then, and stop with the simulation).
+
+No connection graph: see the SDK's hazard below.
 
 The SDK calls back on its own threads. Each callback only hands its arguments to the event loop
 (``call_soon_threadsafe``); the loop's work is the graph's. Two answers are waited for off the
-loop: a service call (the SDK runs its handler on a blocking-pool thread, which waits for the
-loop's answer) and nothing else: parameter reads answer from a snapshot the loop keeps, and a
-parameter set answers with the current values at once (the change, when the loop has applied
-it, follows as a parameter update). Each client has its own bounded queues in the SDK (a client
-that stops reading loses its oldest data messages, and is disconnected when its control queue
-fills), so it never slows the others.
+loop, on SDK threads that hold no lock of the SDK then: a service call (the SDK runs its handler
+on a blocking-pool thread, which waits for the loop's answer) and a parameter set (the client's
+task waits for the loop to apply it, then returns the values, which the SDK sends to the
+parameters' subscribers itself). Parameter reads answer from a snapshot the loop keeps. Each
+client has its own bounded queues in the SDK (a client that stops reading loses its oldest data
+messages, and is disconnected when its control queue fills), so it never slows the others.
 
-A hazard of the SDK (0.30.3) that simbridge can only make rare: it calls the Python listener's
-``on_parameters_subscribe`` and ``on_connection_graph_subscribe`` (and their unsubscribes) while
-it holds the lock that ``publish_parameter_values`` and ``publish_connection_graph`` take, and
-those two keep the GIL while they wait for it. A publish that starts in the microseconds between a
-client's first subscription taking the lock and the callback taking the GIL would deadlock. So
-both are called only when needed: parameter values when a parameter changed, the connection
-graph while a client is subscribed to it, at most once a second.
+A hazard of the SDK (0.30.3): it calls the Python listener's ``on_parameters_subscribe`` and
+``on_connection_graph_subscribe`` (and their unsubscribes) while it holds the lock that
+``publish_parameter_values`` and ``publish_connection_graph`` take, and those two keep the GIL
+while they wait for it: a publish made while such a callback waits for the GIL (up to the
+interpreter's switch interval, 5 ms) deadlocks the process. With the connection graph it
+happened in the first tests (the graph is published when a client subscribes to it, and a client
+that leaves unsubscribes), so simbridge offers no connection graph. Parameter values are
+published only for a change made elsewhere than on this port, and only while a client is
+subscribed to parameters: a deadlock then needs such a change within milliseconds of a client's
+parameter subscription or disconnection.
 
 The protocol carries no token (the SDK's handshake reads only the subprotocol, and its Python
 listener sees a client id): every Foxglove client gets the port's one access (see
@@ -82,7 +84,7 @@ from simbridge.foxglove.mapping import (
     status_of,
 )
 from simbridge.graph import Graph, Topic
-from simbridge.graph.topics import BRIDGE_NODE, Peer
+from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session, ops as o
 
@@ -95,8 +97,8 @@ logger = logging.getLogger(__name__)
 FOXGLOVE_NODE = "/foxglove_bridge"
 #: Outgoing messages the SDK queues per client (its data and its control queue each).
 BACKLOG = 1024
-#: Seconds between two connection-graph updates at least.
-GRAPH_PERIOD = 1.0
+#: Seconds a parameter set of a client waits for the loop to apply it.
+SET_TIMEOUT = 2.0
 #: The simulation's clock: the server's time with ``use_sim_time``.
 CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
 #: Seconds a service call's SDK thread waits for the graph beyond the call's own timeout.
@@ -217,13 +219,13 @@ class FoxgloveFront:
         self._clients: dict[int, _Client] = {}
         self._signature: tuple[int, int] = (-1, -1)
         self._call_ids = itertools.count(1)
-        self._tasks: set[asyncio.Task[None]] = set()
-        self._graph_wanted = False
+        #: Parameter sets of Foxglove clients being applied (their changes are not pushed).
+        self._setting = 0
+        #: Parameter names some Foxglove client subscribed to (the SDK's callbacks say so).
+        self._param_subs: set[str] = set()
         #: Clients subscribed to a channel, and the sockets already set to TCP_NODELAY.
         self._receiving: set[int] = set()
         self._nodelay: set[tuple[int, int]] = set()
-        self._graph_sent: tuple[int, int] = (-1, -1)
-        self._graph_next = 0.0
         #: Parameter values by Foxglove name, replaced whole by the loop (read by SDK threads).
         self._params: dict[str, Any] = {}
         self._time = graph.settings.use_sim_time
@@ -258,7 +260,6 @@ class FoxgloveFront:
             ws.Capability.ClientPublish,
             ws.Capability.Services,
             ws.Capability.Parameters,
-            ws.Capability.ConnectionGraph,
         ]
         if self._time:
             caps.append(ws.Capability.Time)
@@ -306,52 +307,12 @@ class FoxgloveFront:
         }
 
     def tick(self, now: float) -> None:
-        """Advertise what appeared in the graph and unadvertise what went (a tick hook).
-
-        The connection graph is published while a client subscribed to it, at most once every
-        :data:`GRAPH_PERIOD` (every subscription of every client changes it).
-        """
+        """Advertise what appeared in the graph and unadvertise what went (a tick hook)."""
         if self.server is None:
             return
         signature = (self.graph.topics.changes, self.graph.services.changes)
         if signature != self._signature:
             self.reconcile()
-        if self._graph_wanted and signature != self._graph_sent and now >= self._graph_next:
-            self.publish_graph(now)
-
-    # -- connection graph ---------------------------------------------------------------------
-
-    def graph_subscribed(self, wanted: bool) -> None:
-        """The first client subscribed to the connection graph, or the last one left."""
-        self._graph_wanted = wanted
-        if wanted and self.server is not None:
-            self.publish_graph(self._now())
-
-    def publish_graph(self, now: float) -> None:
-        """Publish the graph's publishers, subscribers and services as rosapi lists them."""
-        graph = self.graph
-        self._graph_sent = (graph.topics.changes, graph.services.changes)
-        self._graph_next = now + GRAPH_PERIOD
-        update = self.fox.ConnectionGraph()
-        for topic in graph.topics.listed():
-            publishers = sorted({self._node(owner) for owner in topic.publishers})
-            subscribers = {node for node, _ in topic.internal}
-            if topic.subscriptions:
-                subscribers.add(BRIDGE_NODE)
-            if publishers:
-                update.set_published_topic(topic.name, publishers)
-            if subscribers:
-                update.set_subscribed_topic(topic.name, sorted(subscribers))
-        for name, service in graph.services.services.items():
-            provider = service.node if service.handler is not None else self._node(service.provider)
-            update.set_advertised_service(name, [provider])
-        self.server.publish_connection_graph(update)
-
-    @staticmethod
-    def _node(owner: object) -> str:
-        if isinstance(owner, str):
-            return owner
-        return FOXGLOVE_NODE if isinstance(owner, _Client) else BRIDGE_NODE
 
     # -- channels ---------------------------------------------------------------------------
 
@@ -647,7 +608,10 @@ class FoxgloveFront:
     def _param_changer(self, node: str) -> Callable[[list[str]], None]:
         def changed(names: list[str]) -> None:
             self._snapshot_params()
-            if self.server is not None and names:
+            # a change of a Foxglove client is published by the SDK itself (see set_parameters);
+            # one from elsewhere (/admin, rosbridge) only while a client subscribed to one (the
+            # SDK's lock hazard: module doc)
+            if self.server is not None and names and not self._setting and self._param_subs:
                 params = self._parameters([param_name(node, n) for n in names])
                 if params:
                     self.server.publish_parameter_values(params)
@@ -675,14 +639,13 @@ class FoxgloveFront:
                 out.append(fox.Parameter(name, value=value))
         return out
 
-    def set_parameters(self, client_id: int, changes: list[tuple[str, Any]]) -> None:
-        """A client set parameters: ``/rosapi/set_param`` calls of its session, in order."""
-        self.stats["parameter_sets"] += 1
-        task = asyncio.get_running_loop().create_task(self._set_parameters(client_id, changes))
-        self._tasks.add(task)
-        task.add_done_callback(self._tasks.discard)
+    async def set_parameters(self, client_id: int, changes: list[tuple[str, Any]]) -> None:
+        """A client set parameters: ``/rosapi/set_param`` calls of its session, in order.
 
-    async def _set_parameters(self, client_id: int, changes: list[tuple[str, Any]]) -> None:
+        The SDK publishes the values its listener returns to the clients that subscribed to
+        them (in Rust, without the GIL), so a change made here is not published again.
+        """
+        self.stats["parameter_sets"] += 1
         nodes = list(self.graph.params.nodes)
         for full, value in changes:
             split = split_param(full, nodes)
@@ -690,7 +653,11 @@ class FoxgloveFront:
                 self.status(f"Foxglove client {client_id}: no parameter {full}", "warning")
                 continue
             args = {"name": f"{split[0]}:{split[1]}", "value": json.dumps(value)}
-            body = await self._dispatch_call(client_id, "/rosapi/set_param", args)
+            self._setting += 1  # the in-process service applies the change in the dispatch
+            try:
+                body = await self._dispatch_call(client_id, "/rosapi/set_param", args)
+            finally:
+                self._setting -= 1
             if not body.get("result"):
                 self.status(
                     f"Foxglove client {client_id}: parameter {full} not set: {body.get('values')}",
@@ -750,19 +717,22 @@ class _Listener:
     def on_set_parameters(
         self, client: Any, parameters: list[Any], request_id: str | None = None
     ) -> list[Any]:
+        # this client's task waits (the GIL released) for the loop to apply the change; the
+        # SDK holds no lock meanwhile, and sends what is returned to the parameters' subscribers
         changes = [(str(p.name), p.get_value()) for p in parameters]
-        self._soon(self.front.set_parameters, client.id, changes)
-        # the values as they are now; the change follows as an update once the loop applied it
+        loop = self.front._loop
+        if loop is not None and not loop.is_closed():
+            coro = self.front.set_parameters(client.id, changes)
+            future = asyncio.run_coroutine_threadsafe(coro, loop)
+            try:
+                future.result(SET_TIMEOUT)
+            except Exception as err:  # a timeout: the values as they are now
+                logger.debug("Foxglove: parameter set not applied in time: %r", err)
         return self.front._parameters([name for name, _ in changes])
 
-    def on_connection_graph_subscribe(self) -> None:
-        self._soon(self.front.graph_subscribed, True)
-
-    def on_connection_graph_unsubscribe(self) -> None:
-        self._soon(self.front.graph_subscribed, False)
-
+    # called with the SDK's parameter lock held: nothing here may wait for the loop
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
-        return None
+        self._soon(self.front._param_subs.update, list(param_names))
 
     def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
-        return None
+        self._soon(self.front._param_subs.difference_update, list(param_names))
