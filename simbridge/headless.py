@@ -26,6 +26,8 @@ from typing import Any
 
 from simbridge.config import Params, WorldSpec, load_params, load_world
 from simbridge.errors import ServiceError, SimbridgeError
+from simbridge.grading.grader import Grader
+from simbridge.grading.results import ResultsLog
 from simbridge.graph.assembly import build_robot_graph
 from simbridge.graph.topics import Topic
 from simbridge.sim import World
@@ -91,6 +93,10 @@ class Simulation:
         self.bridge = self.robot.bridge
         #: /clock and the sim-time services.
         self.clock = self.robot.simclock
+        #: The grader (``/simbridge/grade/*``), as the server has it: no tasks and no results
+        #: file of its own (``simbridge grade --headless`` hands it the task to run).
+        self.grader = Grader(self.graph, self.world, ResultsLog(None), {})
+        self.robot.tick_hooks.append(self.grader.tick)
         self.robot.publish_static(0.0)
 
     # -- time ---------------------------------------------------------------------------------

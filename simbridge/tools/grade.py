@@ -193,25 +193,16 @@ def grade_headless(
     Raises:
         ConfigError: the task, world or parameter file is invalid.
     """
-    from simbridge.grading.grader import Grader
-    from simbridge.grading.results import ResultsLog
     from simbridge.headless import Simulation
+    from simbridge.tools.bag import BagWriter
 
     task = load_task(task_path)
     if world is None and task.world is not None:
         world = str((task_path.parent / task.world).resolve())
     sim = Simulation(world, params)
-    from simbridge.tools.bag import BagWriter
-
-    grader = Grader(
-        sim.graph,
-        sim.world,
-        ResultsLog(None),
-        {},
-        bags=bags,
-        recorder=lambda path: BagWriter(path, sim.graph.registry),
-    )
-    sim.robot.tick_hooks.append(grader.tick)
+    grader = sim.grader
+    grader.bags = bags
+    grader.recorder = lambda path: BagWriter(path, sim.graph.registry)
     name = robot if robot is not None else next(iter(sim.world.robots))
     run = grader.start(None, name, task, official=False)
     step = controller(sim, name, run.goal.as_dict())
