@@ -45,9 +45,10 @@ while they wait for it: a publish made while such a callback waits for the GIL (
 interpreter's switch interval, 5 ms) deadlocks the process. With the connection graph it
 happened in the first tests (the graph is published when a client subscribes to it, and a client
 that leaves unsubscribes), so simbridge offers no connection graph. Parameter values are
-published only for a change made elsewhere than on this port, and only while a client is
-subscribed to parameters: a deadlock then needs such a change within milliseconds of a client's
-parameter subscription or disconnection.
+published only for a change made elsewhere than on this port, and simbridge keeps a connection
+of its own subscribed to every parameter (:meth:`FoxgloveFront._hold_parameters`): the SDK then
+calls those listener methods only for names no parameter has, and a deadlock would need a
+change within milliseconds of a client subscribing to such a name.
 
 The protocol carries no token (the SDK's handshake reads only the subprotocol, and its Python
 listener sees a client id): every Foxglove client gets the port's one access (see
@@ -58,6 +59,7 @@ from __future__ import annotations
 
 import asyncio
 import concurrent.futures
+import contextlib
 import importlib
 import itertools
 import json
@@ -221,8 +223,10 @@ class FoxgloveFront:
         self._call_ids = itertools.count(1)
         #: Parameter sets of Foxglove clients being applied (their changes are not pushed).
         self._setting = 0
-        #: Parameter names some Foxglove client subscribed to (the SDK's callbacks say so).
-        self._param_subs: set[str] = set()
+        #: simbridge's own connection subscribed to every parameter (see _hold_parameters).
+        self._holder: asyncio.Task[None] | None = None
+        self._holder_ws: Any = None
+        self._holding: set[str] = set()
         #: Clients subscribed to a channel, and the sockets already set to TCP_NODELAY.
         self._receiving: set[int] = set()
         self._nodelay: set[tuple[int, int]] = set()
@@ -277,11 +281,48 @@ class FoxgloveFront:
         if self._time:
             self.graph.subscribe(CLOCK_TOPIC, CLOCK_TYPE, FOXGLOVE_NODE, self._on_clock)
         self.reconcile()
+        self._holder = asyncio.create_task(self._hold_parameters(), name="foxglove parameters")
         logger.info("Foxglove WebSocket protocol on port %d (foxglove.sdk.v1)", self.port)
+
+    async def _hold_parameters(self) -> None:
+        """Keep one connection of simbridge's own subscribed to every parameter (and read it).
+
+        The SDK calls the listener under its parameter lock only for a name that gains its first
+        subscriber or loses its last one (module doc): with this connection subscribed to every
+        name, a client's subscriptions and disconnections no longer do, and a change made
+        elsewhere can be published safely (``publish_parameter_values``).
+        """
+        from websockets.asyncio.client import connect
+        from websockets.typing import Subprotocol
+
+        host = "127.0.0.1" if self.host in ("0.0.0.0", "::", "") else self.host
+        protocols = [Subprotocol("foxglove.sdk.v1")]
+        try:
+            async with connect(f"ws://{host}:{self.port}", subprotocols=protocols) as ws:
+                self._holding = set(self._params)
+                subscribe = {
+                    "op": "subscribeParameterUpdates",
+                    "parameterNames": sorted(self._params),
+                }
+                await ws.send(orjson.dumps(subscribe).decode())
+                self._holder_ws = ws
+                async for _message in ws:  # parameter values, statuses: read and dropped
+                    pass
+        except (TimeoutError, OSError) as err:
+            logger.warning("Foxglove: parameter updates from elsewhere are off: %s", err)
+        except Exception as err:  # the connection closed: the server stops
+            logger.debug("Foxglove: the parameter holder closed: %r", err)
+        finally:
+            self._holder_ws = None
+            self._holding = set()
 
     async def close(self) -> None:
         """Stop the server (in a thread: the SDK waits for its connections to close)."""
         server, self.server = self.server, None
+        if self._holder is not None:
+            self._holder.cancel()
+            with contextlib.suppress(asyncio.CancelledError):
+                await self._holder
         if self._time:
             self.graph.topics.unsubscribe_internal(CLOCK_TOPIC, self._on_clock)
         if server is not None:
@@ -303,6 +344,7 @@ class FoxgloveFront:
             # the SDK tells no connect or disconnect: clients are counted by what they do
             "clients_subscribed": len(self._receiving),
             "clients_publishing_or_calling": len(self._clients),
+            "parameter_updates": self._holder_ws is not None,
             **self.stats,
         }
 
@@ -611,8 +653,10 @@ class FoxgloveFront:
             # a change of a Foxglove client is published by the SDK itself (see set_parameters);
             # one from elsewhere (/admin, rosbridge) only while a client subscribed to one (the
             # SDK's lock hazard: module doc)
-            if self.server is not None and names and not self._setting and self._param_subs:
-                params = self._parameters([param_name(node, n) for n in names])
+            full = [param_name(node, n) for n in names]
+            held = self._holder_ws is not None and self._holding.issuperset(full)
+            if self.server is not None and full and not self._setting and held:
+                params = self._parameters(full)
                 if params:
                     self.server.publish_parameter_values(params)
 
@@ -730,9 +774,9 @@ class _Listener:
                 logger.debug("Foxglove: parameter set not applied in time: %r", err)
         return self.front._parameters([name for name, _ in changes])
 
-    # called with the SDK's parameter lock held: nothing here may wait for the loop
+    # called with the SDK's parameter lock held (module doc): they do nothing
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
-        self._soon(self.front._param_subs.update, list(param_names))
+        return None
 
     def on_parameters_unsubscribe(self, param_names: list[str]) -> None:
-        self._soon(self.front._param_subs.difference_update, list(param_names))
+        return None

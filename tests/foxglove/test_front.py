@@ -71,6 +71,7 @@ async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
     assert refused.value.response.status_code == 400
     health = app.health()["foxglove"]
     assert health["port"] == app.foxglove.port and health["calls"] >= 1
+    assert health["parameter_updates"] is True
 
 
 CLASS_WORLD = {
