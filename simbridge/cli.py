@@ -503,10 +503,15 @@ async def _serve(
     loop = asyncio.get_running_loop()
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
-    shown = "127.0.0.1" if settings.host in ("0.0.0.0", "::", "") else settings.host
+    everywhere = settings.host in ("0.0.0.0", "::", "")
+    shown = "127.0.0.1" if everywhere else settings.host
     page = f"  page http://{shown}:{app.http_port}/" if app.http_port is not None else ""
     fox = f"  foxglove ws://{shown}:{app.foxglove.port}" if app.foxglove is not None else ""
     print(f"simbridge: rosbridge ws://{shown}:{app.ws_port}/{page}{fox}", flush=True)
+    lan = _network_address(_in_container()) if everywhere else None
+    if lan is not None:  # what an instructor hands out (the first line is for this machine)
+        page = f"  page http://{lan}:{app.http_port}/" if app.http_port is not None else ""
+        print(f"simbridge: from the network: ws://{lan}:{app.ws_port}/{page}", flush=True)
     await stop.wait()
     print("simbridge: stopping", flush=True)
     await app.stop()
@@ -514,6 +519,30 @@ async def _serve(
         recorder.close()
         print(f"simbridge: recorded {recorder.writer.count} messages to {record and record[0]}/")
     return 0
+
+
+def _in_container() -> bool:
+    return Path("/.dockerenv").exists() or Path("/run/.containerenv").exists()
+
+
+def _network_address(in_container: bool) -> str | None:
+    """Return the IPv4 address other machines most likely reach this one at, if any.
+
+    The address of the interface with the default route (a UDP socket "connected" to a private
+    address: nothing is sent). None without a route (an offline Pi: its address is then the
+    one the instructor set) or in a container, whose own address is not the one published.
+    """
+    if in_container:
+        return None
+    import socket
+
+    try:
+        with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as probe:
+            probe.connect(("10.254.254.254", 9))
+            address = str(probe.getsockname()[0])
+    except OSError:
+        return None
+    return None if address.startswith("127.") or address == "0.0.0.0" else address
 
 
 def _import_asyncio(*, tls: bool) -> None:

@@ -14,6 +14,7 @@ from pathlib import Path
 
 import pytest
 
+from simbridge.cli import _network_address
 from tests.helpers import ROOT, TIMEOUT_FACTOR
 
 
@@ -135,6 +136,17 @@ async def start_server(
     match = re.search(r"ws://127\.0\.0\.1:(\d+)/\s+page http://127\.0\.0\.1:(\d+)/", line)
     assert match, line
     return proc, int(match.group(1)), int(match.group(2))
+
+
+def test_the_address_for_other_machines_is_one_of_this_machine_not_a_container_one() -> None:
+    """Printed beside the 127.0.0.1 line when listening everywhere: what an instructor gives."""
+    address = _network_address(in_container=False)
+    if address is None:
+        pytest.skip("no default route here: nothing to print")
+    assert not address.startswith("127.")
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as mine:
+        mine.bind((address, 0))  # an address of this machine's interfaces
+    assert _network_address(in_container=True) is None  # its own address is not the published one
 
 
 @pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT])
