@@ -55,10 +55,10 @@ from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.sim import World
-from simbridge.sim.world import PER_ROBOT_PARAMS
+from simbridge.sim.world import PER_ROBOT_PARAMS, Robot
 
 
-__all__ = ["GRADE_TYPE", "Grader", "Run", "apply_robot_params"]
+__all__ = ["GRADE_TYPE", "Grader", "Run", "apply_robot_params", "restore_robot"]
 
 logger = logging.getLogger(__name__)
 
@@ -107,6 +107,22 @@ def apply_robot_params(world: World, robot: str, params: dict[str, Any]) -> None
         world.set_robot_realism(robot, realism)
 
 
+def restore_robot(body: Robot, overrides: dict[str, float], realism: dict[str, object]) -> None:
+    """Give ``body`` back its own parameters of before a run, and a robot's fresh motors.
+
+    A run's ``realism.*`` values drove the robot's plant (:class:`~simbridge.sim.realism.Plant`:
+    its wheels' speeds, the commands waiting for the run's latency, its slip generator seeded
+    by the run's ``realism.seed``, its odometry's drift): it is dropped when the profile
+    changes back, and the robot's next step makes a new one at its true pose, as it would for
+    a robot that never had the run.
+    """
+    changed = body.realism_own != realism
+    body.overrides, body.cached = dict(overrides), None
+    body.realism_own, body.realism_cached = dict(realism), None
+    if changed:
+        body.plant = None
+
+
 def _thin(values: list[Any]) -> list[Any]:
     step = max(1, math.ceil(len(values) / MAX_POINTS))
     out = values[::step]
@@ -123,6 +139,8 @@ class Run:
     task: Task
     goal: Goal
     robot: str
+    #: The robot run (a robot killed and spawned again under its name is another one).
+    body: Robot
     student: str
     client: str
     official: bool
@@ -295,8 +313,7 @@ class Grader:
             self.world.teleport(robot, start)
             apply_robot_params(self.world, robot, task.robot_params)
         except (ValueError, KeyError) as err:
-            body.overrides, body.cached = saved, None
-            body.realism_own, body.realism_cached = saved_realism, None
+            restore_robot(body, saved, saved_realism)
             raise ServiceError(f"task '{task.id}': {err}") from None
         if official is None:
             published = self.tasks.get(task.id)
@@ -307,6 +324,7 @@ class Grader:
             task=task,
             goal=resolve_goal(task.goal, start, task.frame),
             robot=robot,
+            body=body,
             student=student,
             client="this process" if peer is None else describe_peer(peer),
             official=official,
@@ -391,7 +409,7 @@ class Grader:
             return
         dt = self.world.dt
         for run in list(self.runs.values()):
-            if run.robot not in self.world.robots:
+            if self.world.robots.get(run.robot) is not run.body:
                 self._end(run, "error", "the robot was removed during the run")
                 continue
             if run.bag is not None:
@@ -447,12 +465,10 @@ class Grader:
             except Exception:  # a full disk must not lose the score
                 logger.exception("attempt %s: the bag could not be finished", run.attempt)
             run.bag = None
-        body = self.world.robots.get(run.robot)
-        if body is not None:
+        if self.world.robots.get(run.robot) is run.body:
             if run.phase == "running":
                 self.world.command(run.robot, 0.0, 0.0)  # stopped at the time limit
-            body.overrides, body.cached = dict(run.saved), None
-            body.realism_own, body.realism_cached = dict(run.saved_realism), None
+            restore_robot(run.body, run.saved, run.saved_realism)
         metrics, response = score(run.goal, run.trace)
         passed, lines = evaluate(run.task.rubric, metrics)
         if status is None:

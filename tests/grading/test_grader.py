@@ -104,3 +104,90 @@ def test_a_controller_that_never_comes_is_recorded_as_no_controller() -> None:
     assert grader.results.attempts[run.attempt]["status"] == "no_controller"
     with pytest.raises(ServiceError, match=r"has 1 attempts .*grading_max_attempts 1"):
         grader.start(None, "", task)  # the budget: what one robot's attempts may hold
+
+
+#: A run's own robot: slower, with a worn robot's motors, latency and slip (not the class's).
+WORN = (
+    "robot_params: {robot.max_linear_velocity: 0.2, realism.enabled: true, "
+    "realism.cmd_latency: 0.1, realism.motor_time_constant: 0.2, realism.slip_stddev: 0.05, "
+    "realism.seed: 9}\n"
+)
+
+
+def _sim(class_profile: bool) -> Simulation:
+    """The default world; ``class_profile``: every robot under the class's realism profile."""
+    sim = Simulation()
+    if class_profile:
+        p = sim.world.params
+        real = p.realism.replace(enabled=True, slip_stddev=0.02, motor_time_constant=0.05)
+        sim.world.params = p.replace(realism=real)
+    return sim
+
+
+def _drive(sim: Simulation, steps: int) -> list[tuple[float, ...]]:
+    """Drive an arc then a turn the other way; the truth and /odom after each step."""
+    out = []
+    body = sim.world.robots[""]
+    for k in range(steps):
+        sim.publish("/cmd_vel", {"linear": {"x": 0.4}, "angular": {"z": 0.8 if k < 8 else -0.8}})
+        sim.step()
+        s, o = body.state, body.odometry()
+        out.append((s.x, s.y, s.theta, o.x, o.y, o.theta))
+    return out
+
+
+@pytest.mark.parametrize("class_profile", [False, True], ids=["ideal", "class_profile"])
+@pytest.mark.parametrize("ending", ["time_limit", "cancel", "server_stops"])
+def test_after_a_run_with_its_own_robot_the_robot_moves_as_one_that_never_ran(
+    class_profile: bool, ending: str
+) -> None:
+    sim = _sim(class_profile)
+    grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
+    sim.robot.tick_hooks.append(grader.tick)
+    task = parse_task(
+        "goal: {position: [2, 0]}\ntime_limit: 1\n" + WORN + "rubric: {time_to_goal_s: {max: 5}}\n",
+        task_id="t",
+    )
+    body = sim.world.robots[""]
+    before = (dict(body.overrides), dict(body.realism_own))
+    run = grader.start(None, "", task)
+    assert sim.world.robot_params("").max_linear_velocity == 0.2
+    # the controller sends a command every step up to the end (and goes on after it: _drive)
+    for _ in range(100 if ending == "time_limit" else 10):
+        sim.publish("/cmd_vel", {"linear": {"x": 0.3}, "angular": {"z": 0.4}})
+        sim.step()
+        if not grader.runs:
+            break
+    if ending == "cancel":
+        grader.cancel("", "cancelled by the test")
+    elif ending == "server_stops":
+        grader.close()
+    expected = {"time_limit": "failed", "cancel": "cancelled", "server_stops": "interrupted"}
+    assert grader.results.attempts[run.attempt]["status"] == expected[ending]
+    assert not grader.runs
+    assert (body.overrides, body.realism_own) == before
+    # the robot that never had the run, at the same pose and time: the same next steps, exactly
+    other = _sim(class_profile)
+    other.world.robots[""].place((body.state.x, body.state.y, body.state.theta))
+    other.world.time = sim.world.time  # the plant integrates over [t, t + dt]: the same floats
+    assert _drive(sim, 20) == _drive(other, 20)
+
+
+def test_a_robot_killed_and_spawned_again_mid_run_ends_the_run_and_keeps_its_new_params() -> None:
+    sim = Simulation()
+    grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
+    sim.robot.tick_hooks.append(grader.tick)
+    sim.world.spawn("r9", (1.0, 1.0, 0.0))
+    task = parse_task(
+        "goal: {heading: 1}\ntime_limit: 5\nrobot_params: {robot.mass: 4.0}\n"
+        "rubric: {overshoot_pct: {max: 5}}\n",
+        task_id="t",
+    )
+    run = grader.start(None, "r9", task)
+    sim.world.remove("r9")
+    sim.world.spawn("r9", (1.0, 1.0, 0.0))  # before the grader's next tick
+    sim.world.set_robot_params("r9", {"mass": 2.0})  # the instructor's, for the new robot
+    sim.step()
+    record = grader.results.attempts[run.attempt]
+    assert record["status"] == "error" and "removed" in record["reason"]
+    assert sim.world.robot_params("r9").mass == 2.0
