@@ -142,8 +142,7 @@ def test_after_a_run_with_its_own_robot_the_robot_moves_as_one_that_never_ran(
     class_profile: bool, ending: str
 ) -> None:
     sim = _sim(class_profile)
-    grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
-    sim.robot.tick_hooks.append(grader.tick)
+    grader = sim.grader
     task = parse_task(
         "goal: {position: [2, 0]}\ntime_limit: 1\n" + WORN + "rubric: {time_to_goal_s: {max: 5}}\n",
         task_id="t",
@@ -175,8 +174,7 @@ def test_after_a_run_with_its_own_robot_the_robot_moves_as_one_that_never_ran(
 
 def test_a_robot_killed_and_spawned_again_mid_run_ends_the_run_and_keeps_its_new_params() -> None:
     sim = Simulation()
-    grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
-    sim.robot.tick_hooks.append(grader.tick)
+    grader = sim.grader
     sim.world.spawn("r9", (1.0, 1.0, 0.0))
     task = parse_task(
         "goal: {heading: 1}\ntime_limit: 5\nrobot_params: {robot.mass: 4.0}\n"
