@@ -25,9 +25,10 @@
   administrative service: admin rights needed); a change made elsewhere (``/admin``,
   rosbridge) is pushed to the clients that subscribed to it;
 * **time**: with ``use_sim_time``, the ``/clock`` time is broadcast as the server's time (the
-  stamps are sim time then, and stop with the simulation).
-
-No connection graph: see the SDK's hazard below.
+  stamps are sim time then, and stop with the simulation);
+* **connection graph**: publishers, subscribers and services as rosapi lists them (rosbridge
+  clients as ``/rosbridge_websocket``, Foxglove clients as ``/foxglove_bridge``), at most once a
+  second when it changed.
 
 The SDK calls back on its own threads. Each callback only hands its arguments to the event loop
 (``call_soon_threadsafe``); the loop's work is the graph's. Two answers are waited for off the
@@ -42,13 +43,15 @@ A hazard of the SDK (0.30.3): it calls the Python listener's ``on_parameters_sub
 ``on_connection_graph_subscribe`` (and their unsubscribes) while it holds the lock that
 ``publish_parameter_values`` and ``publish_connection_graph`` take, and those two keep the GIL
 while they wait for it: a publish made while such a callback waits for the GIL (up to the
-interpreter's switch interval, 5 ms) deadlocks the process. With the connection graph it
-happened in the first tests (the graph is published when a client subscribes to it, and a client
-that leaves unsubscribes), so simbridge offers no connection graph. Parameter values are
-published only for a change made elsewhere than on this port, and simbridge keeps a connection
-of its own subscribed to every parameter (:meth:`FoxgloveFront._hold_parameters`): the SDK then
-calls those listener methods only for names no parameter has, and a deadlock would need a
-change within milliseconds of a client subscribing to such a name.
+interpreter's switch interval, 5 ms) deadlocks the process (it did, in a first version that
+published the graph when a client subscribed to it). The SDK calls those methods only for the
+first subscriber and the last one that leaves, so simbridge keeps a connection of its own
+subscribed to every parameter and to the connection graph
+(:meth:`FoxgloveFront._hold_parameters`), and publishes either only once that connection holds
+them: clients' subscriptions and departures then call nothing under those locks. What remains
+is a client subscribing to a parameter name that does not exist, within milliseconds of a
+parameter change made elsewhere than on this port (a change made on it the SDK publishes
+itself).
 
 The protocol carries no token (the SDK's handshake reads only the subprotocol, and its Python
 listener sees a client id): every Foxglove client gets the port's one access (see
@@ -86,7 +89,7 @@ from simbridge.foxglove.mapping import (
     status_of,
 )
 from simbridge.graph import Graph, Topic
-from simbridge.graph.topics import Peer
+from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session, ops as o
 
@@ -99,6 +102,8 @@ logger = logging.getLogger(__name__)
 FOXGLOVE_NODE = "/foxglove_bridge"
 #: Outgoing messages the SDK queues per client (its data and its control queue each).
 BACKLOG = 1024
+#: Seconds between two connection-graph updates at least.
+GRAPH_PERIOD = 1.0
 #: Seconds a parameter set of a client waits for the loop to apply it.
 SET_TIMEOUT = 2.0
 #: The simulation's clock: the server's time with ``use_sim_time``.
@@ -227,6 +232,10 @@ class FoxgloveFront:
         self._holder: asyncio.Task[None] | None = None
         self._holder_ws: Any = None
         self._holding: set[str] = set()
+        #: That connection got the connection graph (it is subscribed): it may be published.
+        self._graph_held = False
+        self._graph_sent: tuple[int, int] = (-1, -1)
+        self._graph_next = 0.0
         #: Clients subscribed to a channel, and the sockets already set to TCP_NODELAY.
         self._receiving: set[int] = set()
         self._nodelay: set[tuple[int, int]] = set()
@@ -264,6 +273,7 @@ class FoxgloveFront:
             ws.Capability.ClientPublish,
             ws.Capability.Services,
             ws.Capability.Parameters,
+            ws.Capability.ConnectionGraph,
         ]
         if self._time:
             caps.append(ws.Capability.Time)
@@ -305,9 +315,13 @@ class FoxgloveFront:
                     "parameterNames": sorted(self._params),
                 }
                 await ws.send(orjson.dumps(subscribe).decode())
-                self._holder_ws = ws
-                async for _message in ws:  # parameter values, statuses: read and dropped
-                    pass
+                await ws.send(orjson.dumps({"op": "subscribeConnectionGraph"}).decode())
+                async for message in ws:  # parameter values, statuses, graphs: read, dropped
+                    # the SDK answers the graph's first subscriber with the whole graph, after
+                    # it took this connection's parameter subscription (in order)
+                    first = self._holder_ws is None and isinstance(message, str)
+                    if first and '"connectionGraphUpdate"' in message:
+                        self._holder_ws, self._graph_held = ws, True
         except (TimeoutError, OSError) as err:
             logger.warning("Foxglove: parameter updates from elsewhere are off: %s", err)
         except Exception as err:  # the connection closed: the server stops
@@ -315,6 +329,7 @@ class FoxgloveFront:
         finally:
             self._holder_ws = None
             self._holding = set()
+            self._graph_held = False
 
     async def close(self) -> None:
         """Stop the server (in a thread: the SDK waits for its connections to close)."""
@@ -355,6 +370,40 @@ class FoxgloveFront:
         signature = (self.graph.topics.changes, self.graph.services.changes)
         if signature != self._signature:
             self.reconcile()
+        if self._graph_held and signature != self._graph_sent and now >= self._graph_next:
+            self.publish_graph(now)
+
+    # -- connection graph ---------------------------------------------------------------------
+
+    def publish_graph(self, now: float) -> None:
+        """Publish the graph's publishers, subscribers and services as rosapi lists them.
+
+        Only once simbridge's own connection subscribed to the graph (see
+        :meth:`_hold_parameters`), at most once every :data:`GRAPH_PERIOD`.
+        """
+        graph = self.graph
+        self._graph_sent = (graph.topics.changes, graph.services.changes)
+        self._graph_next = now + GRAPH_PERIOD
+        update = self.fox.ConnectionGraph()
+        for topic in graph.topics.listed():
+            publishers = sorted({self._node(owner) for owner in topic.publishers})
+            subscribers = {node for node, _ in topic.internal}
+            if topic.subscriptions:
+                subscribers.add(BRIDGE_NODE)
+            if publishers:
+                update.set_published_topic(topic.name, publishers)
+            if subscribers:
+                update.set_subscribed_topic(topic.name, sorted(subscribers))
+        for name, service in graph.services.services.items():
+            provider = service.node if service.handler is not None else self._node(service.provider)
+            update.set_advertised_service(name, [provider])
+        self.server.publish_connection_graph(update)
+
+    @staticmethod
+    def _node(owner: object) -> str:
+        if isinstance(owner, str):
+            return owner
+        return FOXGLOVE_NODE if isinstance(owner, _Client) else BRIDGE_NODE
 
     # -- channels ---------------------------------------------------------------------------
 
@@ -774,7 +823,13 @@ class _Listener:
                 logger.debug("Foxglove: parameter set not applied in time: %r", err)
         return self.front._parameters([name for name, _ in changes])
 
-    # called with the SDK's parameter lock held (module doc): they do nothing
+    # called with the SDK's parameter or connection-graph lock held (module doc): they do nothing
+    def on_connection_graph_subscribe(self) -> None:
+        return None
+
+    def on_connection_graph_unsubscribe(self) -> None:
+        return None
+
     def on_parameters_subscribe(self, param_names: list[str]) -> None:
         return None
 

@@ -41,6 +41,7 @@ async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
         "reset": True,
         "params": True,
         "rosbridge": ws_url(app),
+        "graph": True,
     }
     got = await _foxglove(f"ws://127.0.0.1:{app.foxglove.port}", args)
     assert {"clientPublish", "services", "parameters", "parametersSubscribe"} <= set(
@@ -61,7 +62,12 @@ async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
     assert got["paramFromRosbridge"] == 0.45
     assert got["clientServiceSum"] == 42  # a service a rosbridge client provides, over CDR
     assert app.world.params.robot.max_linear_velocity == 0.45
-    assert "connectionGraph" not in got["capabilities"]  # the SDK's deadlock (module doc)
+    assert got["graph"] == {
+        "odomPublishers": ["/virtual_robot"],
+        "odomSubscribers": ["/foxglove_bridge"],  # this client, through the marker
+        "cmdVelPublishers": ["/foxglove_bridge"],
+        "resetProviders": ["/virtual_robot"],
+    }
     # the old name, which @foxglove/ws-protocol and older Lichtblick ask for, is refused by the
     # SDK's handshake (simbridge serves foxglove.sdk.v1 only: no protocol code of its own)
     old = [Subprotocol("foxglove.websocket.v1")]

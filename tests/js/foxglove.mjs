@@ -12,6 +12,7 @@
 //   params       true: read, set and subscribe robot.max_linear_velocity
 //   reset        true: call /reset
 //   time         true: wait for the server's time messages (use_sim_time)
+//   graph        true: subscribe to the connection graph (after driving: this client publishes)
 //   flood        N: advertise N client channels more (the server refuses past its budget)
 // stdout: one line, {"ok":true,"result":{...}} or {"ok":false,"error":"..."} (as run.mjs).
 
@@ -92,6 +93,14 @@ client.on('message', ({ subscriptionId, data }) => {
 client.on('parameterValues', (ev) => paramValues.push(ev));
 client.on('serviceCallResponse', (r) => responses.set(r.callId, { response: r }));
 client.on('serviceCallFailure', (f) => responses.set(f.callId, { failure: f.message }));
+const graph = { published: new Map(), subscribed: new Map(), services: new Map() };
+client.on('connectionGraphUpdate', (u) => {
+  for (const t of u.publishedTopics) graph.published.set(t.name, t.publisherIds);
+  for (const t of u.subscribedTopics) graph.subscribed.set(t.name, t.subscriberIds);
+  for (const sv of u.advertisedServices) graph.services.set(sv.name, sv.providerIds);
+  for (const n of u.removedTopics) { graph.published.delete(n); graph.subscribed.delete(n); }
+  for (const n of u.removedServices) graph.services.delete(n);
+});
 
 const subs = new Map(); // subscription id -> topic
 function subscribe(topic) {
@@ -197,6 +206,16 @@ async function main() {
       result.clientServiceSum = Number(reader.readMessage(new Uint8Array(answer.data.buffer, answer.data.byteOffset, answer.data.byteLength)).sum);
       ros.close();
     }
+  }
+  if (args.graph) {
+    client.subscribeConnectionGraph();
+    await until('the connection graph', () => graph.published.get(`${ns}/cmd_vel`) && graph.services.has('/reset'));
+    result.graph = {
+      odomPublishers: graph.published.get(`${ns}/odom`),
+      odomSubscribers: graph.subscribed.get(`${ns}/odom`),
+      cmdVelPublishers: graph.published.get(`${ns}/cmd_vel`),
+      resetProviders: graph.services.get('/reset'),
+    };
   }
   if (args.time) {
     await until('server time', () => times.length >= 2);
