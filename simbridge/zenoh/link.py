@@ -819,20 +819,27 @@ class ZenohLink:
                 names.add(entity.name)
         if (names or nodes or actions) and self.session is not None:
             # what only the tokens changed is done here: the tick's comparison of the graph
-            # with Zenoh (its change counters) is not started by it, unless a local
-            # subscriber or client waited for one of these topics
-            quiet = self._signature() == self._generation
+            # with Zenoh (its change counters) is not started by it, unless it may change
+            # what is declared outward: a client subscribed to one of these topics (its
+            # subscription's token follows the topic), or an action came or went
+            quiet = self._signature() == self._generation and not actions
+            clients = self._clients_on(names)
             if actions:
                 self.actions.import_remote(self._allowed_action_parts())
-            waited = self._import_names(names, nodes)
+            self._import_names(names, nodes)
             self._update_subscribers(names)
-            if quiet and not waited:
+            if quiet and not (clients or self._clients_on(names)):
                 self._generation = self._signature()
         with self._inbox_lock:
             again = bool(tokens) and self._loop is not None
             self._tokens_rung = again
         if again:
             self._loop.call_soon(self._drain_tokens)  # type: ignore[union-attr]
+
+    def _clients_on(self, names: Iterable[str]) -> bool:
+        """Whether a rosbridge client subscribes to one of these topics."""
+        table = self.graph.topics.topics
+        return any((t := table.get(n)) is not None and t.subscriptions for n in names)
 
     def _token_changed(self, token: str, alive: bool) -> Entity | None:
         """Record a remote token that appeared or went; return its entity if that changed."""
@@ -933,23 +940,17 @@ class ZenohLink:
         names = {*self._by_name, *self._imported_pubs, *self._markers, *self._providers}
         self._import_names(names, {*self._remote_node_tokens, *self._remote_nodes})
 
-    def _import_names(self, names: Iterable[str], nodes: Iterable[str]) -> bool:
-        """Bring the graph in line with the tokens of these topic and service names and nodes.
-
-        Returns whether a topic it brought in has a subscriber here (a client waiting for it):
-        then what is declared outward may change too.
-        """
+    def _import_names(self, names: Iterable[str], nodes: Iterable[str]) -> None:
+        """Bring the graph in line with the tokens of these topic and service names and nodes."""
         for node in nodes:
             self._import_node(node)
-        waited = False
         for name in names:
             entities = self._by_name.get(name, {}).values()
             self._import_subscriptions(name, entities)
-            waited |= self._import_publishers(name, entities)
+            self._import_publishers(name, entities)
             self._import_service(name, entities)
-        return waited
 
-    def _import_publishers(self, name: str, entities: Iterable[Entity]) -> bool:
+    def _import_publishers(self, name: str, entities: Iterable[Entity]) -> None:
         registry = self.graph.registry
         topics = self.graph.topics
         pubs: dict[RemoteNode, tuple[str, bool]] = {}
@@ -963,7 +964,6 @@ class ZenohLink:
         for owner in [o for o in imported if o not in pubs]:
             del imported[owner]
             topics.unadvertise(name, owner, None)
-        waited = False
         for node, (type_name, latched) in pubs.items():
             if node in imported:
                 continue
@@ -984,17 +984,15 @@ class ZenohLink:
                 )
                 continue
             try:
-                topic = topics.advertise(name, type_name, node, latch=latched)
+                topics.advertise(name, type_name, node, latch=latched)
             except SimbridgeError as err:
                 self._log(f"clash {name}", f"Zenoh: {name} from {node} not bridged: {err}")
                 self.stats["name_clashes"] += 1
                 continue
             imported = self._imported_pubs.setdefault(name, imported)
             imported[node] = type_name
-            waited |= bool(topic.subscriptions)
         if not imported:
             self._imported_pubs.pop(name, None)
-        return waited
 
     def _import_service(self, name: str, entities: Iterable[Entity]) -> None:
         registry = self.graph.registry
