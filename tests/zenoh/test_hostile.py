@@ -12,8 +12,12 @@ import asyncio
 import contextlib
 import itertools
 import json
+import os
+import struct
+import sys
 import time
 from collections.abc import AsyncIterator, Awaitable, Callable
+from pathlib import Path
 from typing import Any
 
 import pytest
@@ -22,9 +26,11 @@ from websockets.exceptions import ConnectionClosed
 
 from simbridge.config import ServerSettings
 from simbridge.runner import App
+from simbridge.zenoh.config import ZenohOptions
+from simbridge.zenoh.names import Entity
 from simbridge.zenoh.typehash import TypeHasher
 from tests.helpers import ROOT, TIMEOUT_FACTOR, send_json, wait_for, ws_url
-from tests.zenoh.conftest import Router, eventually, zenoh_options
+from tests.zenoh.conftest import Router, eventually, free_port, zenoh_options
 
 
 pytestmark = pytest.mark.e2e
@@ -296,3 +302,135 @@ async def test_a_token_flood_is_capped_and_comes_and_goes_without_stalling_the_l
             lambda: not any(n.startswith("/flood_") for n in app.graph.topics.topics), timeout=10
         )
         assert not link._by_name.keys() & set(flood)
+
+
+ACL_EXAMPLE = ROOT / "config" / "zenoh_router_acl.example.json5"
+
+
+def _twist_cdr(x: float) -> bytes:
+    """geometry_msgs/msg/Twist as CDR (little endian), written by hand."""
+    return b"\x00\x01\x00\x00" + struct.pack("<6d", x, 0.0, 0.0, 0.0, 0.0, 0.0)
+
+
+def _client_config(endpoint: str, user: str, password: str) -> Any:
+    import zenoh
+
+    config = zenoh.Config()
+    for key, value in {
+        "mode": "client",
+        "connect/endpoints": [endpoint],
+        "scouting/multicast/enabled": False,
+        "transport/auth/usrpwd/user": user,
+        "transport/auth/usrpwd/password": password,
+    }.items():
+        config.insert_json5(key, json.dumps(value))
+    return config
+
+
+async def test_the_routers_acl_gives_each_students_ros2_node_its_own_robot(
+    tmp_path: Path,
+) -> None:
+    """config/zenoh_router_acl.example.json5 on a real router, simbridge --ros2-role robots."""
+    import zenoh
+
+    users = tmp_path / "users.txt"
+    users.write_text("router:router-pw\nsimbridge:server-pw\nalice:alice-pw\nbob:bob-pw\n")
+    port = free_port()
+    endpoint = f"tcp/127.0.0.1:{port}"
+    env = {
+        **os.environ,
+        "ZENOH_ROUTER_CONFIG_URI": str(ACL_EXAMPLE),
+        "ZENOH_CONFIG_OVERRIDE": (
+            f'transport/auth/usrpwd/dictionary_file="{users}";'
+            'transport/auth/usrpwd/password="router-pw"'
+        ),
+    }
+    proc = await asyncio.create_subprocess_exec(
+        sys.executable, "-m", "simbridge", "zenohd", "--listen", endpoint,
+        cwd=ROOT, env=env, stdout=asyncio.subprocess.PIPE, stderr=asyncio.subprocess.DEVNULL,
+    )  # fmt: skip
+    alice = None
+    try:
+        assert proc.stdout is not None
+        line = await asyncio.wait_for(proc.stdout.readline(), 20 * TIMEOUT_FACTOR)
+        assert b"listening on" in line, line
+        server = ZenohOptions(
+            connect=(endpoint,),
+            override=(
+                'mode="client";transport/auth/usrpwd/user="simbridge";'
+                'transport/auth/usrpwd/password="server-pw"'
+            ),
+        )
+        settings = ServerSettings(
+            host="127.0.0.1",
+            port=0,
+            http_port=0,
+            client_tokens=TOKENS,
+            admin_token=ADMIN,
+            ros2_role="robots",
+        )
+        app = App(settings, world=CLASSROOM, zenoh=server)
+        await app.start()
+        try:
+            link = app.zenoh
+            assert link is not None
+            await wait_for(lambda: link.state == "connected", timeout=10)
+            with pytest.raises(zenoh.ZError):  # a wrong password gets no session
+                await asyncio.to_thread(
+                    zenoh.open, _client_config(endpoint, "alice", "not-her-password")
+                )
+            alice = await asyncio.to_thread(
+                zenoh.open, _client_config(endpoint, "alice", "alice-pw")
+            )
+
+            def cmd_vel_keys() -> dict[str, str]:
+                keys = {}
+                for reply in alice.liveliness().get("@ros2_lv/0/**", timeout=2):
+                    if reply.ok is None:
+                        continue
+                    with contextlib.suppress(ValueError):
+                        entity = Entity.parse(str(reply.ok.key_expr))
+                        if entity.kind == "MS" and entity.name.endswith("/cmd_vel"):
+                            keys[entity.name] = entity.keyexpr()
+                return keys if {"/r1/cmd_vel", "/r2/cmd_vel"} <= keys.keys() else {}
+
+            keys = await eventually(cmd_vel_keys)
+            # she reads every robot's topics: an rmw_zenoh subscription (its token) of /r2/odom
+            hasher = TypeHasher(app.graph.registry, "jazzy")
+            subscription = Entity(
+                0, str(alice.info.zid()), "1", "2", "MS", "/", "alice_node",
+                name="/r2/odom", type="nav_msgs/msg/Odometry",
+                type_hash=hasher.message("nav_msgs/msg/Odometry"),
+            )  # fmt: skip
+            heard: list[str] = []
+            odom = alice.declare_subscriber(
+                subscription.keyexpr(), lambda s: heard.append(str(s.key_expr))
+            )
+            token = alice.liveliness().declare_token(subscription.token())
+            gid = bytes(range(16))
+
+            def drive(name: str, robot: str, seconds: float) -> bool:
+                r = app.world.robots[robot]
+                x0 = r.state.x
+                deadline = time.monotonic() + seconds * TIMEOUT_FACTOR
+                for sequence in itertools.count(1):
+                    if abs(r.state.x - x0) > 0.05 or time.monotonic() > deadline:
+                        break
+                    attachment = struct.pack("<qqB", sequence, time.time_ns(), 16) + gid
+                    alice.put(keys[name], _twist_cdr(0.3), attachment=attachment)
+                    time.sleep(0.1)
+                return abs(r.state.x - x0) > 0.05
+
+            # simbridge lets ROS 2 drive every robot; the router lets alice reach r1's only
+            assert await asyncio.to_thread(drive, "/r1/cmd_vel", "r1", 8.0)
+            assert not await asyncio.to_thread(drive, "/r2/cmd_vel", "r2", 1.0)
+            await wait_for(lambda: bool(heard), timeout=5)
+            token.undeclare()
+            odom.undeclare()
+        finally:
+            if alice is not None:
+                await asyncio.to_thread(alice.close)
+            await app.stop()
+    finally:
+        proc.terminate()
+        await proc.communicate()
