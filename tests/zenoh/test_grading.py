@@ -28,12 +28,13 @@ pytestmark = pytest.mark.e2e
 CLASSROOM = ROOT / "config" / "worlds" / "classroom.yaml"
 ADMIN = "instructor-token-zz"
 TOKENS = {"student-token-r1": "r1"}
-#: A heading step of 1 rad from the start pose, scored over 2.5 s.
+#: A heading step of 1 rad from the start pose, scored over 2.5 s, on a slower-turning robot.
 TASK = """
 name: heading step by a ROS 2 node
 frame: start
 goal: {heading: 1.0, tolerance: 0.05}
 time_limit: 2.5
+robot_params: {robot.max_angular_velocity: 2.0}
 rubric:
   overshoot_pct: {max: 10}
   settling_time_s: {max: 2.0}
@@ -106,7 +107,7 @@ def heading_node(router: Router, robot: str, goal: float) -> Iterator[list[float
 async def test_a_ros2_node_given_the_robot_is_graded_and_one_without_it_cannot_drive_the_run(
     router: Router, ros2: Any
 ) -> None:
-    # the class default: ROS 2 peers have no robot; the student's node cannot start the run
+    # the class default: ROS 2 peers have no robot; the node's /cmd_vel never reaches the run
     async with class_server(router) as app:
         link = app.zenoh
         assert link is not None
@@ -118,12 +119,18 @@ async def test_a_ros2_node_given_the_robot_is_graded_and_one_without_it_cannot_d
         assert "/r1/cmd_vel" not in link._subscribers  # refused: never subscribed
         assert app.grader.runs["r1"].phase == "waiting"
         assert (r1.state.x, r1.state.y, r1.state.theta) == pose
+        assert app.world.robot_params("r1").max_angular_velocity == 2.0
+    # the server stopped mid-run: the attempt is interrupted, the robot's parameters are back
+    assert app.grader.results.attempts[state["attempt"]]["status"] == "interrupted"
+    assert r1.overrides == {}
     # the instructor gives ROS 2 peers robot r1 (a trusted network): the node is graded
     async with class_server(router, ros2_role="robot:r1") as app:
         state = await start_run(app)
         attempt = state["attempt"]
         with heading_node(router, "r1", state["goal"]["heading"]):
             await wait_for(lambda: "r1" not in app.grader.runs, timeout=10)
+            # the time limit ended while the node still sends: its own parameters are back
+            assert app.world.robots["r1"].overrides == {}
         record = app.grader.results.attempts[attempt]
         assert record["status"] == "passed", record["rubric"]
         assert record["duration_s"] == pytest.approx(2.5)
