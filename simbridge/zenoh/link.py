@@ -1547,8 +1547,10 @@ class ZenohLink:
             return self._refusals[name]
         except KeyError:
             pass
-        if len(self._refusals) >= 10_000:
-            self._refusals.clear()  # names come from the graph and the tokens: bounded anyway
+        if len(self._refusals) >= 100_000:
+            # names come from the graph's topics and the remote tokens (at most
+            # zenoh_max_remote_tokens): a clear is rare, and the cache then fills again
+            self._refusals.clear()
         text = self.graph.admission.publish_refusal(self._caller.session, name)
         self._refusals[name] = text
         return text
