@@ -20,7 +20,7 @@ from playwright.async_api import Browser, Page
 from simbridge.runner import App
 from tests.browser.conftest import OpenPage, Watcher, screenshot
 from tests.conftest import AppFactory
-from tests.helpers import http_url, wait_for, ws_url
+from tests.helpers import ROOT, http_url, wait_for, ws_url
 
 
 pytestmark = pytest.mark.e2e
@@ -591,3 +591,25 @@ async def test_no_plot_legend_or_control_is_under_stop_and_plots_read_clearly(
     assert len(set(labels)) == len(labels) and len(labels) <= 5, labels
     assert found["ticks"] == ["-0.0002", "-0.0001", "0.0000", "0.0001", "0.0002"]
     assert log.errors == []
+
+
+async def test_the_readmes_page_works_saved_to_disk(
+    app: App, browser: Browser, watcher: Watcher, tmp_path: Any
+) -> None:
+    """The README's roslibjs page, opened from a file as a student would: the robot drives."""
+    readme = (ROOT / "README.md").read_text()
+    html = readme.split("```html\n", 1)[1].split("```", 1)[0]
+    assert "127.0.0.1:8080" in html and "127.0.0.1:9090" in html
+    html = html.replace("127.0.0.1:8080", f"127.0.0.1:{app.http_port}")
+    html = html.replace("127.0.0.1:9090", f"127.0.0.1:{app.ws_port}")
+    (tmp_path / "my_page.html").write_text(html)
+    ctx = await browser.new_context()
+    page = await ctx.new_page()
+    logged: list[str] = []
+    page.on("console", lambda msg: logged.append(msg.text))
+    await page.goto(f"file://{tmp_path}/my_page.html")
+    await watcher.wait(lambda: watcher.odom()["w"] == pytest.approx(0.5))  # type: ignore[index]
+    await wait_for(lambda: bool(logged), timeout=5)
+    assert all(len(line.split()) == 2 for line in logged), logged  # "x y"
+    await ctx.close()  # the page goes: its link is lost, the robot stops
+    await watcher.wait(lambda: watcher.odom()["w"] == 0.0)  # type: ignore[index]
