@@ -390,12 +390,15 @@ class Graph:
         """Log a notable event to ``/rosout`` (rcl_interfaces/Log) and to the Python log.
 
         ``echo=False`` logs it at debug level in Python (a per-message log such as the tutorial
-        listener's must not flood the server log).
+        listener's must not flood the server log). The message is an ordinary delivery of the
+        topic: rosbridge clients, in-process subscribers and what stands for the other front
+        ends' subscribers (a Foxglove channel's, a ROS 2 node's over Zenoh) all receive it, and
+        the delivery taps see it. It is built only while one of them listens.
         """
         number = _LOG_LEVELS.get(level, 20)
         logger.log(number if echo else logging.DEBUG, "%s", text)
         topic = self.topics.topics.get(ROSOUT)
-        if topic is None or not topic.subscriptions:
+        if topic is None or not (topic.subscriptions or topic.internal):
             return
         sec, nanosec = self.stamp()
         msg = {
@@ -407,7 +410,10 @@ class Graph:
             "function": "",
             "line": 0,
         }
-        self.topics.deliver(topic, self.topics.outgoing(topic, msg, (sec, nanosec)), 0.0, None)
+        # the time of the delivery under way, if any (a log from inside a callback): the
+        # in-process subscribers that time commands read it
+        now = self.topics.now
+        self.topics.deliver(topic, self.topics.outgoing(topic, msg, (sec, nanosec)), now, None)
 
     # -- op handlers ------------------------------------------------------------------------
 

@@ -57,6 +57,8 @@ async def test_foxglove_client_reads_channels_drives_calls_and_sets_parameters(
     # the type conflict is refused by the admission, as for a rosbridge client
     assert any("already established with type nav_msgs/msg/Odometry" in s for s in got["refusal"])
     assert got["reset"] is True
+    # /rosout is an ordinary delivery: the reset's line reaches the Foxglove channel
+    assert got["rosout"]["msg"].startswith("world reset") and got["rosout"]["level"] == 20
     assert {"/reset", "/spawn", "/kill", "/estop", "/estop/reset"} <= set(got["services"])
     assert got["paramRead"] == 0.5
     assert got["paramFromRosbridge"] == 0.45

@@ -41,3 +41,22 @@ def test_rosout_carries_notable_events(graph: Graph) -> None:
     assert msg["msg"]["msg"] == "something happened"
     assert msg["msg"]["level"] == 30
     assert msg["msg"]["stamp"] == {"sec": 1_700_000_000, "nanosec": 500_000_000}
+
+
+def test_rosout_reaches_in_process_subscribers_and_the_taps_without_a_rosbridge_client(
+    graph: Graph,
+) -> None:
+    """Front ends' subscribers (Foxglove channels, ROS 2 nodes) receive /rosout too.
+
+    Each stands in the graph as an in-process subscriber; its front end sends what the delivery
+    tap sees.
+    """
+    got: list[object] = []
+    tapped: list[str] = []
+    graph.subscribe(
+        "/rosout", "rcl_interfaces/msg/Log", "/foxglove_bridge", lambda m, s: got.append(m)
+    )
+    graph.topics.taps.append(lambda topic, out, source: tapped.append(topic.name))
+    graph.log("info", "world reset")
+    assert [m["msg"] for m in got] == ["world reset"]  # type: ignore[index]
+    assert tapped == ["/rosout"]

@@ -10,7 +10,7 @@
 //   refuse       {topic, type}: a client channel the server must refuse (a status comes back)
 //   rosbridge    a rosbridge URL: roslib 2.1.0 sets a parameter there, seen here as an update
 //   params       true: read, set and subscribe robot.max_linear_velocity
-//   reset        true: call /reset
+//   reset        true: call /reset (and read its line on /rosout, subscribed from the start)
 //   time         true: wait for the server's time messages (use_sim_time)
 //   graph        true: subscribe to the connection graph (after driving: this client publishes)
 //   flood        N: advertise N client channels more (the server refuses past its budget)
@@ -129,7 +129,7 @@ function paramValue(name, value) {
 async function main() {
   await until('serverInfo', () => serverInfo);
   const ns = args.robot ? `/${args.robot}` : '';
-  await until('the channels', () => channels.has(`${ns}/odom`) && channels.has(`${ns}/scan`) && channels.has('/tf_static'));
+  await until('the channels', () => channels.has(`${ns}/odom`) && channels.has(`${ns}/scan`) && channels.has('/tf_static') && channels.has('/rosout'));
   const result = {
     capabilities: serverInfo.capabilities,
     encodings: serverInfo.supportedEncodings ?? [],
@@ -138,7 +138,7 @@ async function main() {
     channelCount: channels.size,
   };
   // /tf_static was published at start: it reaches this late subscriber all the same
-  for (const t of [`${ns}/odom`, `${ns}/scan`, '/tf_static']) subscribe(t);
+  for (const t of [`${ns}/odom`, `${ns}/scan`, '/tf_static', '/rosout']) subscribe(t);
   await until('/tf_static', () => messages.get('/tf_static')?.length);
   result.tfStatic = messages.get('/tf_static')[0].msg.transforms.map((t) => `${t.header.frame_id}->${t.child_frame_id}`);
   await until('1 s of /odom', () => {
@@ -177,6 +177,8 @@ async function main() {
   if (args.reset) {
     await call('/reset');
     result.reset = true;
+    const line = await until('the reset on /rosout', () => (messages.get('/rosout') ?? []).find((m) => m.msg.msg.startsWith('world reset')));
+    result.rosout = { msg: line.msg.msg, level: line.msg.level, name: line.msg.name };
   }
   result.services = [...services.keys()].filter((n) => ['/reset', '/spawn', '/kill', '/estop', '/estop/reset'].includes(n));
   if (args.params) {
