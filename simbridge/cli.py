@@ -226,7 +226,7 @@ def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> Non
 
 def _add_foxglove_options(parser: argparse.ArgumentParser, env: Environment) -> None:
     """Options of the Foxglove WebSocket protocol (the ``[foxglove]`` extra; see the README)."""
-    from simbridge.config import Port
+    from simbridge.config import Count, Port
 
     group = parser.add_argument_group(
         'Foxglove, Lichtblick and PlotJuggler natively (needs: pip install "simbridge[foxglove]")'
@@ -246,6 +246,14 @@ def _add_foxglove_options(parser: argparse.ArgumentParser, env: Environment) -> 
         "carries no token, so with --client-tokens the port opens only with this "
         "[SIMBRIDGE_FOXGLOVE_SCOPE]",
     )
+    group.add_argument(
+        "--foxglove-max-clients",
+        type=_typed(Count),
+        metavar="N",
+        default=env.foxglove_max_clients,
+        help="connections of the Foxglove port at most (default 200); one past it is closed "
+        "naming this [SIMBRIDGE_FOXGLOVE_MAX_CLIENTS]",
+    )
 
 
 def _foxglove_settings(args: argparse.Namespace) -> dict[str, Any]:
@@ -259,7 +267,10 @@ def _foxglove_settings(args: argparse.Namespace) -> dict[str, Any]:
     from simbridge.foxglove.front import import_foxglove
 
     import_foxglove()  # exits at once, with the install command, when the extra is missing
-    return {"foxglove_port": args.foxglove_port, "foxglove_scope": args.foxglove_scope}
+    values = {"foxglove_port": args.foxglove_port, "foxglove_scope": args.foxglove_scope}
+    if args.foxglove_max_clients is not None:
+        values["foxglove_max_clients"] = args.foxglove_max_clients
+    return values
 
 
 def _zenoh_options(args: argparse.Namespace) -> Any:

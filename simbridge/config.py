@@ -795,6 +795,9 @@ class ServerSettings(Record, frozen=True):
     #: stays closed unless this opens it; without them, None gives what a rosbridge client
     #: without a token gets.
     foxglove_scope: str | None = setting(default=None, before=_foxglove_scope)
+    #: Connections of the Foxglove port at most (the SDK has no cap of its own: simbridge closes
+    #: each one past it, the newest first, within a tick of seeing it; see docs/security.md).
+    foxglove_max_clients: Count = 200
     # -- grading (simbridge.grading): tasks, and the journal of the class's attempts --
     #: The results journal (JSON lines, appended, read back at start); None: results are
     #: kept in memory only. The runs' bags go beside it, in ``<name>-bags/``.
@@ -878,6 +881,7 @@ class Environment(Record, frozen=True):
     log_level: LogLevel | None = None
     foxglove_port: Port | None = None
     foxglove_scope: str | None = None
+    foxglove_max_clients: Count | None = None
     results: str | None = None
     tasks: str | None = None
 

@@ -94,7 +94,7 @@ from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session, ops as o
 
 
-__all__ = ["FOXGLOVE_NODE", "FoxgloveFront", "import_foxglove"]
+__all__ = ["FOXGLOVE_NODE", "ConnectionWatch", "FoxgloveFront", "import_foxglove"]
 
 logger = logging.getLogger(__name__)
 
@@ -110,6 +110,10 @@ SET_TIMEOUT = 2.0
 CLOCK_TOPIC, CLOCK_TYPE = "/clock", "rosgraph_msgs/msg/Clock"
 #: Seconds a service call's SDK thread waits for the graph beyond the call's own timeout.
 CALL_MARGIN = 2.0
+#: Seconds between two scans of the port's connections at most (sooner when descriptors change).
+SCAN_PERIOD = 2.0
+#: Seconds a connection past ``foxglove_max_clients`` is left to finish its handshake.
+HANDSHAKE_GRACE = 0.1
 
 
 def set_nodelay(port: int, done: set[tuple[int, int]]) -> int:
@@ -150,6 +154,106 @@ def set_nodelay(port: int, done: set[tuple[int, int]]) -> int:
     done.clear()
     done.update(seen)
     return count
+
+
+class ConnectionWatch:
+    """The connections of a port that this process accepted, found in ``/proc/self/fd``.
+
+    The SDK's server (0.30.3) has no client cap and tells its Python listener of no connection
+    (the Rust listener's ``on_client_connect`` takes no client and cannot refuse; the Python
+    binding does not forward it), nor can it close one client. The sockets are this process's
+    own, though: :meth:`scan` lists them (each a connection, from its TCP accept on, handshake
+    or not) and :meth:`close` shuts one down, after which the SDK reads the end of the stream
+    and forgets the client. A scan costs a ``listdir`` and an ``fstat`` per descriptor; a
+    socket is identified once (by its inode) through a duplicate of its descriptor.
+    :meth:`changed` (one ``stat``: the number of descriptors, Linux 6.2 on) says when to scan.
+    """
+
+    def __init__(self, port: int) -> None:
+        self.port = port
+        #: descriptor -> (inode, peer (host, port) or None: not one of the port's connections)
+        self._known: dict[int, tuple[int, tuple[str, int] | None]] = {}
+        #: The order connections were first seen in: (descriptor, inode) -> peer.
+        self.order: dict[tuple[int, int], tuple[str, int]] = {}
+        self._count = -1
+
+    def changed(self) -> bool:
+        """Return whether the number of this process's descriptors changed since the last call."""
+        try:
+            count = os.stat("/proc/self/fd").st_size
+        except OSError:
+            return False
+        changed, self._count = count != self._count, count
+        return changed or count == 0  # 0: a kernel that does not count (scan on the period)
+
+    def scan(self) -> list[tuple[tuple[int, int], tuple[str, int]]]:
+        """Return the port's connections, oldest first: ((descriptor, inode), peer)."""
+        try:
+            names = os.listdir("/proc/self/fd")
+        except OSError:
+            return []
+        known: dict[int, tuple[int, tuple[str, int] | None]] = {}
+        for name in names:
+            fd = int(name)
+            try:
+                inode = os.fstat(fd).st_ino
+            except OSError:
+                continue
+            entry = self._known.get(fd)
+            if entry is None or entry[0] != inode:
+                entry = (inode, self._peer(fd))
+            known[fd] = entry
+        self._known = known
+        current = {(fd, inode): peer for fd, (inode, peer) in known.items() if peer is not None}
+        order = {key: peer for key, peer in self.order.items() if key in current}
+        order.update(current)  # the new ones after those seen before
+        self.order = order
+        return list(order.items())
+
+    def _peer(self, fd: int) -> tuple[str, int] | None:
+        try:
+            if not stat.S_ISSOCK(os.fstat(fd).st_mode):
+                return None
+            sock = socket.socket(fileno=os.dup(fd))  # closing the duplicate leaves the SDK's
+        except OSError:
+            return None
+        with sock:
+            try:
+                if sock.type != socket.SOCK_STREAM or sock.getsockname()[1] != self.port:
+                    return None
+                peer = sock.getpeername()
+                return str(peer[0]), int(peer[1])
+            except (OSError, IndexError, TypeError):
+                return None  # the listening socket has no peer; a socket closed meanwhile
+
+    def close(self, key: tuple[int, int], reason: str) -> bool:
+        """Close connection ``key`` (from :meth:`scan`), with a WebSocket close frame.
+
+        Only if it is still that socket (the same inode: a descriptor the SDK closed and the
+        process reused meanwhile is left alone). Returns whether it was closed. The close frame
+        (1008, ``reason``) is written beside the SDK's own writes: a client
+        past its handshake reads it unless the SDK was in the middle of a frame; one still in
+        its handshake sees the connection end.
+        """
+        from websockets.frames import Close, CloseCode, Frame, Opcode
+
+        fd, inode = key
+        try:
+            sock = socket.socket(fileno=os.dup(fd))
+        except OSError:
+            return False
+        with sock:
+            try:
+                if os.fstat(sock.fileno()).st_ino != inode:
+                    return False
+                frame = Frame(Opcode.CLOSE, Close(CloseCode.POLICY_VIOLATION, reason).serialize())
+                with contextlib.suppress(OSError):
+                    sock.send(frame.serialize(mask=False), socket.MSG_DONTWAIT)
+                sock.shutdown(socket.SHUT_RDWR)
+            except OSError:
+                return False
+        self.order.pop(key, None)
+        return True
 
 
 def import_foxglove() -> Any:
@@ -231,6 +335,7 @@ class FoxgloveFront:
         #: simbridge's own connection subscribed to every parameter (see _hold_parameters).
         self._holder: asyncio.Task[None] | None = None
         self._holder_ws: Any = None
+        self._own_peer = ("", 0)
         self._holding: set[str] = set()
         #: That connection got the connection graph (it is subscribed): it may be published.
         self._graph_held = False
@@ -239,6 +344,11 @@ class FoxgloveFront:
         #: Clients subscribed to a channel, and the sockets already set to TCP_NODELAY.
         self._receiving: set[int] = set()
         self._nodelay: set[tuple[int, int]] = set()
+        #: The port's connections (``foxglove_max_clients``), scanned when the descriptors change.
+        self.watch: ConnectionWatch | None = None
+        self._scan_next = 0.0
+        self._first_seen: dict[tuple[int, int], float] = {}
+        self.connections = 0
         #: Parameter values by Foxglove name, replaced whole by the loop (read by SDK threads).
         self._params: dict[str, Any] = {}
         self._time = graph.settings.use_sim_time
@@ -249,6 +359,7 @@ class FoxgloveFront:
             "refused": 0,
             "calls": 0,
             "parameter_sets": 0,
+            "clients_refused": 0,
         }
         graph.topics.taps.append(self._on_deliver)
         for node in graph.params.nodes.values():
@@ -290,6 +401,7 @@ class FoxgloveFront:
         )
         if self._time:
             self.graph.subscribe(CLOCK_TOPIC, CLOCK_TYPE, FOXGLOVE_NODE, self._on_clock)
+        self.watch = ConnectionWatch(self.port)
         self.reconcile()
         self._holder = asyncio.create_task(self._hold_parameters(), name="foxglove parameters")
         logger.info("Foxglove WebSocket protocol on port %d (foxglove.sdk.v1)", self.port)
@@ -309,6 +421,8 @@ class FoxgloveFront:
         protocols = [Subprotocol("foxglove.sdk.v1")]
         try:
             async with connect(f"ws://{host}:{self.port}", subprotocols=protocols) as ws:
+                # not counted in foxglove_max_clients
+                self._own_peer = (str(ws.local_address[0]), int(ws.local_address[1]))
                 self._holding = set(self._params)
                 subscribe = {
                     "op": "subscribeParameterUpdates",
@@ -328,6 +442,7 @@ class FoxgloveFront:
             logger.debug("Foxglove: the parameter holder closed: %r", err)
         finally:
             self._holder_ws = None
+            self._own_peer = ("", 0)
             self._holding = set()
             self._graph_held = False
 
@@ -356,7 +471,10 @@ class FoxgloveFront:
             "channels": len(self._channels),
             "subscribed_channels": sum(1 for c in self._channels.values() if c.subscribers),
             "services": len(self._services),
-            # the SDK tells no connect or disconnect: clients are counted by what they do
+            # the SDK tells no connect or disconnect: clients are the port's sockets (at the last
+            # scan) and what they do
+            "clients": self.connections,
+            "max_clients": self.graph.settings.foxglove_max_clients,
             "clients_subscribed": len(self._receiving),
             "clients_publishing_or_calling": len(self._clients),
             "parameter_updates": self._holder_ws is not None,
@@ -372,6 +490,35 @@ class FoxgloveFront:
             self.reconcile()
         if self._graph_held and signature != self._graph_sent and now >= self._graph_next:
             self.publish_graph(now)
+        watch = self.watch
+        if watch is not None and (watch.changed() or now >= self._scan_next):
+            self._scan_next = now + SCAN_PERIOD
+            self.cap_connections(watch, now)
+
+    def cap_connections(self, watch: ConnectionWatch, now: float) -> None:
+        """Close the newest connections past ``foxglove_max_clients`` (simbridge's own excepted).
+
+        Counted from the TCP accept on, in what each costs the process (a descriptor, the SDK's
+        queues); one past the budget is closed :data:`HANDSHAKE_GRACE` after it was first seen
+        (its handshake is over by then, so it reads the close frame, which names the refusal, as
+        the server log does).
+        """
+        limit = self.graph.settings.foxglove_max_clients
+        clients = [(key, peer) for key, peer in watch.scan() if peer != self._own_peer]
+        self.connections = len(clients)
+        seen = self._first_seen
+        self._first_seen = {key: seen.get(key, now) for key, _ in clients}
+        if len(clients) <= limit:
+            return
+        reason = f"too many Foxglove clients (at most {limit}: foxglove_max_clients)"
+        for key, peer in clients[limit:]:
+            if now < self._first_seen[key] + HANDSHAKE_GRACE:
+                self._scan_next = min(self._scan_next, self._first_seen[key] + HANDSHAKE_GRACE)
+                continue
+            if watch.close(key, reason):
+                self.connections -= 1
+                self.stats["clients_refused"] += 1
+                logger.warning("Foxglove client %s:%d closed: %s", peer[0], peer[1], reason)
 
     # -- connection graph ---------------------------------------------------------------------
 

@@ -6,6 +6,7 @@
 
 from __future__ import annotations
 
+import asyncio
 import json
 import subprocess
 import sys
@@ -113,6 +114,36 @@ async def test_in_a_class_the_foxglove_port_drives_only_the_robot_it_was_opened_
     assert any("at most 4: max_advertisements" in s for s in got["flood"])  # its budget
     assert "time" in got["capabilities"] and got["times"] >= 2  # the sim clock, from /clock
     assert app.world.robots["r2"].state.x == pytest.approx(1.0, abs=1e-6)  # r2 never moved
+
+
+async def test_a_connection_past_foxglove_max_clients_is_closed_by_name_and_its_slot_freed(
+    make_app: AppFactory, node_ready: None
+) -> None:
+    app = await make_app(foxglove_port=0, foxglove_max_clients=2)
+    assert app.foxglove is not None
+    url = f"ws://127.0.0.1:{app.foxglove.port}"
+    protocols = [Subprotocol("foxglove.sdk.v1")]
+    async with connect(url, subprotocols=protocols) as first:
+        async with connect(url, subprotocols=protocols) as second:
+            await second.recv()  # serverInfo: both are clients of the SDK
+            got = await _foxglove(url, {"closed": True}, timeout=10)  # the third: the real client
+            assert got["code"] == 1008
+            assert got["reason"] == "too many Foxglove clients (at most 2: foxglove_max_clients)"
+            health = app.health()["foxglove"]
+            assert health["clients_refused"] == 1 and health["clients"] == 2
+            await second.ping()  # the two within the budget are untouched
+        await first.ping()
+        async with connect(url, subprotocols=protocols) as again:  # the slot left is free
+            await again.recv()
+            # a scan counted it (one of the two) and did not close it
+            watch, peer = app.foxglove.watch, again.local_address[:2]
+            assert watch is not None
+            async with asyncio.timeout(5 * TIMEOUT_FACTOR):
+                while tuple(peer) not in watch.order.values():
+                    await asyncio.sleep(0.02)
+            assert app.foxglove.connections == 2
+            await again.ping()
+    assert app.foxglove.stats["clients_refused"] == 1
 
 
 def test_without_the_option_nothing_of_foxglove_is_imported() -> None:

@@ -14,6 +14,8 @@
 //   time         true: wait for the server's time messages (use_sim_time)
 //   graph        true: subscribe to the connection graph (after driving: this client publishes)
 //   flood        N: advertise N client channels more (the server refuses past its budget)
+//   closed       true: only wait for the server to close the connection (a connection past
+//                foxglove_max_clients): {code, reason, serverInfo}
 // stdout: one line, {"ok":true,"result":{...}} or {"ok":false,"error":"..."} (as run.mjs).
 
 import { parseArgs } from 'node:util';
@@ -127,6 +129,10 @@ function paramValue(name, value) {
 }
 
 async function main() {
+  if (args.closed) {
+    const [code, reason] = await new Promise((resolve) => ws.once('close', (c, r) => resolve([c, String(r)])));
+    return { code, reason, serverInfo: serverInfo !== null };
+  }
   await until('serverInfo', () => serverInfo);
   const ns = args.robot ? `/${args.robot}` : '';
   await until('the channels', () => channels.has(`${ns}/odom`) && channels.has(`${ns}/scan`) && channels.has('/tf_static') && channels.has('/rosout'));
