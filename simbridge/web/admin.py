@@ -315,7 +315,7 @@ class _Admin:
                 try:
                     world.set_robot_params(name, own)
                 except ValueError:
-                    robot.realism_own, robot.realism_cached = before, None
+                    world.set_robot_realism(name, dict.fromkeys(robot.realism_own) | before)
                     raise
         except ValueError as err:
             raise ServiceError(f"robot {name}: {_first_line(err)}") from None
