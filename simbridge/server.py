@@ -144,6 +144,9 @@ class Client:
         self.work = work or TokenBucket(session.limits.work_share, WORK_BURST)
         #: It connected with a token with admin rights (not counted in ``max_clients``).
         self.reserved = False
+        #: Whose connections it is counted with and shares ``work`` with: its token, or for
+        #: one that authenticated with the ``auth`` op its scope and address (None: its own).
+        self.identity: str | None = None
 
     def close_soon(self, code: int, reason: str) -> None:
         """Close the connection after what is queued (e.g. a failed ``auth``)."""
@@ -400,10 +403,13 @@ class BridgeServer:
         """
         if token is None or token_access(self.settings, token) is None:
             return None
-        bucket, users = self._shares.get(token, (None, 0))
+        return self._join(token, session)
+
+    def _join(self, identity: str, session: Session) -> TokenBucket:
+        bucket, users = self._shares.get(identity, (None, 0))
         if bucket is None:
             bucket = TokenBucket(session.limits.work_share, WORK_BURST)
-        self._shares[token] = (bucket, users + 1)
+        self._shares[identity] = (bucket, users + 1)
         return bucket
 
     def _unshare(self, token: str | None) -> None:
@@ -439,9 +445,48 @@ class BridgeServer:
         client.auth_timer = asyncio.get_running_loop().call_later(s.auth_timeout, deadline)
 
     def _admitted(self, client: Client) -> None:
-        """The connection authenticated: it leaves the pool of those that owe a token."""
+        """The connection authenticated: it leaves the pool of those that owe a token.
+
+        It is admitted as a connection with a token would be: one identity (its scope and its
+        address: one student's machine) has at most ``max_connections_per_token`` connections
+        and one loop share, and it takes one of the ``max_clients`` slots unless it has admin
+        rights. Before, a client with one valid MAC opened connections past ``max_clients``
+        (the others got 503), each with a loop share of its own. Refused, it is told why, owes
+        a token again and is closed (1013).
+        """
+        s = self.settings
+        session = client.session
+        address = client.ws.remote_address
+        identity = f"\0auth {session.scope} {address[0] if address else '?'}"
+        same = self._by_token.get(identity)
+        held = 0 if same is None else sum(1 for c in same if c.state is not State.CLOSED)
+        refusal = None
+        if held >= s.max_connections_per_token:
+            refusal = (
+                f"auth: refused, {held} connections authenticated with scope {session.scope} "
+                "from your address are open (the server's max_connections_per_token); close "
+                "some first"
+            )
+        elif not session.admin:
+            admitted = sum(1 for c in self.clients if not (c.unauthenticated or c.reserved))
+            if admitted >= s.max_clients:
+                refusal = (
+                    f"auth: refused, simbridge is full: {s.max_clients} clients connected (the "
+                    "server's max_clients); try again later"
+                )
+        if refusal is not None:
+            self.refused_total += 1
+            logger.warning("%s refused after auth: %s", client.label, refusal)
+            session.connect(session.scope, False, authenticated=False)  # owes a token again
+            self.graph.apply(client, session.status("error", refusal))
+            client.close_soon(CloseCode.TRY_AGAIN_LATER, "too many connections")
+            return
         client.unauthenticated = False
-        _frame_limit(client.ws, self._read_limit(client.session))
+        client.reserved = session.admin
+        self._by_token.setdefault(identity, weakref.WeakSet()).add(client.ws)
+        client.work = self._join(identity, session)
+        client.identity = identity
+        _frame_limit(client.ws, self._read_limit(session))
         self._unauthenticated.discard(client.ws)
         if client.auth_timer is not None:
             client.auth_timer.cancel()
@@ -497,6 +542,8 @@ class BridgeServer:
         token = _query_token(ws.request.path) if ws.request else None
         session = graph.new_session(token)
         client = Client(ws, session, self.settings, self._share(token, session))
+        if token is not None and token in self._shares:
+            client.identity = token
         granted = None if token is None else token_access(self.settings, token)
         client.reserved = granted is not None and granted[1]
         _read_chunk(ws)
@@ -553,7 +600,9 @@ class BridgeServer:
             with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
                 await writer
             self.clients.discard(client)
-            self._unshare(token)
+            if client.identity is not None and client.identity in self._by_token:
+                self._by_token[client.identity].discard(ws)
+            self._unshare(client.identity)
             lost = not closed_on_purpose(ws.protocol.close_rcvd)
             graph.remove_peer(client, lost=lost)
             logger.info(

@@ -24,6 +24,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from simbridge.config import load_world
+from simbridge.graph.guard import rosauth_mac
 from simbridge.protocol.fragments import MESSAGE_COST, PIECE_COST
 from simbridge.runner import App
 from tests.conftest import AppFactory
@@ -43,6 +44,7 @@ pytestmark = pytest.mark.e2e
 
 STUDENT = "student-token-r1"
 TOKENS = {STUDENT: "r1", "teacher-token-xyz": "admin"}
+AUTH_SECRET = "sixteen-chars-ok"
 
 
 class Observer:
@@ -633,6 +635,59 @@ async def test_issue29_one_token_is_capped_its_connections_share_one_loop_share(
         assert len(app.estop.latches) == 1
         await steady()
     await wait_for(lambda: not app.server._shares)
+
+
+async def test_issue29_rosauth_connections_are_capped_and_counted_as_token_ones(
+    make_app: AppFactory,
+) -> None:
+    """Connections that authenticate with the auth op (no URL token) are admitted as a token's.
+
+    One valid MAC of r1 used to open connections past ``max_clients`` (r3 then got 503), each
+    with a loop share of its own: now a fourth is told ``max_connections_per_token`` and closed,
+    r1's three share one loop share, r3's token gets the last slot, a rosauth r2 the 503 of a
+    full server (told by name), and the instructor still gets in.
+    """
+    world = load_world(ROOT / "config" / "worlds" / "classroom.yaml")
+    tokens = TOKENS | {"student-token-r3": "r3"}
+    app = await make_app(
+        world=world,
+        client_tokens=tokens,
+        admin_token="teacher-token-xyz",
+        auth_secret=AUTH_SECRET,
+        max_clients=4,
+        max_connections_per_token=3,
+    )
+
+    async def authenticated(stack: contextlib.AsyncExitStack, level: str) -> Any:
+        ws = await stack.enter_async_context(connect(ws_url(app)))
+        t = int(time.time())
+        fields = {"client": "c", "dest": "d", "rand": "r", "t": t, "level": level, "end": t + 60}
+        await send_json(ws, {"op": "auth", **fields, "mac": rosauth_mac(AUTH_SECRET, **fields)})
+        await send_json(ws, {"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+        try:
+            return ws, await recv_until(
+                ws, lambda m: m.get("id") == "t" or m.get("level") == "error"
+            )
+        except ConnectionClosed:
+            return ws, None
+
+    async with contextlib.AsyncExitStack() as stack:
+        for _ in range(3):
+            _ws, reply = await authenticated(stack, "r1")
+            assert reply is not None and reply["result"] is True
+        ws, refused = await authenticated(stack, "r1")
+        assert refused is not None and "max_connections_per_token" in refused["msg"]
+        await asyncio.wait_for(ws.wait_closed(), 5 * TIMEOUT_FACTOR)
+        assert ws.close_code == 1013
+        r1 = [c for c in server_side(app) if c.session.scope == "r1" and not c.closed]
+        assert len(r1) == 3 and len({id(c.work) for c in r1}) == 1
+        await stack.enter_async_context(connect(f"{ws_url(app)}/?token=student-token-r3"))
+        ws, full = await authenticated(stack, "r2")
+        assert full is not None and "max_clients" in full["msg"]
+        admin = await stack.enter_async_context(connect(f"{ws_url(app)}/?token=teacher-token-xyz"))
+        await send_json(admin, {"op": "call_service", "service": "/rosapi/topics", "id": "t"})
+        assert (await recv_until(admin, lambda m: m.get("id") == "t"))["result"] is True
+    await wait_for(lambda: not app.server._shares and not app.server._by_token)
 
 
 async def test_issue29_png_under_four_spellings_decodes_to_each_spelling(
