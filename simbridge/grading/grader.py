@@ -62,6 +62,11 @@ __all__ = ["GRADE_TYPE", "Grader", "Run", "apply_robot_params", "restore_robot"]
 
 logger = logging.getLogger(__name__)
 
+#: Robot parameters that limit how fast a robot goes: a task sent as text by a client without
+#: admin rights may lower them, never raise them (see :meth:`Grader._may_set`).
+RAISABLE_LIMITS = frozenset(
+    {"max_linear_velocity", "max_angular_velocity", "max_wheel_torque", "velocity_gain"}
+)
 #: The grader's service type: one shape for every grade service (unused fields empty); its
 #: definition is in :data:`simbridge.msgs.interfaces.SERVICES`.
 GRADE_TYPE = "simbridge_msgs/srv/Grade"
@@ -601,6 +606,8 @@ class Grader:
             except ConfigError as err:
                 raise ServiceError(str(err)) from None
             official = None
+            if not admin:
+                self._may_set(robot, task)
         else:
             task_or_none = self.tasks.get(task_id)
             if task_or_none is None or not (admin or task_id in self.results.published):
@@ -610,6 +617,28 @@ class Grader:
             task, official = task_or_none, True
         run = self.start(peer, robot, task, official=official)
         return {**run.state(), "official": run.official}
+
+    def _may_set(self, robot: str, task: Task) -> None:
+        """Refuse a task sent as text that would raise one of ``robot``'s limits.
+
+        A student may practise on its own robot with parameters of its own, but not lift the
+        limits only an administrator may set (``…/set_parameters``): ``robot_params:
+        {robot.max_linear_velocity: 20}`` made a student's robot 40 times as fast for the
+        600 s a run may last. A published task's own parameters are the instructor's.
+        """
+        published = self.tasks.get(task.id) if task.id in self.published() else None
+        if published is not None and published.robot_params == task.robot_params:
+            return
+        current = self.world.robot_params(robot)
+        for key, value in task.robot_params.items():
+            section, _, name = key.partition(".")
+            if section == "robot" and name in RAISABLE_LIMITS and value > getattr(current, name):
+                msg = (
+                    f"task_yaml: robot_params.{key} {value:g} is above the robot's "
+                    f"{getattr(current, name):g}: only the instructor raises a robot's limits; "
+                    "a task sent as text may lower them"
+                )
+                raise ServiceError(msg)
 
     def _status(self, peer: Peer | None, req: dict[str, Any]) -> Any:
         attempt = req.get("attempt") or ""

@@ -124,3 +124,28 @@ async def test_a_class_of_three_runs_the_published_task_and_admin_lists_them(
     )
     assert code == 200 and b"<svg" in body and b"quick turn" in body
     await wait_for(lambda: not app.grader.runs)
+
+
+async def test_a_students_task_sent_as_text_may_lower_its_robots_limits_never_raise_them(
+    make_app: AppFactory,
+) -> None:
+    """Issue 29's rule for ``…/set_parameters`` holds for ``robot_params`` in ``task_yaml`` too.
+
+    A student's own task made its robot 40 times as fast (``robot.max_linear_velocity: 20``).
+    """
+    app = await make_app(
+        world=resource_dir("config") / "worlds" / "classroom.yaml",
+        client_tokens=TOKENS,
+        admin_token=ADMIN,
+    )
+    url = f"{ws_url(app)}/?token=student-one-token"
+    async with RosbridgeClient.connect(url) as r1:
+        fast = QUICK + "robot_params: {robot.max_linear_velocity: 20}\n"
+        with pytest.raises(ClientError, match=r"max_linear_velocity 20 is above the robot's 0\.5"):
+            await grade(r1, "start", task="practice", task_yaml=fast)
+        assert not app.grader.runs and app.world.robot_params("r1").max_linear_velocity == 0.5
+        slow = QUICK + "robot_params: {robot.max_linear_velocity: 0.2, robot.mass: 3.0}\n"
+        started = await grade(r1, "start", task="practice", task_yaml=slow)
+        assert started["robot"] == "r1" and app.world.robot_params("r1").max_linear_velocity == 0.2
+        await grade(r1, "cancel")
+    assert app.world.robot_params("r1").max_linear_velocity == 0.5
