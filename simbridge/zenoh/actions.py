@@ -275,15 +275,26 @@ class ActionBridge:
             self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {err}")
             answer(False)
             return
-        outcome = self.graph.actions.submit(
-            self.link._caller,
-            admitted.action,
-            admitted.message,
-            op_id=op_id,
-            written=name,
-            feedback=True,
-            goal_uuid=goal_id,
-        )
+        loop = self.link._loop
+        try:
+            # counted as a rosbridge client's goal: against the ROS 2 peers' max_pending_goals
+            # and global_pending_goals, and aborted after max_goal_timeout when a client serves
+            # the action (one that never answered held ROS 2's goals for ever)
+            outcome = self.graph.actions.submit(
+                self.link._caller,
+                admitted.action,
+                admitted.message,
+                op_id=op_id,
+                written=name,
+                feedback=True,
+                goal_uuid=goal_id,
+                now=loop.time() if loop is not None else 0.0,
+            )
+        except ProtocolError as err:
+            self._forget(op_id)
+            self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {err}")
+            answer(False)
+            return
         served.goal = outcome
         if not served.done:
             served.status = outcome.status

@@ -463,3 +463,50 @@ async def test_a_goal_that_is_not_cdr_gets_an_error_reply_and_the_action_goes_on
     finally:
         send_goal.close()
     assert accepted is not None and accepted.accepted
+
+
+async def test_a_ros2_goal_to_an_action_a_client_serves_is_counted_and_times_out(
+    router: Router, ros2: Any
+) -> None:
+    """Issue 29's goal budget for ROS 2 peers: their goals count as a rosbridge client's.
+
+    A goal of a ROS 2 client to an action a rosbridge client serves and never answers counts
+    against the ROS 2 peers' ``max_pending_goals`` and is aborted after ``max_goal_timeout``
+    (its server told ``cancel_action_goal``); it used to be held for ever, uncounted.
+    """
+    from zenoh_ros2_sdk import get_message_class, get_service_names_and_types
+
+    settings = ServerSettings(host="127.0.0.1", port=0, http_port=0, max_goal_timeout=1.0)
+    app = App(settings, zenoh=zenoh_options(router))
+    await app.start()
+    link = app.zenoh
+    assert link is not None
+    try:
+        async with connect(ws_url(app)) as server:
+            await send_json(server, {"op": "advertise_action", "action": "/slow", "type": FIB})
+            await eventually(
+                lambda: (
+                    "/slow/_action/get_result" in dict(get_service_names_and_types(**kw(router)))
+                )
+            )
+            send_goal = await _client(router, "/slow", "send_goal")
+            get_result = await _client(router, "/slow", "get_result")
+            goal_class = get_message_class(f"{FIB}_Goal")
+            assert goal_class is not None
+            goal_id = uuid.uuid4().bytes
+            try:
+                accepted = await asyncio.to_thread(
+                    send_goal.call, goal_id=_uuid(goal_id), goal=goal_class(order=3)
+                )
+                assert accepted is not None and accepted.accepted
+                await recv_until(server, lambda m: m.get("op") == "send_action_goal")
+                assert link._caller.session.pending_goals == 1
+                result = await asyncio.to_thread(get_result.call, goal_id=_uuid(goal_id))
+                assert result is not None and result.status == 6  # ABORTED
+                await recv_until(server, lambda m: m.get("op") == "cancel_action_goal")
+                assert link._caller.session.pending_goals == 0
+            finally:
+                send_goal.close()
+                get_result.close()
+    finally:
+        await app.stop()
