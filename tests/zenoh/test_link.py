@@ -202,11 +202,27 @@ async def test_ros2_calls_reset_and_a_service_with_fields(zapp: App, router: Rou
         type_hash=empty_hash,
         **sdk_kw(router),
     )
+    from zenoh_ros2_sdk import ROS2Subscriber
+
+    # a ROS 2 node's /rosout subscription gets the reset's line (an ordinary delivery)
+    lines: list[str] = []
+    rosout = await asyncio.to_thread(
+        ROS2Subscriber,
+        "/rosout",
+        "rcl_interfaces/msg/Log",
+        callback=lambda m: lines.append(m.msg),
+        msg_definition=zapp.graph.registry.definition_text("rcl_interfaces/msg/Log"),
+        type_hash=TypeHasher(zapp.graph.registry, "jazzy").message("rcl_interfaces/msg/Log"),
+        **sdk_kw(router),
+    )
+    await wait_for(lambda: zapp.graph.topics.topics["/rosout"].internal, timeout=10)
     robot = next(iter(zapp.world.robots.values()))
     start = robot.state.x
     robot.state.x += 0.5
     await asyncio.to_thread(reset.call)
     assert robot.state.x == pytest.approx(start)
+    await wait_for(lambda: any(s.startswith("world reset") for s in lines), timeout=10)
+    rosout.close()
     pause.close()
     reset.close()
 
