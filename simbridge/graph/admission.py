@@ -57,6 +57,7 @@ from simbridge.graph.actions import Action, ActionTable, Goal
 from simbridge.graph.services import Finish, PendingCall, Prepare, Service, ServiceTable
 from simbridge.graph.topics import Peer, Topic, TopicTable
 from simbridge.msgs import normalize_type, positional_args
+from simbridge.msgs.registry import MAX_TYPE_LENGTH
 from simbridge.protocol import (
     ANY_SCOPE,
     NOT_AUTHENTICATED,
@@ -321,6 +322,13 @@ class Admission:
     ) -> Any:
         if self.guarded and not self._may_reach(session, op.name):
             msg = f"action {op.name} belongs to another robot; this connection may not use it"
+            raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
+        if len(op.action_type) > MAX_TYPE_LENGTH:  # a goal keeps it while it runs
+            msg = (
+                f"send_action_goal {op.name}: refused, its action_type is "
+                f"{len(op.action_type)} characters long: at most {MAX_TYPE_LENGTH}, e.g. "
+                "'example_interfaces/action/Fibonacci'"
+            )
             raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
         return self.goal(op.name, op.args, op)
 

@@ -566,6 +566,12 @@ async def test_issue29_long_ids_are_refused_and_goals_to_its_own_action_are_capp
             assert refused["id"] == "g5" and "max_pending_goals" in refused["values"]
             goals = app.graph.actions.goals.values()
             assert len(goals) == 5 and all(g.args is None for g in goals)
+            # a goal keeps its action_type: 400 of 900 kB took the server from 43 to 393 MB
+            goal = {"op": "send_action_goal", "action": "/r1/act", "action_type": "p/" + long}
+            await send_json(ws, goal | {"id": "t"})
+            refused = await recv_until(ws, lambda m: m.get("id") == "t")
+            assert "its action_type is 5002 characters long: at most 256" in refused["values"]
+            assert len(goals) == 5
         await wait_for(lambda: app.graph.pool.used["pending_goals"] == 0)
         assert not app.graph.actions.goals
         await steady()
