@@ -248,8 +248,22 @@ def parse_task(text: str, *, source: str = "task", task_id: str = "") -> Task:
     if len(text.encode()) > MAX_TASK_BYTES:
         msg = f"{source}: larger than {MAX_TASK_BYTES} bytes"
         raise ConfigError(msg)
+
+    class _Loader(yaml.SafeLoader):
+        """``safe_load`` without aliases: a task is sent by students (``task_yaml``).
+
+        An alias shares a node, so eight nested lists in 360 bytes stood for 9**8 strings, which
+        the refusal's ``got [...]`` then spelled out: 1 GB and the loop held 5 s.
+        """
+
+        def compose_node(self, parent: Any, index: Any) -> Any:
+            if self.check_event(yaml.AliasEvent):
+                msg = "aliases (*name) are not taken in a task"
+                raise yaml.composer.ComposerError(None, None, msg)
+            return super().compose_node(parent, index)
+
     try:
-        data = yaml.safe_load(text)
+        data = yaml.load(text, Loader=_Loader)  # a SafeLoader, without aliases
     except yaml.YAMLError as err:
         line = " ".join(str(err).split())
         msg = f"{source}: is not valid YAML: {line}"

@@ -64,3 +64,16 @@ def test_a_copy_that_asks_something_else_has_another_digest() -> None:
     c = parse_task(GOOD.replace("name: demo", "name: demo\ndescription: words"), task_id="lab")
     assert a.digest() != b.digest()
     assert a.digest() == c.digest()
+
+
+def test_a_task_sent_by_a_student_may_not_use_yaml_aliases() -> None:
+    # 360 bytes whose aliases stand for 9**8 strings: the refusal spelled them out (1 GB, 5 s)
+    levels = ['&a0 ["x", "x", "x", "x", "x", "x", "x", "x", "x"]']
+    levels += [f"&a{i} [" + ", ".join([f"*a{i - 1}"] * 9) + "]" for i in range(1, 8)]
+    text = GOOD.replace("name: demo", "name: [" + ", ".join(levels) + "]")
+    with pytest.raises(ConfigError) as caught:
+        parse_task(text, source="task_yaml", task_id="lab")
+    message = str(caught.value)
+    assert "is not valid YAML" in message
+    assert "aliases" in message
+    assert len(message) < 500
