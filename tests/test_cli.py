@@ -343,3 +343,19 @@ def test_empty_environment_variable_means_the_default(monkeypatch: pytest.Monkey
     env = Environment.read({"SIMBRIDGE_PORT": "", "SIMBRIDGE_MAX_CLIENTS": "  "})
     assert env.port is None and env.max_clients is None
     assert Environment.read({"SIMBRIDGE_MAX_CLIENTS": "7"}).max_clients == 7
+
+
+def test_the_server_raises_its_soft_limit_on_open_files_to_the_hard_one() -> None:
+    """1,024 descriptors were 6,000 idle TCP connections' to take (issue 29's red team)."""
+    import resource
+
+    from simbridge.cli import FILE_LIMIT, raise_file_limit
+
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    want = FILE_LIMIT if hard == resource.RLIM_INFINITY else min(hard, FILE_LIMIT)
+    try:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (min(256, want), hard))
+        assert raise_file_limit() == want
+        assert resource.getrlimit(resource.RLIMIT_NOFILE) == (want, hard)
+    finally:
+        resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
