@@ -43,6 +43,7 @@ from typing import Any, Literal
 
 import orjson
 
+from simbridge.config import RealismParams, RobotParams, ValidationError
 from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.grading.metrics import Trace, clearance, evaluate, resolve_goal, score, thresholds
 from simbridge.grading.report import response_svg
@@ -630,6 +631,7 @@ class Grader:
         if published is not None and published.robot_params == task.robot_params:
             return
         current = self.world.robot_params(robot)
+        self._may_speed_up(robot, task, current)
         for key, value in task.robot_params.items():
             section, _, name = key.partition(".")
             if section == "robot" and name in RAISABLE_LIMITS and value > getattr(current, name):
@@ -637,6 +639,37 @@ class Grader:
                     f"task_yaml: robot_params.{key} {value:g} is above the robot's "
                     f"{getattr(current, name):g}: only the instructor raises a robot's limits; "
                     "a task sent as text may lower them"
+                )
+                raise ServiceError(msg)
+
+    def _may_speed_up(self, robot: str, task: Task, current: RobotParams) -> None:
+        """Refuse a task sent as text whose realism profile makes ``robot`` faster than now.
+
+        Under a profile the ground moves by the true wheels (``realism.wheel_radius_*``,
+        ``wheel_speed_scale``, ``wheelbase``) what the clamp allowed the nominal ones: true
+        wheels of 1 m on a 0.033 m nominal radius drove a student's robot 60 times as fast as
+        ``max_linear_velocity``, as raising the limit itself would have.
+        """
+        body = self.world.robots.get(robot)
+        if body is None:
+            return  # start() names the robot
+        shared = self.world.params.realism
+        params = task.robot_params
+        own = {k.removeprefix("realism."): v for k, v in params.items() if k.startswith("realism.")}
+        try:
+            after = shared.replace(**{**body.realism_own, **own})
+        except (ValidationError, TypeError):
+            return  # start() refuses it, naming the value
+        r = float(params.get("robot.wheel_radius", current.wheel_radius))
+        b = float(params.get("robot.wheelbase", current.wheelbase))
+        now = _speed_up(current.wheel_radius, current.wheelbase, body.realism(shared))
+        then = _speed_up(r, b, after if after.enabled else None)
+        for what, before, later in zip(("linear", "angular"), now, then, strict=True):
+            if later > max(1.0, before) + 1e-9:
+                msg = (
+                    f"task_yaml: its realism values move robot '{robot}' {later:.3g} times as "
+                    f"fast ({what}) as it is commanded, above the robot's {max(1.0, before):.3g}: "
+                    "only the instructor raises a robot's limits"
                 )
                 raise ServiceError(msg)
 
@@ -686,6 +719,15 @@ class Grader:
                 robot, f"cancelled by {'this process' if peer is None else describe_peer(peer)}"
             )
         )
+
+
+def _speed_up(r: float, b: float, real: RealismParams | None) -> tuple[float, float]:
+    """How many times as fast as commanded a robot moves under ``real``: (linear, angular)."""
+    if real is None or r <= 0 or b <= 0:
+        return 1.0, 1.0
+    wheel = real.wheel_speed_scale * max(real.wheel_radius_left or r, real.wheel_radius_right or r)
+    linear = wheel / r
+    return linear, linear * b / (real.wheelbase or b)
 
 
 def _rank(record: dict[str, Any]) -> tuple[int, int, float]:

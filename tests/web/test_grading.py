@@ -144,6 +144,15 @@ async def test_a_students_task_sent_as_text_may_lower_its_robots_limits_never_ra
         with pytest.raises(ClientError, match=r"max_linear_velocity 20 is above the robot's 0\.5"):
             await grade(r1, "start", task="practice", task_yaml=fast)
         assert not app.grader.runs and app.world.robot_params("r1").max_linear_velocity == 0.5
+        # true wheels of 1 m on the nominal 0.033 m: the ground moved 30 times as fast
+        wheels = "realism.wheel_radius_left: 1.0, realism.wheel_radius_right: 1.0"
+        big = QUICK + "robot_params: {realism.enabled: true, " + wheels + "}\n"
+        with pytest.raises(ClientError, match=r"times as fast \(linear\)"):
+            await grade(r1, "start", task="practice", task_yaml=big)
+        assert not app.grader.runs and app.world.robots["r1"].realism_own == {}
+        worn = QUICK + "robot_params: {realism.enabled: true, realism.slip: 0.1}\n"
+        await grade(r1, "start", task="practice", task_yaml=worn)
+        await grade(r1, "cancel")
         slow = QUICK + "robot_params: {robot.max_linear_velocity: 0.2, robot.mass: 3.0}\n"
         started = await grade(r1, "start", task="practice", task_yaml=slow)
         assert started["robot"] == "r1" and app.world.robot_params("r1").max_linear_velocity == 0.2
