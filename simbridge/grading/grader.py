@@ -315,11 +315,13 @@ class Grader:
         start = task.start or body.start
         saved = dict(body.overrides)
         saved_realism = dict(body.realism_own)
-        try:
-            self.world.teleport(robot, start)
+        saved_plant = body.plant
+        try:  # the parameters first: a refused one leaves the robot where and as it was
             apply_robot_params(self.world, robot, task.robot_params)
+            self.world.teleport(robot, start)  # checks the pose before it moves the robot
         except (ValueError, KeyError) as err:
             restore_robot(body, saved, saved_realism)
+            body.plant = saved_plant
             raise ServiceError(f"task '{task.id}': {err}") from None
         if official is None:
             published = self.tasks.get(task.id)

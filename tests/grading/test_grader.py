@@ -206,3 +206,25 @@ def test_the_csv_shows_a_students_task_id_as_text_never_as_a_formula() -> None:
     rows = list(csv.DictReader(io.StringIO(attempts_csv(grader))))
     assert rows[0]["attempt"] == run.attempt
     assert rows[0]["task_id"] == "'" + task.id
+
+
+def test_a_start_refused_for_its_robot_params_leaves_the_robot_as_it_was() -> None:
+    sim = Simulation()
+    grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
+    sim.publish("/cmd_vel", {"linear": {"x": 0.2}, "angular": {"z": 0.3}})
+    sim.run(0.2)
+    body = sim.world.robots[""]
+    pose, command = sim.pose(), (body.cmd_v, body.cmd_omega)
+    assert command == (0.2, 0.3)
+    task = parse_task(
+        "goal: {position: [3, 0]}\ntime_limit: 1\nstart: [0.5, 0.5, 1.0]\n"
+        "robot_params: {robot.mass: 4.0, realism.slip: -1}\nrubric: {time_to_goal_s: {max: 5}}\n",
+        task_id="t",
+    )
+    with pytest.raises(ServiceError, match=r"task 't': .*slip"):
+        grader.start(None, "", task)
+    assert sim.pose() == pose  # not teleported to the task's start
+    assert (body.cmd_v, body.cmd_omega) == command  # nor stopped
+    assert sim.world.robot_params("").mass == 1.5
+    assert body.realism_own == {}
+    assert grader.runs == {}
