@@ -423,6 +423,15 @@ class BridgeServer:
         else:
             self._shares[token] = (bucket, users - 1)
 
+    def _leave(self, client: Client) -> None:
+        """Take ``client`` out of the connections and the share of its identity, if it has one."""
+        identity, client.identity = client.identity, None
+        if identity is None:
+            return
+        if identity in self._by_token:
+            self._by_token[identity].discard(client.ws)
+        self._unshare(identity)
+
     def _owes_token(self, client: Client) -> None:
         """Give a connection that owes a token its deadline and small frames."""
         s = self.settings
@@ -483,6 +492,7 @@ class BridgeServer:
             return
         client.unauthenticated = False
         client.reserved = session.admin
+        self._leave(client)  # one share per connection: a URL token's is left first
         self._by_token.setdefault(identity, weakref.WeakSet()).add(client.ws)
         client.work = self._join(identity, session)
         client.identity = identity
@@ -541,26 +551,32 @@ class BridgeServer:
         graph = self.graph
         token = _query_token(ws.request.path) if ws.request else None
         session = graph.new_session(token)
-        client = Client(ws, session, self.settings, self._share(token, session))
-        if token is not None and token in self._shares:
-            client.identity = token
-        granted = None if token is None else token_access(self.settings, token)
-        client.reserved = granted is not None and granted[1]
-        _read_chunk(ws)
-        self.clients.add(client)
-        self.connections_total += 1
-        generate_interfaces_soon()  # off the loop, before a client's first rosapi call
-        graph.add_peer(client)
-        if not session.authenticated:  # set on connect by the guard (none: all admitted)
-            self._owes_token(client)
-        else:
-            _frame_limit(ws, self._read_limit(session))
-        writer = asyncio.create_task(client.write_loop(), name=f"writer-{session.client_id}")
-        logger.info("%s connected", client.label)
-        loop = asyncio.get_running_loop()
-        handled = 0
-        yielded = loop.time()
+        work = self._share(token, session)
         try:
+            client = Client(ws, session, self.settings, work)
+        except BaseException:
+            self._unshare(token if work is not None else None)
+            raise
+        if work is not None:
+            client.identity = token
+        writer: asyncio.Task[None] | None = None
+        try:  # from here whatever raises, the finally gives back the share and the slot
+            granted = None if token is None else token_access(self.settings, token)
+            client.reserved = granted is not None and granted[1]
+            _read_chunk(ws)
+            self.clients.add(client)
+            self.connections_total += 1
+            generate_interfaces_soon()  # off the loop, before a client's first rosapi call
+            graph.add_peer(client)
+            if not session.authenticated:  # set on connect by the guard (none: all admitted)
+                self._owes_token(client)
+            else:
+                _frame_limit(ws, self._read_limit(session))
+            writer = asyncio.create_task(client.write_loop(), name=f"writer-{session.client_id}")
+            logger.info("%s connected", client.label)
+            loop = asyncio.get_running_loop()
+            handled = 0
+            yielded = loop.time()
             async for message in ws:
                 now = loop.time()
                 # a dropped message counts too: a flood of them, queued by one read of the
@@ -596,13 +612,12 @@ class BridgeServer:
             self._unauthenticated.discard(ws)
             if client.auth_timer is not None:
                 client.auth_timer.cancel()
-            writer.cancel()
-            with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
-                await writer
+            if writer is not None:
+                writer.cancel()
+                with contextlib.suppress(asyncio.CancelledError, ConnectionClosed):
+                    await writer
             self.clients.discard(client)
-            if client.identity is not None and client.identity in self._by_token:
-                self._by_token[client.identity].discard(ws)
-            self._unshare(client.identity)
+            self._leave(client)
             lost = not closed_on_purpose(ws.protocol.close_rcvd)
             graph.remove_peer(client, lost=lost)
             logger.info(

@@ -696,6 +696,47 @@ async def test_issue29_rosauth_connections_are_capped_and_counted_as_token_ones(
     await wait_for(lambda: not app.server._shares and not app.server._by_token)
 
 
+async def test_a_connection_that_fails_while_it_is_set_up_gives_its_share_back(
+    make_app: AppFactory,
+) -> None:
+    """A connection whose set-up raises (here a connect callback) leaves no share behind."""
+    app = await make_app(client_tokens=TOKENS, admin_token="teacher-token-xyz")
+
+    def broken(peer: Any) -> None:
+        raise RuntimeError("set-up failed")
+
+    app.graph.on_connect.append(broken)
+    ws = await connect(f"{ws_url(app)}/?token={STUDENT}")
+    await asyncio.wait_for(ws.wait_closed(), 5 * TIMEOUT_FACTOR)
+    assert ws.close_code == 1011
+    app.graph.on_connect.remove(broken)
+    await wait_for(lambda: not app.server.clients)
+    assert not app.server._shares and not app.server._by_token
+
+
+async def test_a_connection_that_authenticates_again_leaves_its_first_share(
+    make_app: AppFactory,
+) -> None:
+    """A URL-token connection admitted again by an auth op belongs to one share, the new one.
+
+    No client reaches it today (a URL token is admitted at once): the connection is made to owe
+    a token again, as a refused auth leaves it, to check that joining a share leaves the old one.
+    """
+    app = await make_app(client_tokens=TOKENS, auth_secret=AUTH_SECRET)
+    async with connect(f"{ws_url(app)}/?token={STUDENT}") as ws:
+        await wait_for(lambda: len(app.server.clients) == 1)
+        client = server_side(app, 0)
+        assert set(app.server._shares) == {STUDENT}
+        client.unauthenticated = True
+        t = int(time.time())
+        fields = {"client": "c", "dest": "d", "rand": "r", "t": t, "level": "r1", "end": t + 60}
+        await send_json(ws, {"op": "auth", **fields, "mac": rosauth_mac(AUTH_SECRET, **fields)})
+        await wait_for(lambda: not client.unauthenticated)
+        assert [users for _bucket, users in app.server._shares.values()] == [1]
+        assert STUDENT not in app.server._shares and client.identity in app.server._shares
+    await wait_for(lambda: not app.server._shares and not app.server._by_token)
+
+
 async def test_issue29_png_under_four_spellings_decodes_to_each_spelling(
     make_app: AppFactory,
 ) -> None:
