@@ -92,6 +92,10 @@ INBOX_LIMIT = 20_000
 #: loop 1.5-1.8 s (issue 29).
 DRAIN_BATCH = 500
 DRAIN_BYTES = 1_000_000
+#: Calls from ROS 2 (Zenoh queries) waiting for the event loop at most; their request bytes are
+#: bounded by ``zenoh_inbox_bytes`` too. Past either, a call is refused on Zenoh's thread with
+#: an error reply (counted: ``calls_refused``) instead of growing the loop's queue.
+CALL_INBOX_LIMIT = 1_000
 #: Samples of the ring channels handed to the graph per poll callback at most. The frames
 #: they make for the clients are written when the callback ends (the server corks them:
 #: :meth:`simbridge.server.BridgeServer._send_many`). With 32 a callback, the clients got the
@@ -315,6 +319,11 @@ class ZenohLink:
         self._inbox_bytes = 0
         self._inbox_lock = threading.Lock()
         self._inbox_rung = False
+        #: Calls from ROS 2 waiting for the event loop (service, type, query, request bytes),
+        #: their bytes, and whether the loop was woken; under the inbox's lock.
+        self._call_inbox: deque[tuple[str, str, Any, int]] = deque()
+        self._calls_bytes = 0
+        self._calls_rung = False
         #: The budgets of samples (``zenoh_max_sample_bytes``, ``zenoh_inbox_bytes``).
         self.max_sample = graph.settings.zenoh_max_sample_bytes
         self.max_inbox = graph.settings.zenoh_inbox_bytes
@@ -701,11 +710,73 @@ class ZenohLink:
 
     def _query_handler(self, name: str, type_name: str) -> Callable[[Any], None]:
         def on_query(query: Any) -> None:  # a Zenoh thread
-            loop = self._loop
-            if loop is not None:
-                loop.call_soon_threadsafe(self._on_query, name, type_name, query)
+            self.hand_over_call(name, type_name, query)
 
         return on_query
+
+    def hand_over_call(self, name: str, type_name: str, query: Any) -> None:
+        """Queue a call from ROS 2 for the event loop, or refuse it here (Zenoh's threads).
+
+        A request over ``zenoh_max_sample_bytes``, or past :data:`CALL_INBOX_LIMIT` calls or
+        ``zenoh_inbox_bytes`` bytes waiting, gets an error reply at once (``calls_refused``).
+        """
+        loop = self._loop
+        if loop is None:
+            return
+        payload = query.payload
+        size = len(payload) if payload is not None else 0
+        refusal = None
+        with self._inbox_lock:
+            if size > self.max_sample:
+                refusal = (
+                    f"service {name}: request of {size} bytes over zenoh_max_sample_bytes "
+                    f"({self.max_sample})"
+                )
+            elif (
+                len(self._call_inbox) >= CALL_INBOX_LIMIT
+                or self._calls_bytes + size > self.max_inbox
+            ):
+                refusal = (
+                    f"service {name}: refused, too many calls waiting (over {CALL_INBOX_LIMIT} "
+                    f"calls or zenoh_inbox_bytes {self.max_inbox})"
+                )
+            else:
+                self._call_inbox.append((name, type_name, query, size))
+                self._calls_bytes += size
+            if refusal is not None:
+                self.stats["calls_refused"] += 1
+                ring = False
+            else:
+                ring = not self._calls_rung
+                self._calls_rung = True  # one wake-up of the event loop per burst
+        if refusal is not None:
+            try:
+                query.reply_err(refusal.encode())
+            except Exception as err:
+                logger.debug("reply_err: %s", err)
+            finally:
+                _quietly(query.drop)
+        elif ring:
+            loop.call_soon_threadsafe(self._drain_calls)
+
+    def _drain_calls(self) -> None:
+        """Take the calls from ROS 2 that arrived, :data:`DRAIN_BATCH` per callback at most."""
+        calls = self._call_inbox
+        for _ in range(DRAIN_BATCH):
+            with self._inbox_lock:
+                if not calls:
+                    break
+                name, type_name, query, size = calls.popleft()
+                self._calls_bytes -= size
+            try:
+                self._on_query(name, type_name, query)
+            except Exception:  # one call's fault stops neither the drain nor the others
+                logger.exception("Zenoh: a call on %s", name)
+        with self._inbox_lock:
+            again = bool(calls) and self._loop is not None
+            self._calls_rung = again
+        if again:
+            self._loop.call_soon(self._drain_calls)  # type: ignore[union-attr]
 
     def _on_query(self, name: str, type_name: str, query: Any) -> None:
         self.stats["calls_in"] += 1

@@ -434,3 +434,44 @@ async def test_the_routers_acl_gives_each_students_ros2_node_its_own_robot(
     finally:
         proc.terminate()
         await proc.communicate()
+
+
+async def test_a_call_flood_is_refused_past_the_call_inbox_with_an_error_reply(
+    zapp: App, router: Router, ros2: Any, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    from simbridge.zenoh import link as link_module
+    from simbridge.zenoh.attachment import Attachment
+
+    link = zapp.zenoh
+    assert link is not None
+    monkeypatch.setattr(link_module, "CALL_INBOX_LIMIT", 5)
+    await wait_for(
+        lambda: any(e.entity.name == "/sim/pause" for e in link._declared.values()), timeout=8
+    )
+    key = next(e.entity.keyexpr() for e in link._declared.values() if e.entity.name == "/sim/pause")
+    attachment = Attachment(1, time.time_ns(), bytes(16)).pack()
+    request = b"\x00\x01\x00\x00\x01"  # SetBool data=True as CDR
+    # the loop is held (as under load) while 20 calls arrive: 5 wait, 15 are refused on
+    # Zenoh's threads, none more is queued on the loop
+    handlers = [
+        ros2.session.get(key, payload=request, attachment=attachment, timeout=5) for _ in range(20)
+    ]
+    deadline = time.monotonic() + 5 * TIMEOUT_FACTOR
+    while link.stats["calls_refused"] < 15 and time.monotonic() < deadline:
+        time.sleep(0.01)  # the event loop held on purpose: Zenoh's threads go on
+    assert len(link._call_inbox) == 5 and link.stats["calls_refused"] == 15
+
+    def collect() -> tuple[int, list[str]]:
+        ok, errors = 0, []
+        for handler in handlers:
+            for reply in handler:
+                if reply.err is not None:
+                    errors.append(bytes(reply.err.payload.to_bytes()).decode())
+                else:
+                    ok += 1
+        return ok, errors
+
+    ok, errors = await asyncio.to_thread(collect)
+    assert ok == 5 and len(errors) == 15
+    assert all("too many calls waiting" in e for e in errors)
+    assert zapp.simclock.paused and not link._call_inbox and link._calls_bytes == 0
