@@ -70,6 +70,7 @@ import logging
 import os
 import socket
 import stat
+import threading
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass, field
 from typing import Any
@@ -114,6 +115,11 @@ CALL_MARGIN = 2.0
 SCAN_PERIOD = 2.0
 #: Seconds a connection past ``foxglove_max_clients`` is left to finish its handshake.
 HANDSHAKE_GRACE = 0.1
+#: A client's published messages handed by the SDK's threads to the event loop and not yet
+#: taken, at most, and their bytes at most; past either, a message is dropped on the SDK's
+#: thread (counted: ``messages_dropped``) instead of growing the loop's queue.
+INBOX_MESSAGES = 500
+INBOX_BYTES = 4_000_000
 
 
 def set_nodelay(port: int, done: set[tuple[int, int]]) -> int:
@@ -328,6 +334,10 @@ class FoxgloveFront:
         self._by_id: dict[int, _Channel] = {}
         self._services: dict[str, str] = {}
         self._clients: dict[int, _Client] = {}
+        #: Messages and bytes of each client waiting for the event loop (INBOX_MESSAGES,
+        #: INBOX_BYTES), under their lock (the SDK's threads hand them over).
+        self._waiting: dict[int, list[int]] = {}
+        self._waiting_lock = threading.Lock()
         self._signature: tuple[int, int] = (-1, -1)
         self._call_ids = itertools.count(1)
         #: Parameter sets of Foxglove clients being applied (their changes are not pushed).
@@ -346,6 +356,8 @@ class FoxgloveFront:
         self._nodelay: set[tuple[int, int]] = set()
         #: The port's connections (``foxglove_max_clients``), scanned when the descriptors change.
         self.watch: ConnectionWatch | None = None
+        #: The SDK's server listener.
+        self.listener = _Listener(self)
         self._scan_next = 0.0
         self._first_seen: dict[tuple[int, int], float] = {}
         self.connections = 0
@@ -360,6 +372,7 @@ class FoxgloveFront:
             "calls": 0,
             "parameter_sets": 0,
             "clients_refused": 0,
+            "messages_dropped": 0,
         }
         graph.topics.taps.append(self._on_deliver)
         for node in graph.params.nodes.values():
@@ -394,7 +407,7 @@ class FoxgloveFront:
             host=self.host,
             port=self.port_asked,
             capabilities=caps,
-            server_listener=_Listener(self),
+            server_listener=self.listener,
             supported_encodings=list(CLIENT_ENCODINGS),
             context=self.context,
             message_backlog_size=BACKLOG,
@@ -947,7 +960,29 @@ class _Listener:
         self._soon(self.front.unadvertised, client.id, client_channel_id)
 
     def on_message_data(self, client: Any, client_channel_id: int, data: bytes) -> None:
-        self._soon(self.front.message, client.id, client_channel_id, bytes(data))
+        front, size, client_id = self.front, len(data), int(client.id)
+        loop = front._loop
+        if loop is None or loop.is_closed():
+            return
+        with front._waiting_lock:
+            waiting = front._waiting.setdefault(client_id, [0, 0])
+            if waiting[0] >= INBOX_MESSAGES or waiting[1] + size > INBOX_BYTES:
+                front.stats["messages_dropped"] += 1  # over the client's inbox: dropped here
+                return
+            waiting[0] += 1
+            waiting[1] += size
+        loop.call_soon_threadsafe(self._message, client_id, client_channel_id, bytes(data))
+
+    def _message(self, client_id: int, channel_id: int, data: bytes) -> None:
+        front = self.front
+        with front._waiting_lock:
+            waiting = front._waiting.get(client_id)
+            if waiting is not None:
+                waiting[0] -= 1
+                waiting[1] -= len(data)
+                if waiting[0] <= 0:
+                    del front._waiting[client_id]
+        front.message(client_id, channel_id, data)
 
     def on_get_parameters(
         self, client: Any, param_names: list[str], request_id: str | None = None

@@ -182,3 +182,39 @@ def test_set_nodelay_turns_nagle_off_on_this_process_s_sockets_of_the_port_once(
                 assert set_nodelay(port, done) == 1  # the accepted socket, not the listener
                 assert accepted.getsockopt(socket.IPPROTO_TCP, socket.TCP_NODELAY) == 1
                 assert set_nodelay(port, done) == 0
+
+
+async def test_a_clients_messages_waiting_for_the_loop_are_bounded_per_client(
+    make_app: AppFactory,
+) -> None:
+    import threading
+    import time
+    from types import SimpleNamespace
+
+    from simbridge.foxglove.front import INBOX_BYTES, INBOX_MESSAGES
+
+    app = await make_app(foxglove_port=0)
+    front = app.foxglove
+    assert front is not None
+    flooder, other = SimpleNamespace(id=901), SimpleNamespace(id=902)  # as the SDK's Client
+
+    def flood() -> None:  # the SDK's thread: the listener's callback
+        for _ in range(INBOX_MESSAGES + 100):
+            front.listener.on_message_data(flooder, 1, b"{}")
+        front.listener.on_message_data(other, 1, b"{}")  # another client is not affected
+        big = b" " * (INBOX_BYTES // 2 - 1)  # two fit beside the small one, not three
+        for _ in range(3):
+            front.listener.on_message_data(other, 2, big)
+
+    # the event loop held (as under load) while the SDK's thread hands messages over
+    thread = threading.Thread(target=flood)
+    thread.start()
+    thread.join(10 * TIMEOUT_FACTOR)
+    assert not thread.is_alive()
+    assert front._waiting[901] == [INBOX_MESSAGES, 2 * INBOX_MESSAGES]
+    assert front._waiting[902] == [3, 2 + 2 * (INBOX_BYTES // 2 - 1)]
+    assert front.stats["messages_dropped"] == 100 + 1  # by count, then by bytes
+    deadline = time.monotonic() + 5 * TIMEOUT_FACTOR
+    while front._waiting and time.monotonic() < deadline:
+        await asyncio.sleep(0.01)  # the loop takes them (unknown clients: nothing published)
+    assert not front._waiting and front.health()["messages_dropped"] == 101
