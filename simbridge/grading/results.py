@@ -1,8 +1,11 @@
 """The class's results: an append-only journal of JSON lines, read back at start.
 
-Every event is one line, written with a single ``write`` on a file opened for appending and
-flushed to disk (``fsync``) before the call returns, so that a crash or ``kill -9`` can at worst
-leave the last line incomplete, never an earlier one:
+Every event is one line, written with a single ``write`` on a file opened for appending, so
+that a crash or ``kill -9`` can at worst leave the last line incomplete, never an earlier one,
+and flushed to disk (``fsync``). On the event loop the ``fsync`` runs on a worker thread (on an
+SD card it took long enough to stall the simulation's tick): the lines are written in order on
+the loop, and one ``fsync`` at a time flushes all those written before it; :meth:`close`
+flushes what is left. Without a running loop the ``fsync`` runs before the call returns:
 
 * ``{"kind": "start", "attempt": "a7", "task": ..., "robot": ..., "student": ..., "time": ...}``
   when a run begins;
@@ -19,6 +22,7 @@ starts clean. A ``start`` without its ``result`` is an attempt the restart cut: 
 
 from __future__ import annotations
 
+import asyncio
 import logging
 import os
 import time
@@ -34,6 +38,13 @@ logger = logging.getLogger(__name__)
 
 #: Attempt statuses that end a run.
 FINISHED = frozenset({"passed", "failed", "interrupted", "no_controller", "cancelled", "error"})
+
+
+def _fsync_and_close(fd: int) -> None:
+    try:
+        os.fsync(fd)
+    finally:
+        os.close(fd)
 
 
 class ResultsLog:
@@ -55,6 +66,9 @@ class ResultsLog:
         self.bad_lines = 0
         self._next = 1
         self._fd: int | None = None
+        #: An ``fsync`` runs on a worker thread; lines were written since it began.
+        self._syncing = False
+        self._dirty = False
 
     # -- the file -------------------------------------------------------------------------
 
@@ -114,8 +128,11 @@ class ResultsLog:
     def close(self) -> None:
         """Close the journal."""
         if self._fd is not None:
+            if self._syncing or self._dirty:
+                os.fsync(self._fd)  # what the worker thread has not flushed yet
             os.close(self._fd)
             self._fd = None
+            self._dirty = False
 
     def _append(self, line: dict[str, Any]) -> None:
         self._apply(line)
@@ -123,7 +140,37 @@ class ResultsLog:
             return
         data = orjson.dumps(line, option=orjson.OPT_SERIALIZE_NUMPY) + b"\n"
         os.write(self._fd, data)  # one write on an O_APPEND file: never interleaved
-        os.fsync(self._fd)
+        self._sync()
+
+    def _sync(self) -> None:
+        """Flush the lines written to disk: off the loop when there is one, one at a time."""
+        if self._fd is None:
+            return
+        if self._syncing:
+            self._dirty = True  # flushed by the next fsync, once this one ends
+            return
+        try:
+            loop = asyncio.get_running_loop()
+        except RuntimeError:  # no loop running: flush here
+            os.fsync(self._fd)
+            return
+        fd = os.dup(self._fd)  # the thread's own: close() never pulls it from under it
+        try:
+            future = loop.run_in_executor(None, _fsync_and_close, fd)
+        except RuntimeError:  # the loop's executor is shut down: flush here
+            os.close(fd)
+            os.fsync(self._fd)
+            return
+        self._syncing, self._dirty = True, False
+        future.add_done_callback(self._synced)
+
+    def _synced(self, future: asyncio.Future[None]) -> None:
+        self._syncing = False
+        err = None if future.cancelled() else future.exception()
+        if err is not None:
+            logger.error("results file %s: fsync failed: %s", self.path, err)
+        if self._dirty:
+            self._sync()
 
     def _apply(self, line: dict[str, Any]) -> None:
         kind = line.get("kind")

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import os
 import signal
 import socket
 import sys
+import threading
 from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
@@ -136,3 +138,33 @@ async def test_kill_9_between_two_attempts_and_during_a_third(tmp_path: Path) ->
     statuses = {a: r["status"] for a, r in log.attempts.items()}
     assert statuses == {first: "passed", second: "passed", third: "interrupted"}
     assert len(results.read_bytes().splitlines()) == 6
+
+
+async def test_on_the_loop_the_fsync_runs_off_it_and_every_line_is_kept(
+    tmp_path: Path, monkeypatch: Any
+) -> None:
+    """An attempt's start and end are written in order; their fsync never holds the loop."""
+    synced: list[int] = []
+    real_fsync = os.fsync
+
+    def fsync(fd: int) -> None:
+        synced.append(threading.get_ident())
+        real_fsync(fd)
+
+    monkeypatch.setattr(os, "fsync", fsync)
+    path = tmp_path / "results.jsonl"
+    log = ResultsLog(path)
+    log.open()
+    for attempt in ("a1", "a2", "a3"):
+        log.start(attempt, {"task_id": "t"})
+        log.finish(attempt, {"status": "passed", "passed": True})
+    async with asyncio.timeout(5 * TIMEOUT_FACTOR):
+        while getattr(log, "_syncing", False):
+            await asyncio.sleep(0.01)
+    assert synced and threading.get_ident() not in synced
+    log.close()
+    again = ResultsLog(path)
+    assert again.open() == []
+    assert again.bad_lines == 0
+    assert list(again.attempts) == ["a1", "a2", "a3"]
+    assert [r["status"] for r in again.attempts.values()] == ["passed"] * 3
