@@ -14,6 +14,7 @@ import ipaddress
 import logging
 import time
 from collections import deque
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -138,6 +139,24 @@ class LoopStats:
         }
 
 
+def offload(work: Callable[[], None], done: Callable[[BaseException | None], None]) -> bool:
+    """Run ``work`` on a worker thread of the running loop, then ``done(error)`` on the loop.
+
+    Returns False, having run nothing, with no running loop or with its executor shut down (the
+    grading journal then flushes in the call: :data:`simbridge.grading.results.Offload`).
+    """
+    try:
+        future = asyncio.get_running_loop().run_in_executor(None, work)
+    except RuntimeError:
+        return False
+
+    def finished(f: asyncio.Future[None]) -> None:
+        done(None if f.cancelled() else f.exception())
+
+    future.add_done_callback(finished)
+    return True
+
+
 class App:
     """One simbridge process: world, graph, servers and the loop."""
 
@@ -204,7 +223,7 @@ class App:
             roles=self.roles,
         )
         #: The grader: task runs scored on the true pose, the class's results (/admin).
-        self.grader = install_grader(self.graph, self.world, self.settings)
+        self.grader = install_grader(self.graph, self.world, self.settings, offload=offload)
         self.tick_hooks.append(self.grader.tick)
         install_grading_admin(self.web, self.grader, self.settings)
         #: Loop timing.

@@ -20,7 +20,7 @@ from pathlib import Path
 from simbridge.config import ServerSettings, resource_dir
 from simbridge.errors import ConfigError
 from simbridge.grading.grader import GRADE_TYPE, Grader, Run
-from simbridge.grading.results import ResultsLog
+from simbridge.grading.results import Offload, ResultsLog
 from simbridge.grading.task import METRICS, Task, load_task, load_tasks, parse_task
 from simbridge.graph.graph import Graph
 from simbridge.sim import World
@@ -30,6 +30,7 @@ __all__ = [
     "GRADE_TYPE",
     "METRICS",
     "Grader",
+    "Offload",
     "ResultsLog",
     "Run",
     "Task",
@@ -46,8 +47,12 @@ def default_tasks_dir() -> Path:
     return resource_dir("config") / "tasks"
 
 
-def install_grader(graph: Graph, world: World, settings: ServerSettings) -> Grader:
+def install_grader(
+    graph: Graph, world: World, settings: ServerSettings, *, offload: Offload | None = None
+) -> Grader:
     """Build the grader of a server: its tasks, its results journal (read back), its services.
+
+    ``offload`` is where the journal's ``fsync`` runs (the server's event-loop executor).
 
     The task files are read when first needed (``simbridge`` checks a ``--tasks`` directory at
     startup).
@@ -65,7 +70,7 @@ def install_grader(graph: Graph, world: World, settings: ServerSettings) -> Grad
         return load_tasks(tasks_dir) if tasks_dir.is_dir() else {}
 
     path = Path(settings.results_file) if settings.results_file else None
-    results = ResultsLog(path)
+    results = ResultsLog(path, offload=offload)
     try:
         results.open()
     except OSError as err:

@@ -2,10 +2,11 @@
 
 Every event is one line, written with a single ``write`` on a file opened for appending, so
 that a crash or ``kill -9`` can at worst leave the last line incomplete, never an earlier one,
-and flushed to disk (``fsync``). On the event loop the ``fsync`` runs on a worker thread (on an
-SD card it took long enough to stall the simulation's tick): the lines are written in order on
-the loop, and one ``fsync`` at a time flushes all those written before it; :meth:`close`
-flushes what is left. Without a running loop the ``fsync`` runs before the call returns:
+and flushed to disk (``fsync``). Given an ``offload`` (the server's: a worker thread of its
+event loop), the ``fsync`` runs there (on an SD card it took long enough to stall the
+simulation's tick): the lines are written in order by the caller, and one ``fsync`` at a time
+flushes all those written before it; :meth:`close` flushes what is left. Without one, or when
+it cannot run, the ``fsync`` runs before the call returns:
 
 * ``{"kind": "start", "attempt": "a7", "task": ..., "robot": ..., "student": ..., "time": ...}``
   when a run begins;
@@ -22,22 +23,27 @@ starts clean. A ``start`` without its ``result`` is an attempt the restart cut: 
 
 from __future__ import annotations
 
-import asyncio
 import logging
 import os
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
 import orjson
 
 
-__all__ = ["ResultsLog"]
+__all__ = ["Offload", "ResultsLog"]
 
 logger = logging.getLogger(__name__)
 
 #: Attempt statuses that end a run.
 FINISHED = frozenset({"passed", "failed", "interrupted", "no_controller", "cancelled", "error"})
+
+
+#: Runs ``work`` off the caller's thread, then ``done(error)`` back on it (``error``: what
+#: ``work`` raised, or None); returns False, having run nothing, when it cannot.
+Offload = Callable[[Callable[[], None], Callable[[BaseException | None], None]], bool]
 
 
 def _fsync_and_close(fd: int) -> None:
@@ -53,11 +59,19 @@ class ResultsLog:
     Args:
         path: the journal; None keeps results in memory only (lost on restart).
         clock: wall-clock seconds (Unix time), for the lines' ``time``.
+        offload: where each ``fsync`` runs (None: in the call that wrote the line).
     """
 
-    def __init__(self, path: Path | None = None, *, clock: Any = time.time) -> None:
+    def __init__(
+        self,
+        path: Path | None = None,
+        *,
+        clock: Any = time.time,
+        offload: Offload | None = None,
+    ) -> None:
         self.path = path
         self.clock = clock
+        self.offload = offload
         #: Attempts by id, oldest first: their start line merged with their result line.
         self.attempts: dict[str, dict[str, Any]] = {}
         #: Task ids published, in the order they were published.
@@ -149,24 +163,18 @@ class ResultsLog:
         if self._syncing:
             self._dirty = True  # flushed by the next fsync, once this one ends
             return
-        try:
-            loop = asyncio.get_running_loop()
-        except RuntimeError:  # no loop running: flush here
+        if self.offload is None:
             os.fsync(self._fd)
             return
-        fd = os.dup(self._fd)  # the thread's own: close() never pulls it from under it
-        try:
-            future = loop.run_in_executor(None, _fsync_and_close, fd)
-        except RuntimeError:  # the loop's executor is shut down: flush here
-            os.close(fd)
+        fd = os.dup(self._fd)  # the worker's own: close() never pulls it from under it
+        if not self.offload(lambda: _fsync_and_close(fd), self._synced):
+            os.close(fd)  # it cannot run now (no loop, or its executor shut down): flush here
             os.fsync(self._fd)
             return
         self._syncing, self._dirty = True, False
-        future.add_done_callback(self._synced)
 
-    def _synced(self, future: asyncio.Future[None]) -> None:
+    def _synced(self, err: BaseException | None) -> None:
         self._syncing = False
-        err = None if future.cancelled() else future.exception()
         if err is not None:
             logger.error("results file %s: fsync failed: %s", self.path, err)
         if self._dirty:

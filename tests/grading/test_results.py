@@ -16,6 +16,7 @@ from typing import Any
 import orjson
 
 from simbridge.grading.results import ResultsLog
+from simbridge.runner import offload
 from simbridge.tools.client import RosbridgeClient
 from tests.helpers import ROOT, TIMEOUT_FACTOR
 
@@ -153,7 +154,7 @@ async def test_on_the_loop_the_fsync_runs_off_it_and_every_line_is_kept(
 
     monkeypatch.setattr(os, "fsync", fsync)
     path = tmp_path / "results.jsonl"
-    log = ResultsLog(path)
+    log = ResultsLog(path, offload=offload)
     log.open()
     for attempt in ("a1", "a2", "a3"):
         log.start(attempt, {"task_id": "t"})
