@@ -93,16 +93,21 @@ def response_svg(report: dict[str, Any]) -> str:
         f'<text x="12" y="{(_T + _H - _B) / 2}" transform="rotate(-90 12 {(_T + _H - _B) / 2})"'
         f' text-anchor="middle">{html.escape(what)} ({unit})</text>'
     )
-    for label, v, colour in lines:
+    for _, v, colour in lines:
         out.append(
             f'<line x1="{_L}" x2="{_W - _R}" y1="{py(v):.1f}" y2="{py(v):.1f}" '
             f'stroke="{colour}" stroke-dasharray="5 3"/>'
         )
-        if label:
-            out.append(
-                f'<text x="{_W - _R - 4}" y="{py(v) - 3:.1f}" text-anchor="end" '
-                f'fill="{colour}">{html.escape(label)}</text>'
-            )
+    # each label just above its line, from the top down, at least a line of text apart (the
+    # setpoint, its band and the overshoot line are often a few pixels apart)
+    below = float(_T + 10)
+    for label, v, colour in sorted((x for x in lines if x[0]), key=lambda x: py(x[1])):
+        ty = max(py(v) - 3, below)
+        below = ty + 12
+        out.append(
+            f'<text x="{_W - _R - 4}" y="{ty:.1f}" text-anchor="end" '
+            f'fill="{colour}">{html.escape(label)}</text>'
+        )
     for label, v, colour in vlines:
         out.append(
             f'<line x1="{px(v):.1f}" x2="{px(v):.1f}" y1="{_T}" y2="{_H - _B}" '
@@ -111,7 +116,9 @@ def response_svg(report: dict[str, Any]) -> str:
         right = px(v) > _W - _R - 110  # near the right edge: the label goes left of the line
         x = px(v) - 3 if right else px(v) + 3
         anchor = "end" if right else "start"
-        ty = _T + 12 + 12 * vlines.index((label, v, colour))
+        # at the foot of the plot, where a settled response leaves room (the top holds the
+        # setpoint's labels)
+        ty = _H - _B - 4 - 12 * vlines.index((label, v, colour))
         out.append(
             f'<text x="{x:.1f}" y="{ty}" text-anchor="{anchor}" fill="{colour}">'
             f"{html.escape(label)}</text>"
