@@ -44,6 +44,7 @@ __all__ = [
     "SimParams",
     "ValidationError",
     "WorldSpec",
+    "check_numbers",
     "check_ros2_role",
     "default_params_path",
     "default_world_path",
@@ -388,7 +389,11 @@ class NamedRobotSpec(RobotSpec):
     name: str = setting(before=check_robot_name, description="the robot's topic namespace")
 
 
-def _check_numbers(value: Any, count: int, what: str) -> list[float]:
+def check_numbers(value: Any, count: int, what: str) -> list[float]:
+    """Return ``value`` as ``count`` floats, or raise ``ValueError`` saying what was ``what``.
+
+    The checks of a world file's walls, points and poses (and a task's), for ``before=``.
+    """
     if not isinstance(value, Sequence) or isinstance(value, str):
         msg = f"is {value!r}, not a list; expected {what}"
         raise ValueError(msg)
@@ -406,7 +411,7 @@ def _check_numbers(value: Any, count: int, what: str) -> list[float]:
 
 def _frame_pose(value: Any) -> list[float]:
     count = len(value) if isinstance(value, list) else 0
-    return _check_numbers(
+    return check_numbers(
         value, 6 if count == 6 else 3, "[x, y, yaw] or [x, y, z, roll, pitch, yaw]"
     )
 
@@ -417,7 +422,7 @@ def _walls(value: Any) -> Any:
         raise ValueError(msg)
     for i, seg in enumerate(value):
         try:
-            _check_numbers(seg, 4, "[x1, y1, x2, y2]")
+            check_numbers(seg, 4, "[x1, y1, x2, y2]")
         except ValueError as err:
             raise ValidationError.one(str(err), f"[{i}]") from None
     return value
@@ -432,7 +437,7 @@ def _polygons(value: Any) -> Any:
             raise ValidationError.one("needs at least 2 points [x, y]", f"[{i}]")
         for j, pt in enumerate(poly):
             try:
-                _check_numbers(pt, 2, "[x, y]")
+                check_numbers(pt, 2, "[x, y]")
             except ValueError as err:
                 raise ValidationError.one(str(err), f"[{i}][{j}]") from None
     return value
@@ -460,7 +465,7 @@ def _floor_polygon(value: Any) -> Any:
         raise ValueError(msg)
     for j, pt in enumerate(value):
         try:
-            _check_numbers(pt, 2, "[x, y]")
+            check_numbers(pt, 2, "[x, y]")
         except ValueError as err:
             raise ValidationError.one(str(err), f"[{j}]") from None
     return value

@@ -28,7 +28,7 @@ from typing import Any, Literal
 
 import orjson
 
-from simbridge.config import finite_number
+from simbridge.config import check_numbers, finite_number
 from simbridge.errors import ConfigError
 from simbridge.schema import Record, ValidationError, setting
 
@@ -63,35 +63,29 @@ MAX_TASK_BYTES = 64_000
 
 
 def _pose(value: Any) -> Any:
-    if not isinstance(value, list | tuple) or len(value) != 3:
-        msg = f"must be [x, y, theta], got {value!r}"
-        raise ValueError(msg)
-    return value
+    return check_numbers(value, 3, "[x, y, theta]")
 
 
 def _point(value: Any) -> Any:
-    if not isinstance(value, list | tuple) or len(value) != 2:
-        msg = f"must be [x, y], got {value!r}"
-        raise ValueError(msg)
-    return value
+    return check_numbers(value, 2, "[x, y]")
 
 
 def _points(value: Any) -> Any:
     if not isinstance(value, list) or not value:
         msg = f"must be a list of [x, y] points, got {value!r}"
         raise ValueError(msg)
+    out = []
     for i, p in enumerate(value):
-        if not isinstance(p, list | tuple) or len(p) != 2:
-            msg = f"[{i}] must be [x, y], got {p!r}"
-            raise ValueError(msg)
-    return value
+        try:
+            out.append(check_numbers(p, 2, "[x, y]"))
+        except ValueError as err:
+            msg = f"[{i}] {err}"
+            raise ValueError(msg) from None
+    return out
 
 
 def _segment(value: Any) -> Any:
-    if not isinstance(value, list | tuple) or len(value) != 4:
-        msg = f"must be [x1, y1, x2, y2], got {value!r}"
-        raise ValueError(msg)
-    return value
+    return check_numbers(value, 4, "[x1, y1, x2, y2]")
 
 
 class WallGoal(Record):
