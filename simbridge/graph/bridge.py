@@ -299,33 +299,21 @@ class RobotBridge:
             if not (odom_wanted or tf_wanted):
                 continue  # nobody listens to this robot's pose: no message is built
             s = robot.state if robot.plant is None else robot.plant.odom
-            q = _quaternion(s.theta)
-            position = {"x": s.x, "y": s.y, "z": 0.0}
             odom_frame = robot.frame("odom")
             base = robot.frame("base_link")
+            odom = _odometry(stamp, odom_frame, base, s)
             if odom_wanted:
-                odom = {
-                    "header": {"stamp": stamp, "frame_id": odom_frame},
-                    "child_frame_id": base,
-                    "pose": {
-                        "pose": {"position": position, "orientation": q},
-                        "covariance": _ZERO36,
-                    },
-                    "twist": {
-                        "twist": {
-                            "linear": {"x": s.v, "y": 0.0, "z": 0.0},
-                            "angular": {"x": 0.0, "y": 0.0, "z": s.omega},
-                        },
-                        "covariance": _ZERO36,
-                    },
-                }
                 g.publish(rt.odom, odom, now)
             if tf_wanted:
+                pose = odom["pose"]["pose"]
                 transforms.append(
                     {
                         "header": {"stamp": stamp, "frame_id": odom_frame},
                         "child_frame_id": base,
-                        "transform": {"translation": position, "rotation": q},
+                        "transform": {
+                            "translation": pose["position"],
+                            "rotation": pose["orientation"],
+                        },
                     }
                 )
         if tf_wanted:
