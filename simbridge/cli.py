@@ -219,8 +219,24 @@ def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> Non
         "--ros-distro",
         choices=["humble", "jazzy", "kilted"],
         default=None,
-        help="match this distribution's rmw_zenoh: humble has no type hashes, jazzy and "
-        "kilted use RIHS01 (default: $ROS_DISTRO, else jazzy)",
+        help="match this distribution's rmw_zenoh and DDS middlewares: humble has no type "
+        "hashes (and 24-byte GIDs over DDS), jazzy and kilted use RIHS01 (default: "
+        "$ROS_DISTRO, else jazzy)",
+    )
+
+
+def _add_dds_options(parser: argparse.ArgumentParser, env: Environment) -> None:
+    """Options of ROS 2 over DDS (the ``[dds]`` extra; see the README and docs/dds.md)."""
+    group = parser.add_argument_group(
+        'ROS 2 through DDS, as rmw_fastrtps or rmw_cyclonedds (needs: pip install "simbridge[dds]")'
+    )
+    group.add_argument(
+        "--dds",
+        action="store_true",
+        default=bool(env.dds),
+        help="join the ROS 2 graph over DDS as a default ROS 2 install does: domain "
+        "ROS_DOMAIN_ID (default 0), ROS_LOCALHOST_ONLY and ROS_AUTOMATIC_DISCOVERY_RANGE "
+        "honoured; --ros2-role and --ros-distro apply [SIMBRIDGE_DDS]",
     )
 
 
@@ -280,8 +296,11 @@ def _zenoh_options(args: argparse.Namespace) -> Any:
         ConfigError: the extra is not installed, or a setting is invalid.
     """
     if not args.zenoh:
-        if args.zenoh_connect or args.zenoh_listen or args.ros_distro:
-            msg = "--zenoh-connect, --zenoh-listen and --ros-distro need --zenoh"
+        if args.zenoh_connect or args.zenoh_listen:
+            msg = "--zenoh-connect and --zenoh-listen need --zenoh"
+            raise ConfigError(msg)
+        if args.ros_distro and not args.dds:
+            msg = "--ros-distro needs --zenoh or --dds"
             raise ConfigError(msg)
         return None
     from simbridge.zenoh.config import ZenohOptions
@@ -291,6 +310,21 @@ def _zenoh_options(args: argparse.Namespace) -> Any:
     return ZenohOptions.from_env(
         distro=args.ros_distro, connect=args.zenoh_connect, listen=args.zenoh_listen
     )
+
+
+def _dds_options(args: argparse.Namespace) -> Any:
+    """Return the DdsOptions of ``--dds``, or None without it.
+
+    Raises:
+        ConfigError: the extra is not installed, or a setting is invalid.
+    """
+    if not args.dds:
+        return None
+    from simbridge.ros2.dds.link import import_cyclonedds
+    from simbridge.ros2.dds.options import DdsOptions
+
+    import_cyclonedds()  # exits at once, with the install command, when the extra is missing
+    return DdsOptions.from_env(distro=args.ros_distro)
 
 
 def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
@@ -389,6 +423,7 @@ def _run_parser(env: Environment) -> argparse.ArgumentParser:
     _add_config_options(parser, env)
     _add_security_options(parser, env)
     _add_zenoh_options(parser, env)
+    _add_dds_options(parser, env)
     _add_foxglove_options(parser, env)
     parser.add_argument(
         "--admin-token",
@@ -490,12 +525,13 @@ async def _serve(
     record: tuple[str, list[str] | None] | None = None,
     zenoh: Any = None,
     no_sim: bool = False,
+    dds: Any = None,
 ) -> int:
     import asyncio
 
     from simbridge.runner import App  # imported late: `simbridge --help` stays fast
 
-    app = App(settings, world=world, params=params, zenoh=zenoh, no_sim=no_sim)
+    app = App(settings, world=world, params=params, zenoh=zenoh, no_sim=no_sim, dds=dds)
     try:
         await app.start()
     except OSError as err:
@@ -684,12 +720,13 @@ def _cmd_run(argv: Sequence[str]) -> int:
         load_params(args.params)
         record = (args.record, args.record_topics) if args.record else None
         zenoh = _zenoh_options(args)
+        dds = _dds_options(args)
         _import_asyncio(tls=settings.certfile is not None)
         raise_file_limit()
         import asyncio
 
         return asyncio.run(
-            _serve(settings, args.world, args.params, record, zenoh, no_sim=args.no_sim)
+            _serve(settings, args.world, args.params, record, zenoh, no_sim=args.no_sim, dds=dds)
         )
     except ConfigError as err:
         print(f"simbridge: {err}", file=sys.stderr)

@@ -791,6 +791,13 @@ class ServerSettings(Record, frozen=True):
     zenoh_inbox_bytes: Count = 16_000_000
     #: Liveliness tokens of other processes (their nodes, topics, services) kept at most.
     zenoh_max_remote_tokens: Count = 20_000
+    # -- ROS 2 over DDS (--dds, the [dds] extra; docs/dds.md) --
+    #: Bytes of one DDS sample from another participant at most; bigger ones are dropped.
+    dds_max_sample_bytes: Count = 1_000_000
+    #: Bytes of DDS samples waiting for the event loop at most (past it, new ones are dropped).
+    dds_inbox_bytes: Count = 16_000_000
+    #: Writers and readers of other participants kept at most (each) from DDS discovery.
+    dds_max_remote_endpoints: Count = 20_000
     # -- the Foxglove WebSocket protocol (the [foxglove] extra; README "Foxglove, Lichtblick and
     # PlotJuggler") --
     #: Port of the Foxglove WebSocket protocol (``foxglove.sdk.v1``) beside rosbridge (None: off).
@@ -881,6 +888,7 @@ class Environment(Record, frozen=True):
     demo_nodes: bool | None = None
     no_sim: bool | None = None
     zenoh: bool | None = None
+    dds: bool | None = None
     ros2_role: str | None = None
     record: str | None = None
     log_level: LogLevel | None = None

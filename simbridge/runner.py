@@ -44,6 +44,8 @@ from simbridge.web.pool import Pool
 
 if TYPE_CHECKING:
     from simbridge.foxglove.front import FoxgloveFront
+    from simbridge.ros2.dds.link import DdsLink
+    from simbridge.ros2.dds.options import DdsOptions
     from simbridge.zenoh.config import ZenohOptions
     from simbridge.zenoh.link import ZenohLink
 
@@ -170,6 +172,7 @@ class App:
         seed: int = 0,
         zenoh: ZenohOptions | None = None,
         no_sim: bool = False,
+        dds: DdsOptions | None = None,
     ) -> None:
         #: Network settings.
         self.settings = settings or ServerSettings()
@@ -255,6 +258,13 @@ class App:
 
             self.zenoh = ZenohLink(self.graph, zenoh, simulator=not no_sim)
             self.tick_hooks.append(self.zenoh.tick)
+        #: The ROS 2 graph through DDS (``--dds``), or None.
+        self.dds: DdsLink | None = None
+        if dds is not None:
+            from simbridge.ros2.dds.link import DdsLink  # the [dds] extra, only when asked
+
+            self.dds = DdsLink(self.graph, dds, simulator=not no_sim)
+            self.tick_hooks.append(self.dds.tick)
         #: The Foxglove WebSocket protocol (``--foxglove-port``), or None.
         self.foxglove: FoxgloveFront | None = None
         s = self.settings
@@ -293,6 +303,7 @@ class App:
             "loop": {**self.stats.summary(), "failures": self.robot.failures},
             **({"http": self.http_pool.stats()} if self._http is not None else {}),
             **({"zenoh": self.zenoh.health()} if self.zenoh is not None else {}),
+            **({"dds": self.dds.health()} if self.dds is not None else {}),
             **({"foxglove": self.foxglove.health()} if self.foxglove is not None else {}),
         }
 
@@ -313,6 +324,8 @@ class App:
         self._loop_task = asyncio.create_task(self._run_loop(), name="simulation")
         if self.zenoh is not None:
             await self.zenoh.start()
+        if self.dds is not None:
+            await self.dds.start()
         if self.foxglove is not None:
             await self.foxglove.start()
         self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
@@ -327,6 +340,8 @@ class App:
         self.grader.close()  # runs in progress are recorded as interrupted
         if self.zenoh is not None:
             await self.zenoh.close()
+        if self.dds is not None:
+            await self.dds.close()
         if self.foxglove is not None:
             await self.foxglove.close()
         if self._http is not None:

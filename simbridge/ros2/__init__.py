@@ -1,0 +1,1 @@
+"""What ROS 2 transports share, and each of them (DDS here; Zenoh moves in)."""

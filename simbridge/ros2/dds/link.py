@@ -1,0 +1,870 @@
+"""simbridge on the ROS 2 graph through DDS, as a ROS 2 node on Fast DDS or Cyclone DDS.
+
+:class:`DdsLink` keeps one Cyclone DDS participant beside the graph and maps both ways:
+
+* **outward**: every topic an in-process node (``/virtual_robot``, ``/sim``, ...) or a
+  rosbridge client (as ``/rosbridge_websocket``) publishes gets a DDS writer on ``rt/<name>``
+  with the ROS type's DDS name; every topic they subscribe to a reader. Writers are reliable
+  (so both reliable and best-effort readers match), volatile with depth 10, or transient-local
+  with depth 1 for latched topics (``/tf_static``, ``/walls``). The bytes written are the
+  message's CDR, made once and shared with ``cbor-raw`` and Zenoh. The participant carries
+  ``enclave=/;``, each endpoint from Iron on its ``typehash=``; the nodes and their endpoints
+  go out on ``ros_discovery_info``;
+* **inward**: writers and readers of other participants (from DDS discovery) on ``rt/``
+  topics of a type the registry knows join the graph while they exist, under the node that
+  ``ros_discovery_info`` names (``_NODE_NAME_UNKNOWN_`` without it), so rosapi lists them and
+  rosbridge clients subscribe and publish.
+
+Cyclone's threads run the data listeners: they only take the samples' bytes and hand them to
+the event loop through a bounded inbox (samples and bytes), dropping and counting past it.
+Discovery is read on the event loop at each reconcile (every 0.5 s). Whatever comes from DDS
+passes the graph's admission as one client of the ROS 2 peers' role (``--ros2-role``).
+Bad input (a payload that is not CDR of its type, an unknown type, a name that clashes, a
+participant that vanishes) becomes a counter and a rate-limited log line, never an exception
+in the loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import contextlib
+import importlib
+import logging
+import threading
+import time
+from collections import Counter, deque
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+from simbridge.errors import ConfigError, SimbridgeError
+from simbridge.graph import BRIDGE_NODE, Graph, Topic
+from simbridge.graph.guard import ros2_access
+from simbridge.graph.topics import Peer
+from simbridge.msgs.cdr import CdrReader, CdrWriter
+from simbridge.protocol import Outgoing
+from simbridge.ros2.dds.options import DdsOptions
+from simbridge.ros2.dds.types import IdlTypes
+from simbridge.ros2.dds.wire import (
+    DISCOVERY_TOPIC,
+    DISCOVERY_TYPE,
+    ENCLAVE_USER_DATA,
+    ParticipantInfo,
+    encode_participant_info,
+    gid_size,
+    node_entities,
+    read_participant_info,
+    ros_name,
+    topic_name,
+    typehash_user_data,
+)
+from simbridge.zenoh.names import dds_type, ros_type
+from simbridge.zenoh.typehash import TypeHasher
+
+
+__all__ = ["DdsLink", "DdsNode", "import_cyclonedds"]
+
+logger = logging.getLogger(__name__)
+
+INSTALL_HINT = 'pip install "simbridge[dds]" (in a checkout: pip install ".[dds]")'
+#: Seconds between two reads of DDS discovery and comparisons with the graph.
+RECONCILE_PERIOD = 0.5
+#: Seconds between two log lines about the same problem.
+LOG_EVERY = 30.0
+#: Topics that many processes publish at once (every other name has one owner).
+SHARED_TOPICS = frozenset({"/tf", "/tf_static", "/rosout", "/parameter_events"})
+#: Samples waiting for the event loop at most (past it, new ones are dropped and counted).
+INBOX_LIMIT = 20_000
+#: Samples handed to the graph per event-loop callback at most, and their bytes at most.
+DRAIN_BATCH = 500
+DRAIN_BYTES = 1_000_000
+#: Samples a data listener takes from its reader at once.
+TAKE_BATCH = 64
+#: Discovery samples read per reconcile at most, per built-in topic.
+DISCOVERY_BATCH = 2_000
+#: What a node of another participant is called in rosapi's node list.
+REMOTE_NODE = "a ROS 2 node (DDS)"
+#: rmw_dds_common's name for an endpoint no ``ros_discovery_info`` accounts for.
+UNKNOWN_NODE = "/_NODE_NAME_UNKNOWN_"
+#: The writer history depth of a volatile topic (rclcpp's default profile).
+DEPTH = 10
+
+
+def import_cyclonedds(what: str = "--dds") -> Any:
+    """Import the Cyclone DDS binding for ``what`` (the option the user gave).
+
+    Raises:
+        ConfigError: it is not installed (the message names ``what`` and the install command).
+    """
+    try:
+        return importlib.import_module("cyclonedds.domain")
+    except ImportError:
+        msg = f"{what} needs the DDS extra: {INSTALL_HINT}"
+        raise ConfigError(msg) from None
+
+
+class DdsNode(str):
+    """A node of another DDS participant, as the owner of a topic's publisher in the graph.
+
+    It reads as the node's name but is never equal to a local node of that name, nor to a
+    node of that name in another participant.
+    """
+
+    participant: str
+
+    def __new__(cls, name: str, participant: str) -> DdsNode:
+        """Make the owner for node ``name`` of the participant ``participant`` (its GUID)."""
+        node = super().__new__(cls, name)
+        node.participant = participant
+        return node
+
+    def __eq__(self, other: object) -> bool:
+        return (
+            isinstance(other, DdsNode)
+            and str.__eq__(self, other)
+            and self.participant == other.participant
+        )
+
+    def __ne__(self, other: object) -> bool:
+        return not self.__eq__(other)
+
+    def __hash__(self) -> int:
+        return hash(("dds", str(self), self.participant))
+
+
+@dataclass(eq=False, slots=True)
+class _Endpoint:
+    """A writer or reader simbridge made."""
+
+    name: str
+    type: str
+    node: str
+    handle: Any
+    gid: bytes
+    latched: bool = False
+    #: Readers matched (writers only; kept by Cyclone's listener thread).
+    matched: int = 0
+
+
+@dataclass(frozen=True, slots=True)
+class _Remote:
+    """An endpoint of another participant, from DDS discovery."""
+
+    participant: bytes
+    name: str  # the ROS name (``/odom``)
+    type: str  # the ROS type (``nav_msgs/msg/Odometry``), or the DDS name if not ROS's
+    latched: bool
+
+
+class DdsLink:
+    """The graph's front end on DDS (see the module's docstring)."""
+
+    def __init__(self, graph: Graph, options: DdsOptions, *, simulator: bool = False) -> None:
+        #: The graph mapped onto DDS.
+        self.graph = graph
+        #: Domain, distribution, discovery range.
+        self.options = options
+        #: Whether this process simulates robots (not ``--no-sim``).
+        self.simulator = simulator
+        self.dds = import_cyclonedds()
+        self.cdr = CdrWriter(graph.registry)
+        self.reader = CdrReader(graph.registry)
+        self.types = IdlTypes(graph.registry)
+        self.hasher = TypeHasher(graph.registry, options.distro)  # type: ignore[arg-type]
+        self.gid_size = gid_size(options.distro)
+        #: "starting", "running", "closed", "failed".
+        self.state = "starting"
+        self.error: str | None = None
+        self.participant: Any = None
+        self.guid = b""
+        self._loop: asyncio.AbstractEventLoop | None = None
+        self._writers: dict[str, _Endpoint] = {}
+        self._readers: dict[str, _Endpoint] = {}
+        self._topics: dict[tuple[str, str], Any] = {}  # (DDS name, DDS type) -> Topic
+        self._discovery_writer: Any = None
+        self._discovery_reader: Any = None
+        self._builtin: list[tuple[str, Any]] = []
+        self._announced: bytes | None = None
+        #: Other participants: GUID -> their ParticipantEntitiesInfo (once they sent one).
+        self._participants: set[bytes] = set()
+        self._infos: dict[bytes, ParticipantInfo] = {}
+        #: Remote endpoints by their GUID, writers and readers.
+        self._remote_writers: dict[bytes, _Remote] = {}
+        self._remote_readers: dict[bytes, _Remote] = {}
+        #: Inward: topic owners added to the graph, remote subscriptions' markers, nodes.
+        self._imported: dict[str, dict[DdsNode, str]] = {}
+        self._markers: dict[str, dict[DdsNode, Callable[[Any, Any], None]]] = {}
+        self._marker_ids: set[int] = set()
+        self._remote_nodes: set[str] = set()
+        session = graph.new_session()
+        # whatever comes from DDS passes admission as one client of the ROS 2 peers' role
+        scope, admin = ros2_access(graph.settings)
+        session.connect(scope, admin)
+        self._session = session
+        self._refusals: dict[str, str | None] = {}
+        self._forwarding = False
+        self._next_reconcile = 0.0
+        self._logged: dict[str, float] = {}
+        #: Samples from Cyclone's threads waiting for the event loop: (topic, bytes).
+        self._inbox: deque[tuple[str, bytes]] = deque()
+        self._inbox_bytes = 0
+        self._inbox_lock = threading.Lock()
+        self._inbox_rung = False
+        self.max_sample = graph.settings.dds_max_sample_bytes
+        self.max_inbox = graph.settings.dds_inbox_bytes
+        self.max_remote = graph.settings.dds_max_remote_endpoints
+        #: Counters for /healthz.
+        self.stats: Counter[str] = Counter()
+        graph.topics.taps.append(self._on_deliver)
+
+    # -- lifecycle ------------------------------------------------------------------------
+
+    async def start(self) -> None:
+        """Join the domain (the participant, ``ros_discovery_info``, discovery readers)."""
+        self._loop = asyncio.get_running_loop()
+        try:
+            self._open()
+        except Exception as err:  # Cyclone refuses the configuration or the network
+            self.state, self.error = "failed", str(err)
+            logger.error("DDS participant could not start: %s", err)
+            return
+        self.state = "running"
+        logger.info(
+            "DDS: participant %s, domain %d, ROS 2 %s, discovery %s",
+            self.guid.hex(),
+            self.options.domain,
+            self.options.distro,
+            self.options.discovery,
+        )
+        self.reconcile()
+
+    def _open(self) -> None:
+        dds = self.dds
+        core = importlib.import_module("cyclonedds.core")
+        builtin = importlib.import_module("cyclonedds.builtin")
+        dds.Domain(self.options.domain, self.options.cyclone_config())
+        qos = core.Qos(core.Policy.Userdata(ENCLAVE_USER_DATA))
+        self.participant = dds.DomainParticipant(self.options.domain, qos=qos)
+        self.guid = self.participant.guid.bytes
+        policy = core.Policy
+        t = importlib.import_module("cyclonedds.idl.types")
+        gid = self.types.named(
+            "rmw_dds_common::msg::dds_::Gid_", {"data": t.array[t.uint8, self.gid_size]}
+        )
+        node = self.types.named(
+            "rmw_dds_common::msg::dds_::NodeEntitiesInfo_",
+            {
+                "node_namespace": t.bounded_str[256],
+                "node_name": t.bounded_str[256],
+                "reader_gid_seq": t.sequence[gid],
+                "writer_gid_seq": t.sequence[gid],
+            },
+        )
+        info = self.types.named(
+            DISCOVERY_TYPE, {"gid": gid, "node_entities_info_seq": t.sequence[node]}
+        )
+        topic = importlib.import_module("cyclonedds.topic").Topic(
+            self.participant, DISCOVERY_TOPIC, info
+        )
+        pub = importlib.import_module("cyclonedds.pub")
+        sub = importlib.import_module("cyclonedds.sub")
+        self._discovery_writer = pub.DataWriter(
+            self.participant,
+            topic,
+            qos=core.Qos(
+                policy.Reliability.Reliable(100_000_000),
+                policy.Durability.TransientLocal,
+                policy.History.KeepLast(1),
+            ),
+        )
+        self._discovery_reader = sub.DataReader(
+            self.participant,
+            topic,
+            qos=core.Qos(
+                policy.Reliability.Reliable(100_000_000),
+                policy.Durability.TransientLocal,
+                policy.History.KeepLast(1),
+                policy.IgnoreLocal.Participant,
+            ),
+        )
+        for kind, which in (
+            ("participant", builtin.BuiltinTopicDcpsParticipant),
+            ("writer", builtin.BuiltinTopicDcpsPublication),
+            ("reader", builtin.BuiltinTopicDcpsSubscription),
+        ):
+            self._builtin.append((kind, builtin.BuiltinDataReader(self.participant, which)))
+
+    async def close(self) -> None:
+        """Leave the domain (every endpoint goes with the participant)."""
+        participant, self.participant = self.participant, None
+        self._loop = None  # Cyclone's threads hand nothing more to the event loop
+        if participant is None:
+            return
+        self.state = "closed"
+        self._writers.clear()
+        self._readers.clear()
+        self._builtin.clear()
+        self._topics.clear()
+        self._discovery_writer = self._discovery_reader = None
+        # deleting the participant deletes its entities and waits for its listeners
+        with contextlib.suppress(Exception):
+            participant.__del__()
+
+    def health(self) -> dict[str, Any]:
+        """Return the ``dds`` part of ``/healthz``."""
+        out: dict[str, Any] = {
+            "state": self.state,
+            "guid": self.guid.hex(),
+            "domain": self.options.domain,
+            "ros_distro": self.options.distro,
+            "discovery": self.options.discovery,
+            "writers": len(self._writers),
+            "readers": len(self._readers),
+            "remote_participants": len(self._participants),
+            "remote_writers": len(self._remote_writers),
+            "remote_readers": len(self._remote_readers),
+            **dict(self.stats),
+        }
+        if self.error:
+            out["error"] = self.error
+        return out
+
+    # -- the periodic pass ------------------------------------------------------------------
+
+    def tick(self, now: float) -> None:
+        """Read discovery and bring the endpoints in line with the graph (every 0.5 s)."""
+        if self.participant is None or now < self._next_reconcile:
+            return
+        self._next_reconcile = now + RECONCILE_PERIOD
+        self.reconcile()
+
+    def reconcile(self) -> None:
+        """Read discovery, import what other participants have, export what the graph has."""
+        if self.participant is None:
+            return
+        self.stats["reconciles"] += 1
+        try:
+            self._read_discovery()
+        except Exception as err:  # a discovery sample Cyclone or we cannot read
+            self._log("discovery", f"DDS: discovery not read: {err}")
+        self._import_remote()
+        self._export_local()
+        self._announce()
+
+    # -- discovery ------------------------------------------------------------------------
+
+    def _read_discovery(self) -> None:
+        core = importlib.import_module("cyclonedds.core")
+        alive_state = core.InstanceState.Alive
+        for kind, reader in self._builtin:
+            for sample in reader.take(DISCOVERY_BATCH):
+                info = getattr(sample, "sample_info", None)
+                alive = info is None or info.instance_state == alive_state
+                if kind == "participant":
+                    key = sample.key.bytes
+                    if key == self.guid:
+                        continue
+                    if alive:
+                        self._participants.add(key)
+                    else:
+                        self._forget_participant(key)
+                    continue
+                key = sample.key.bytes
+                table = self._remote_writers if kind == "writer" else self._remote_readers
+                if not alive:
+                    table.pop(key, None)
+                    continue
+                participant = sample.participant_key.bytes
+                if participant == self.guid:
+                    continue
+                remote = self._remote(sample, participant)
+                if remote is None:
+                    continue
+                if key not in table and len(table) >= self.max_remote:
+                    self.stats["remote_refused"] += 1
+                    self._log(
+                        "remote limit",
+                        f"DDS: more than {self.max_remote} remote {kind}s "
+                        "(dds_max_remote_endpoints): the others are ignored",
+                    )
+                    continue
+                table[key] = remote
+        for sample in _take_raw(self._discovery_reader, DISCOVERY_BATCH):
+            data, valid = sample
+            if not valid:
+                continue
+            try:
+                info = read_participant_info(data, self.gid_size)
+            except ValueError as err:
+                self.stats["bad_payloads"] += 1
+                self._log("discovery info", f"DDS: a bad {DISCOVERY_TOPIC} sample: {err}")
+                continue
+            gid = info.gid[:16]
+            if gid != self.guid:
+                self._infos[gid] = info
+
+    def _forget_participant(self, key: bytes) -> None:
+        """A participant left (or its lease ran out): drop it and every endpoint of it."""
+        self._participants.discard(key)
+        self._infos.pop(key, None)
+        for table in (self._remote_writers, self._remote_readers):
+            for gone in [k for k, r in table.items() if r.participant == key]:
+                del table[gone]
+
+    def _remote(self, sample: Any, participant: bytes) -> _Remote | None:
+        """Return the ROS meaning of a discovered endpoint, None if it is not a ROS topic."""
+        parsed = ros_name(sample.topic_name)
+        if parsed is None or parsed[0] != "rt":
+            return None
+        try:
+            type_name = ros_type(sample.type_name)
+        except ValueError:
+            type_name = sample.type_name
+        latched = False
+        with contextlib.suppress(Exception):
+            durability = sample.qos["Durability"]
+            latched = "Transient" in type(durability).__name__ or "TransientLocal" in repr(
+                durability
+            )
+        return _Remote(participant, parsed[1], type_name, latched)
+
+    def _owner(self, guid: bytes, remote: _Remote) -> DdsNode:
+        """The node of a remote endpoint, as ``ros_discovery_info`` names it."""
+        info = self._infos.get(remote.participant)
+        if info is not None:
+            for node in info.nodes:
+                if any(g[:16] == guid for g in (*node.writers, *node.readers)):
+                    return DdsNode(node.fqn, remote.participant.hex())
+        return DdsNode(UNKNOWN_NODE, remote.participant.hex())
+
+    # -- inward -----------------------------------------------------------------------------
+
+    def _import_remote(self) -> None:
+        """Make the graph hold exactly the remote publishers, subscriptions and nodes."""
+        pubs: dict[str, dict[DdsNode, tuple[str, bool]]] = {}
+        for guid, remote in self._remote_writers.items():
+            owner = self._owner(guid, remote)
+            pubs.setdefault(remote.name, {})[owner] = (remote.type, remote.latched)
+        subs: dict[str, dict[DdsNode, str]] = {}
+        for guid, remote in self._remote_readers.items():
+            subs.setdefault(remote.name, {})[self._owner(guid, remote)] = remote.type
+        for name in {*pubs, *self._imported}:
+            self._import_publishers(name, pubs.get(name, {}))
+        for name in {*subs, *self._markers}:
+            self._import_subscriptions(name, subs.get(name, {}))
+        self._import_nodes()
+
+    def _import_publishers(self, name: str, pubs: dict[DdsNode, tuple[str, bool]]) -> None:
+        topics = self.graph.topics
+        if pubs and self._refused(name, f"{next(iter(pubs))}:", count=False):
+            pubs = {}  # the ROS 2 peers' role may not publish it here
+        imported = self._imported.get(name, {})
+        for owner in [o for o in imported if o not in pubs]:
+            del imported[owner]
+            topics.unadvertise(name, owner, None)
+        for owner, (type_name, latched) in pubs.items():
+            if owner in imported:
+                continue
+            if not self.graph.registry.known(type_name):
+                self._log(
+                    f"type {type_name}",
+                    f"DDS: {name} from {owner} has type {type_name}, unknown here: listed, "
+                    "its messages are not bridged",
+                )
+                self.stats["unknown_types"] += 1
+                if "/" not in type_name:
+                    continue  # not even a ROS type name: not listed
+            local = self._local_publisher(name)
+            if local is not None and name not in SHARED_TOPICS:
+                self._log(
+                    f"clash {name}",
+                    f"DDS: {name} of {owner} not bridged: {local} here publishes it already",
+                )
+                self.stats["name_clashes"] += 1
+                continue
+            try:
+                topics.advertise(name, type_name, owner, latch=latched)
+            except SimbridgeError as err:
+                self._log(f"clash {name}", f"DDS: {name} from {owner} not bridged: {err}")
+                self.stats["name_clashes"] += 1
+                continue
+            imported = self._imported.setdefault(name, imported)
+            imported[owner] = type_name
+        if not imported:
+            self._imported.pop(name, None)
+
+    def _import_subscriptions(self, name: str, subs: dict[DdsNode, str]) -> None:
+        topics = self.graph.topics
+        markers = self._markers.get(name, {})
+        for owner in [o for o in markers if o not in subs]:
+            callback = markers.pop(owner)
+            self._marker_ids.discard(id(callback))
+            topics.unsubscribe_internal(name, callback)
+        for owner, type_name in subs.items():
+            if owner in markers or not self.graph.registry.known(type_name):
+                continue
+
+            def marker(msg: Any, source: Any) -> None:
+                """A DDS reader: the message goes out through the delivery tap."""
+
+            try:
+                topics.subscribe_internal(name, type_name, owner, marker)
+            except SimbridgeError as err:
+                self._log(f"clash {name}", f"DDS: {name} of {owner} not bridged: {err}")
+                self.stats["name_clashes"] += 1
+                continue
+            markers = self._markers.setdefault(name, markers)
+            markers[owner] = marker
+            self._marker_ids.add(id(marker))
+        if not markers:
+            self._markers.pop(name, None)
+
+    def _import_nodes(self) -> None:
+        """List the nodes of other participants in the graph (rosapi) while they exist."""
+        nodes = self.graph.nodes
+        wanted = {
+            node.fqn
+            for key, info in self._infos.items()
+            if key in self._participants
+            for node in info.nodes
+        }
+        for name in [n for n in self._remote_nodes if n not in wanted]:
+            self._remote_nodes.discard(name)
+            nodes.pop(name, None)
+        for name in wanted - self._remote_nodes:
+            if name in nodes:
+                self._log(
+                    f"node {name}",
+                    f"DDS: a node {name} of another participant clashes with {name} here "
+                    "(node names must be unique): not listed",
+                )
+                self.stats["name_clashes"] += 1
+                continue
+            nodes[name] = REMOTE_NODE
+            self._remote_nodes.add(name)
+
+    def _local_publisher(self, name: str) -> str | None:
+        topic = self.graph.topics.topics.get(name)
+        if topic is None:
+            return None
+        for owner in topic.publishers:
+            local = _local_owner(owner)
+            if local is not None:
+                return local
+        return None
+
+    # -- outward ----------------------------------------------------------------------------
+
+    def _wanted(self) -> tuple[dict[str, tuple[str, str, bool]], dict[str, tuple[str, str]]]:
+        """Return the local writers (name -> node, type, latched) and readers (name -> ...)."""
+        writers: dict[str, tuple[str, str, bool]] = {}
+        readers: dict[str, tuple[str, str]] = {}
+        for topic in self.graph.topics.topics.values():
+            if topic.type is None or not topic.known:
+                continue
+            for owner in topic.publishers:
+                local = _local_owner(owner)
+                if local is not None:
+                    writers[topic.name] = (local, topic.type, topic.latch)
+                    break
+            for node, callback in topic.internal:
+                if type(node) is str and id(callback) not in self._marker_ids:
+                    readers[topic.name] = (node, topic.type)
+                    break
+            else:
+                if topic.subscriptions:
+                    readers[topic.name] = (BRIDGE_NODE, topic.type)
+        return writers, readers
+
+    def _export_local(self) -> None:
+        writers, readers = self._wanted()
+        for name in [n for n in self._writers if n not in writers]:
+            _delete(self._writers.pop(name).handle)
+        for name in [n for n in self._readers if n not in readers]:
+            _delete(self._readers.pop(name).handle)
+        for name, (node, type_name, latched) in writers.items():
+            entry = self._writers.get(name)
+            if entry is not None and (entry.type, entry.latched) == (type_name, latched):
+                entry.node = node
+                continue
+            if entry is not None:
+                _delete(self._writers.pop(name).handle)
+            try:
+                self._writers[name] = self._make_writer(name, node, type_name, latched)
+            except Exception as err:  # a type Cyclone cannot describe, a refused QoS
+                self._log(f"writer {name}", f"DDS: no writer for {name}: {err}")
+                continue
+            self.stats["writers_made"] += 1
+            topic = self.graph.topics.topics.get(name)
+            if latched and topic is not None and topic.latched is not None:
+                self._write(self._writers[name], topic.latched)
+        for name, (node, type_name) in readers.items():
+            entry = self._readers.get(name)
+            if entry is not None and entry.type == type_name:
+                entry.node = node
+                continue
+            if entry is not None:
+                _delete(self._readers.pop(name).handle)
+            if self.refusal(name) is not None:
+                continue  # the ROS 2 peers' role may not publish it: nothing to read
+            try:
+                self._readers[name] = self._make_reader(name, node, type_name)
+            except Exception as err:
+                self._log(f"reader {name}", f"DDS: no reader for {name}: {err}")
+                continue
+            self.stats["readers_made"] += 1
+
+    def _topic(self, name: str, type_name: str) -> Any:
+        key = (topic_name(name), dds_type(type_name))
+        found = self._topics.get(key)
+        if found is None:
+            topic_mod = importlib.import_module("cyclonedds.topic")
+            found = topic_mod.Topic(self.participant, key[0], self.types.get(type_name))
+            self._topics[key] = found
+        return found
+
+    def _endpoint_qos(self, type_name: str, *, latched: bool, reader: bool) -> Any:
+        core = importlib.import_module("cyclonedds.core")
+        policy = core.Policy
+        policies = [
+            policy.Reliability.Reliable(100_000_000),
+            policy.Durability.TransientLocal if latched else policy.Durability.Volatile,
+            policy.History.KeepLast(1 if latched and not reader else DEPTH),
+            policy.DataRepresentation(use_cdrv0_representation=True),
+        ]
+        if reader:
+            policies.append(policy.IgnoreLocal.Participant)
+        if self.options.distro != "humble":
+            policies.append(policy.Userdata(typehash_user_data(self.hasher.message(type_name))))
+        return core.Qos(*policies)
+
+    def _make_writer(self, name: str, node: str, type_name: str, latched: bool) -> _Endpoint:
+        core = importlib.import_module("cyclonedds.core")
+        pub = importlib.import_module("cyclonedds.pub")
+        entry = _Endpoint(name, type_name, node, None, b"", latched=latched)
+
+        def matched(writer: Any, status: Any) -> None:  # a Cyclone thread
+            entry.matched = status.current_count
+
+        writer = pub.DataWriter(
+            self.participant,
+            self._topic(name, type_name),
+            qos=self._endpoint_qos(type_name, latched=latched, reader=False),
+            listener=core.Listener(on_publication_matched=matched),
+        )
+        entry.handle = writer
+        entry.gid = writer.guid.bytes
+        return entry
+
+    def _make_reader(self, name: str, node: str, type_name: str) -> _Endpoint:
+        core = importlib.import_module("cyclonedds.core")
+        sub = importlib.import_module("cyclonedds.sub")
+
+        def available(reader: Any) -> None:  # a Cyclone thread
+            self.hand_over(name, reader)
+
+        reader = sub.DataReader(
+            self.participant,
+            self._topic(name, type_name),
+            qos=self._endpoint_qos(type_name, latched=False, reader=True),
+            listener=core.Listener(on_data_available=available),
+        )
+        return _Endpoint(name, type_name, node, reader, reader.guid.bytes)
+
+    def _announce(self) -> None:
+        """Write this participant's nodes and endpoints on ``ros_discovery_info`` if changed."""
+        nodes: dict[str, tuple[list[bytes], list[bytes]]] = {}
+        for fqn, what in self.graph.nodes.items():
+            if fqn not in self._remote_nodes and not what.startswith("a ROS 2 node"):
+                nodes[fqn] = ([], [])
+        for entry in self._writers.values():
+            nodes.setdefault(entry.node, ([], []))[1].append(entry.gid)
+        for entry in self._readers.values():
+            nodes.setdefault(entry.node, ([], []))[0].append(entry.gid)
+        info = ParticipantInfo(self.guid, node_entities(nodes))
+        data = encode_participant_info(info, self.gid_size)
+        if data == self._announced or self._discovery_writer is None:
+            return
+        try:
+            _write_raw(self._discovery_writer, data)
+        except Exception as err:
+            self._log("announce", f"DDS: {DISCOVERY_TOPIC} not written: {err}")
+            return
+        self._announced = data
+        self.stats["announced"] += 1
+
+    def _on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
+        """Tap on every delivery in the graph: write it for DDS readers."""
+        if self._forwarding:
+            return
+        entry = self._writers.get(topic.name)
+        if entry is None or not (entry.latched or entry.matched):
+            return
+        self._write(entry, out)
+
+    def _write(self, entry: _Endpoint, out: Outgoing) -> None:
+        try:
+            payload = out.cdr() if out.cdr is not None else None
+            if payload is None:
+                payload = self.cdr.serialize(entry.type, out.msg)
+        except Exception as err:  # a message the CDR writer cannot encode: skip, say so
+            self._log(f"cdr {entry.name}", f"DDS: {entry.name} not sent: {err}")
+            return
+        try:
+            _write_raw(entry.handle, payload)
+        except Exception as err:
+            self._log(f"write {entry.name}", f"DDS: write on {entry.name}: {err}")
+            return
+        self.stats["published"] += 1
+
+    # -- samples from DDS -------------------------------------------------------------------
+
+    def hand_over(self, name: str, reader: Any) -> None:
+        """Take a reader's samples and queue them for the event loop (Cyclone's threads).
+
+        Past ``dds_inbox_bytes`` or :data:`INBOX_LIMIT` samples, or over
+        ``dds_max_sample_bytes``, a sample is dropped here and counted.
+        """
+        try:
+            samples = _take_raw(reader, TAKE_BATCH)
+        except Exception:  # the reader went with the participant
+            return
+        ring = False
+        with self._inbox_lock:
+            for data, valid in samples:
+                if not valid:
+                    continue
+                size = len(data)
+                if size > self.max_sample:
+                    self.stats["dropped_oversized"] += 1
+                    continue
+                if len(self._inbox) >= INBOX_LIMIT or self._inbox_bytes + size > self.max_inbox:
+                    self.stats["dropped_inbox"] += 1
+                    continue
+                self._inbox.append((name, data))
+                self._inbox_bytes += size
+            if self._inbox and not self._inbox_rung:
+                self._inbox_rung = ring = True
+        loop = self._loop
+        if ring and loop is not None:
+            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
+                loop.call_soon_threadsafe(self._drain)
+
+    def _drain(self) -> None:
+        """Hand the samples that arrived to the graph, a bounded batch per callback."""
+        inbox = self._inbox
+        budget = DRAIN_BYTES
+        for _ in range(DRAIN_BATCH):
+            with self._inbox_lock:
+                if not inbox:
+                    break
+                name, payload = inbox.popleft()
+                self._inbox_bytes -= len(payload)
+            self._on_sample(name, payload)
+            budget -= len(payload)
+            if budget <= 0:
+                break
+        with self._inbox_lock:
+            again = bool(inbox) and self._loop is not None
+            self._inbox_rung = again
+        if again:
+            self._loop.call_soon(self._drain)  # type: ignore[union-attr]
+
+    def _on_sample(self, name: str, payload: bytes) -> None:
+        topic = self.graph.topics.topics.get(name)
+        if topic is None or topic.type is None or self.participant is None:
+            return
+        if self._refusals.get(name, "") is not None and self._refused(name, "a sample on"):
+            return
+        self.stats["received"] += 1
+        try:
+            msg = self.reader.read(topic.type, payload)
+        except Exception as err:  # whatever the network sent: reported, never raised
+            self.stats["bad_payloads"] += 1
+            self._log(f"bad {name}", f"DDS: {name}: payload is not CDR of {topic.type}: {err}")
+            return
+        out = self.graph.topics.outgoing(topic, msg, self.graph.stamp())
+        out.cdr = lambda: payload
+        loop = self._loop
+        now = loop.time() if loop is not None else 0.0
+        self._forwarding = True
+        try:
+            self.graph.topics.deliver(topic, out, now, None)
+        except SimbridgeError as err:
+            self._log(f"refused {name}", f"DDS: {name}: refused here: {err}")
+        finally:
+            self._forwarding = False
+
+    # -- access ------------------------------------------------------------------------------
+
+    def refusal(self, name: str) -> str | None:
+        """Return why DDS peers may not publish on ``name``; None if they may (cached)."""
+        try:
+            return self._refusals[name]
+        except KeyError:
+            pass
+        if len(self._refusals) >= 100_000:
+            self._refusals.clear()
+        text = self.graph.admission.publish_refusal(self._session, name)
+        self._refusals[name] = text
+        return text
+
+    def _refused(self, name: str, what: str, *, count: bool = True) -> bool:
+        text = self.refusal(name)
+        if text is None:
+            return False
+        if count:
+            self.stats["refused"] += 1
+        self._log(f"refused {name}", f"DDS: {what} {text} (ROS 2 peers' role; --ros2-role)")
+        return True
+
+    def _log(self, key: str, text: str) -> None:
+        """Log a warning at most once per :data:`LOG_EVERY` seconds per ``key``."""
+        now = time.monotonic()
+        if now - self._logged.get(key, -LOG_EVERY) >= LOG_EVERY:
+            self._logged[key] = now
+            self.graph.log("warn", text, name="simbridge.dds")
+
+
+def _local_owner(owner: object) -> str | None:
+    """The node a topic's owner stands for here; None for another process's node."""
+    if type(owner) is str:
+        return owner
+    if isinstance(owner, str):
+        return None  # a node of another process (DDS or Zenoh)
+    return BRIDGE_NODE  # a rosbridge client
+
+
+def _write_raw(writer: Any, data: bytes) -> None:
+    """Write serialized CDR (with its encapsulation header) on a Cyclone writer."""
+    ret = _clayer().ddspy_write(writer._ref, data)
+    if ret < 0:
+        msg = f"dds_write returned {ret}"
+        raise RuntimeError(msg)
+
+
+def _take_raw(reader: Any, limit: int) -> list[tuple[bytes, bool]]:
+    """Take up to ``limit`` samples of a Cyclone reader as their serialized bytes."""
+    ret = _clayer().ddspy_take(reader._ref, _ANY, limit)
+    if isinstance(ret, int):
+        msg = f"dds_take returned {ret}"
+        raise RuntimeError(msg)
+    return [(bytes(data), bool(info.valid_data)) for data, info in ret]
+
+
+_CLAYER: Any = None
+#: Any sample, view and instance state (Cyclone's DDS_ANY_STATE mask).
+_ANY = 0x7F
+
+
+def _clayer() -> Any:
+    """Cyclone's C layer (imported once: it sits on the path of every sample)."""
+    global _CLAYER
+    if _CLAYER is None:
+        _CLAYER = importlib.import_module("cyclonedds._clayer")
+    return _CLAYER
+
+
+def _delete(entity: Any) -> None:
+    with contextlib.suppress(Exception):
+        entity.__del__()

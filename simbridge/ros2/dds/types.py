@@ -1,0 +1,99 @@
+"""Cyclone DDS topic types made from the registry's definitions.
+
+Cyclone needs a type for each topic: its name (``pkg::msg::dds_::Type_``, what Fast DDS and
+rmw_cyclonedds match on) and its structure (sent as XTypes type information, which another
+Cyclone checks for assignability). The structure is the ROS definition's, every type
+``@final`` so that Cyclone writes XCDR1 as the ROS 2 middlewares do. simbridge writes and reads
+the samples' bytes itself (:mod:`simbridge.msgs.cdr`): these classes are never instantiated
+on the hot path.
+"""
+
+from __future__ import annotations
+
+import importlib
+from typing import Any
+
+from simbridge.msgs.registry import TypeRegistry
+
+
+__all__ = ["IdlTypes"]
+
+_PLACEHOLDER = "structure_needs_at_least_one_member"
+
+
+def _cyclone(module: str) -> Any:
+    return importlib.import_module(module)
+
+
+def _dds_name(ros_name: str) -> str:
+    pkg, kind, name = ros_name.split("/")
+    return f"{pkg}::{kind}::dds_::{name}_"
+
+
+class IdlTypes:
+    """The Cyclone classes of the registry's types, made once each."""
+
+    def __init__(self, registry: TypeRegistry) -> None:
+        t = _cyclone("cyclonedds.idl.types")  # the [dds] extra
+
+        self.registry = registry
+        self._made: dict[str, Any] = {}
+        self._primitives: dict[str, Any] = {
+            "bool": bool,
+            "byte": t.byte,
+            "char": t.uint8,
+            "int8": t.int8,
+            "uint8": t.uint8,
+            "int16": t.int16,
+            "uint16": t.uint16,
+            "int32": t.int32,
+            "uint32": t.uint32,
+            "int64": t.int64,
+            "uint64": t.uint64,
+            "float32": t.float32,
+            "float64": t.float64,
+            "string": str,
+        }
+
+    def get(self, ros_name: str) -> Any:
+        """Return the class of message type ``pkg/msg/Type`` (any spelling the registry takes).
+
+        Raises:
+            TypeNotFoundError: the registry does not know the type.
+            KeyError: a field's primitive has no DDS type here (``wstring``).
+        """
+        spec = self.registry.spec(ros_name)
+        found = self._made.get(spec.name)
+        if found is not None:
+            return found
+        t = _cyclone("cyclonedds.idl.types")
+        idl = _cyclone("cyclonedds.idl")
+        fields: dict[str, Any] = {}
+        for f in spec.fields:
+            base = self.get(f.base) if f.nested else self._primitives[f.base]
+            if f.base == "string" and f.string_bound:
+                base = t.bounded_str[f.string_bound]
+            if f.arraylen > 0:
+                base = t.array[base, f.arraylen]
+            elif f.arraylen == 0:
+                base = t.sequence[base, f.bound] if f.bound else t.sequence[base]
+            elif f.base == "string" and f.bound:
+                base = t.bounded_str[f.bound]
+            fields[f.name] = base
+        if not fields:
+            fields[_PLACEHOLDER] = t.uint8
+        made = _cyclone("cyclonedds.idl.annotations").final(
+            idl.make_idl_struct(spec.name.replace("/", "_"), _dds_name(spec.name), fields)
+        )
+        self._made[spec.name] = made
+        return made
+
+    def named(self, dds_name: str, fields: dict[str, Any]) -> Any:
+        """Return a ``@final`` class of DDS name ``dds_name`` with these fields (made once)."""
+        found = self._made.get(dds_name)
+        if found is None:
+            class_name = dds_name.replace(":", "_")
+            made = _cyclone("cyclonedds.idl").make_idl_struct(class_name, dds_name, fields)
+            found = _cyclone("cyclonedds.idl.annotations").final(made)
+            self._made[dds_name] = found
+        return found
