@@ -87,6 +87,8 @@ NOT_ON_THE_DEFAULT_PATH = (
     "urllib.request",
     "http.client",
     "zenoh",
+    "cyclonedds",
+    "simbridge.ros2.dds.link",
     "mcap",
     "rosbags",
     "simbridge.tools",

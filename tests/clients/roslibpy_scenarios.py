@@ -773,7 +773,18 @@ def action_goals(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
     return out
 
 
+def echo(roslibpy: Any, ros: Any, args: dict[str, Any]) -> JSON:
+    """The first ``count`` messages of ``topic`` (type ``type``), and rosapi's topics."""
+    timeout_s = args.get("timeout_ms", 5000) / 1000
+    messages, _ = collect(
+        roslibpy, ros, args["topic"], args["type"], args.get("count", 1), timeout_s
+    )
+    full = call_service(roslibpy, ros, "/rosapi/topics", "rosapi/Topics", {}, timeout_s)
+    return {"messages": messages, "topics": dict(zip(full["topics"], full["types"], strict=True))}
+
+
 SCENARIOS: dict[str, Callable[[Any, Any, dict[str, Any]], JSON]] = {
+    "echo": echo,
     "action_goals": action_goals,
     "tutorials": tutorials,
     "tf_clients": tf_clients,

@@ -176,6 +176,7 @@ class DdsLink:
         self.state = "starting"
         self.error: str | None = None
         self.participant: Any = None
+        self._domain: Any = None
         self.guid = b""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._writers: dict[str, _Endpoint] = {}
@@ -242,7 +243,8 @@ class DdsLink:
         dds = self.dds
         core = importlib.import_module("cyclonedds.core")
         builtin = importlib.import_module("cyclonedds.builtin")
-        dds.Domain(self.options.domain, self.options.cyclone_config())
+        # kept: the domain (and its configuration) lives as long as this object
+        self._domain = dds.Domain(self.options.domain, self.options.cyclone_config())
         qos = core.Qos(core.Policy.Userdata(ENCLAVE_USER_DATA))
         self.participant = dds.DomainParticipant(self.options.domain, qos=qos)
         self.guid = self.participant.guid.bytes
@@ -309,6 +311,9 @@ class DdsLink:
         # deleting the participant deletes its entities and waits for its listeners
         with contextlib.suppress(Exception):
             participant.__del__()
+        domain, self._domain = self._domain, None
+        with contextlib.suppress(Exception):
+            domain.__del__()
 
     def health(self) -> dict[str, Any]:
         """Return the ``dds`` part of ``/healthz``."""
@@ -633,7 +638,9 @@ class DdsLink:
             policy.DataRepresentation(use_cdrv0_representation=True),
         ]
         if reader:
-            policies.append(policy.IgnoreLocal.Participant)
+            # not what this participant writes; and a peer's type that differs only in
+            # bounds (another Cyclone sends its type's structure) still matches
+            policies += [policy.IgnoreLocal.Participant, policy.TypeConsistency.AllowTypeCoercion()]
         if self.options.distro != "humble":
             policies.append(policy.Userdata(typehash_user_data(self.hasher.message(type_name))))
         return core.Qos(*policies)
