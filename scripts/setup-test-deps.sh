@@ -104,3 +104,45 @@ compose_v2_plugin() {
 
 deploy_packages
 compose_v2_plugin
+
+# --- ROS 2 over DDS tests (tests/ros2/dds): Debian's Fast DDS 2.9 (the library rmw_fastrtps_cpp
+# is made of), fastddsgen (pulls in Java) and a C++ toolchain, then the Fast DDS test peer built
+# once into build/ddspeer (git-ignored), again only when its sources or Fast DDS change. --------
+dds_packages() {
+  local missing=() pkg
+  for pkg in libfastrtps-dev libfastcdr-dev fastddsgen nlohmann-json3-dev cmake g++ make; do
+    dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q 'install ok installed' || missing+=("$pkg")
+  done
+  [ ${#missing[@]} -eq 0 ] && return
+  if [ "$(id -u)" != 0 ] || ! command -v apt-get >/dev/null 2>&1; then
+    echo "setup-test-deps: the DDS tests need: apt-get install ${missing[*]}" >&2
+    return 1
+  fi
+  apt-get -o DPkg::Lock::Timeout=600 update -qq
+  DEBIAN_FRONTEND=noninteractive apt-get -o DPkg::Lock::Timeout=600 install -y -qq \
+    --no-install-recommends "${missing[@]}" >/dev/null
+}
+
+dds_peer() {
+  local src=tests/ros2/dds/peer dest=build/ddspeer stamp log
+  stamp="$(cat "$src"/CMakeLists.txt "$src"/*.cpp "$src"/*.idl | sha256sum | cut -c1-16)"
+  stamp="$stamp fastrtps=$(dpkg-query -W -f='${Version}' libfastrtps-dev)"
+  if [ -x "$dest/ddspeer" ] && [ "$(cat "$dest/.stamp" 2>/dev/null)" = "$stamp" ]; then
+    return
+  fi
+  echo "setup-test-deps: building the Fast DDS test peer into $dest (15-60 s)"
+  log=$(mktemp)
+  if ! { cmake -S "$src" -B "$dest" -DCMAKE_BUILD_TYPE=Release &&
+         cmake --build "$dest" -j "$(nproc)"; } >"$log" 2>&1; then
+    tail -40 "$log" >&2
+    rm -f "$log"
+    echo "setup-test-deps: the Fast DDS test peer did not build" >&2
+    return 1
+  fi
+  rm -f "$log"
+  echo "$stamp" >"$dest/.stamp"
+}
+
+if dds_packages; then
+  dds_peer
+fi
