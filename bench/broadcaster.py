@@ -18,7 +18,7 @@ import time
 
 from websockets.asyncio.server import ServerConnection, broadcast, serve
 
-from simbridge.config import Params, load_world
+from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph, RobotBridge
 from simbridge.sim import World
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from simbridge.config import Params, load_world
+from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph, RobotBridge
 from simbridge.protocol import Outgoing
 from simbridge.sim import World

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from simbridge.config import Params, WorldSpec
+from simbridge.app.config import Params, WorldSpec
 from simbridge.graph import Graph, RobotBridge
 from simbridge.protocol import Frame
 from simbridge.sim import World, raycast

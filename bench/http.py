@@ -25,7 +25,7 @@ from typing import Any
 
 from bench.encoding import _time
 from bench.http_handwritten import serve_http as handwritten
-from simbridge.config import resource_dir
+from simbridge.app.config import resource_dir
 from simbridge.web import HttpResponse, WebApp, serve_http
 from simbridge.web.http import _encode, _Parsed
 

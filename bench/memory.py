@@ -13,9 +13,9 @@
    same server with the cut modules imported first (the default path as it was before the cuts),
    with the ratio. MB here are MiB (VmRSS / 1024), as in the test. Twice: with the page cache
    as found, then with the server's shared libraries evicted from it (read back from disk).
-   "Before" only imports the cut modules (one not installed is skipped): for pydantic it misses
-   what building the old settings models with it cost (the first table's row "pydantic's schema
-   builder" read +2.2 MB before they were replaced).
+   "Before" only imports the cut modules (one not installed is skipped). pydantic is back on
+   the default path since issue 24 (the settings are declared on it): its cost is the first
+   table's row of the settings.
 4. **Exclusive shares**: a child imports the modules the idle server imported, in its order
    (not simbridge's own), once with everything and once without each large package (and so
    without what only that package imports): the difference is what that package alone costs,
@@ -55,7 +55,7 @@ ROOT = Path(__file__).resolve().parent.parent
 GROUPS: list[tuple[str, list[str]]] = [
     ("simbridge.cli (argparse, logging)", ["simbridge.cli"]),
     ("hashlib, hmac, secrets (CPython's own hashes)", ["@hashlib", "secrets"]),
-    ("simbridge.config, simbridge.schema (settings)", ["simbridge.config"]),
+    ("simbridge.app.settings, simbridge.app.config (pydantic)", ["simbridge.app.config"]),
     ("importlib.metadata (websockets' version lookup)", ["importlib.metadata"]),
     ("asyncio (no ssl)", ["@asyncio"]),
     ("numpy", ["numpy"]),
@@ -75,10 +75,7 @@ CUT: list[tuple[str, str]] = [
     ("cbor2", "only with a cbor / cbor-raw subscription"),
     ("simbridge.graph.tutorials", "only with --demo-nodes"),
     ("yaml", "only with a --world, --params or --client-tokens file (and the YAML tools)"),
-    (
-        "pydantic",
-        "never (the settings are simbridge.schema's records; it also imported importlib.metadata)",
-    ),
+    ("pydantic_settings", "only with a SIMBRIDGE_* variable set (the environment's reader)"),
     ("simbridge.msgs.cdr", "only with a cbor-raw subscription, --zenoh or a bag (the CDR codec)"),
     (
         "rosbags.typesys",
@@ -118,7 +115,7 @@ for name, _ in json.loads(sys.argv[2]):
     before = status()
     try:
         importlib.import_module(name)
-    except ImportError:  # e.g. pydantic, no longer a dependency
+    except ImportError:  # an optional package not installed
         rows.append(("+" + name + " (not installed)", (0.0, 0.0, 0.0)))
         continue
     after = status()
@@ -133,7 +130,7 @@ port, http_port, preload = int(sys.argv[1]), sys.argv[2], json.loads(sys.argv[3]
 for name in preload:  # the modules the default path no longer imports, as before the cuts
     try:
         importlib.import_module(name)
-    except ImportError:  # not installed any more (pydantic)
+    except ImportError:  # an optional package not installed
         pass
 
 

@@ -48,7 +48,7 @@ WORLDS = ("default", "classroom")
 
 def _serve(static: str, world: str) -> None:
     """Child process: a simbridge App serving ``static`` on free ports; prints the ports."""
-    from simbridge.config import ServerSettings
+    from simbridge.app.settings import ServerSettings
     from simbridge.runner import App
 
     async def run() -> None:

@@ -22,7 +22,8 @@ from collections.abc import Callable, Hashable
 from typing import Any
 
 from bench.encoding import _time
-from simbridge.config import Params, ServerSettings, load_world
+from simbridge.app.config import Params, load_world
+from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph, RobotBridge
 from simbridge.graph.guard import Guard
 from simbridge.sim import World

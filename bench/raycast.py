@@ -24,7 +24,7 @@ import numpy as np
 import yaml
 
 from bench.encoding import _time
-from simbridge.config import Params, WorldSpec, load_world
+from simbridge.app.config import Params, WorldSpec, load_world
 from simbridge.sim import World
 
 

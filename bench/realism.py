@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import time
 
-from simbridge.config import Params, WorldSpec
+from simbridge.app.config import Params, WorldSpec
 from simbridge.headless import Simulation
 from simbridge.sim import World
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import asyncio
 import time
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.runner import App
 
 

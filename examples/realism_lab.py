@@ -27,7 +27,7 @@ from pathlib import Path
 
 import yaml
 
-from simbridge.config import Params, RealismParams, WorldSpec
+from simbridge.app.config import Params, RealismParams, WorldSpec
 from simbridge.headless import Simulation
 from simbridge.msgs import TypeRegistry
 from simbridge.sim import World

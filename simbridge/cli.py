@@ -3,10 +3,11 @@
 ``simbridge [options]`` runs the server; ``simbridge COMMAND ...`` runs a sub-command
 (``check-config``, ``healthcheck``; see ``simbridge --help``). Every option can also be set by
 an environment variable ``SIMBRIDGE_<OPTION>`` (e.g. ``SIMBRIDGE_PORT=9091``), validated with the
-option's own bounds (:class:`~simbridge.config.Environment`): a bad value is refused naming the
-variable, with exit code 2 as a bad option is. The command line wins. ``healthcheck`` reads
-``SIMBRIDGE_PORT`` without the settings (it runs every few seconds in a container): a bad port is
-an unhealthy probe.
+option's own bounds (:func:`~simbridge.app.settings.environment`): a bad value is refused naming
+the variable, with exit code 2 as a bad option is. The options and variables are generated
+from the settings' declarations (:mod:`simbridge.app.settings`). The command line wins.
+``healthcheck`` reads ``SIMBRIDGE_PORT`` without the settings (it runs every few seconds in a
+container): a bad port is an unhealthy probe.
 """
 
 from __future__ import annotations
@@ -28,9 +29,9 @@ from simbridge.errors import ConfigError, SimbridgeError
 
 
 if TYPE_CHECKING:
-    from simbridge.config import Environment, ServerSettings
+    from simbridge.app.settings import Declared, ServerSettings
 
-# simbridge.config is imported where it is used: `simbridge healthcheck`, a container's
+# simbridge.app is imported where it is used: `simbridge healthcheck`, a container's
 # HEALTHCHECK every few seconds, then costs a bare interpreter (it matters on a Pi).
 
 
@@ -53,145 +54,73 @@ def _env(name: str, default: str | None) -> str | None:
     return os.environ.get(f"SIMBRIDGE_{name}", default)
 
 
-def _typed(kind: Any) -> Callable[[str], Any]:
-    """An argparse ``type`` checking a value as the settings do (:func:`config.parse_value`)."""
-    from simbridge.config import parse_value
+def _typed(declared: Declared) -> Callable[[str], Any]:
+    """An argparse ``type`` checking a value as the settings do (the field's type and bounds)."""
+    from simbridge.app.settings import check
 
     def parse(text: str) -> Any:
         try:
-            return parse_value(kind, text)
+            return check(declared, text)
         except ValueError as err:
             raise argparse.ArgumentTypeError(str(err)) from None
 
     return parse
 
 
-def _environment() -> Environment:
-    """Return the validated ``SIMBRIDGE_*`` variables.
+def _environment() -> dict[str, Any]:
+    """Return the validated ``SIMBRIDGE_*`` variables by option name.
 
     Raises:
         ConfigError: one is invalid (the text names it).
     """
-    from simbridge.config import Environment
+    from simbridge.app.settings import environment
 
-    return Environment.read(os.environ)
-
-
-def _add_config_options(parser: argparse.ArgumentParser, env: Environment) -> None:
-    from simbridge.config import default_params_path, default_world_path
-
-    parser.add_argument(
-        "--world",
-        metavar="FILE",
-        default=env.world,
-        help=f"world file (YAML: walls, obstacles, robot start pose); "
-        f"default: the bundled {default_world_path().name} [SIMBRIDGE_WORLD]",
-    )
-    parser.add_argument(
-        "--params",
-        metavar="FILE",
-        default=env.params,
-        help=f"robot and LiDAR parameter file (YAML); default: the bundled "
-        f"{default_params_path().name}, the course's Raspberry Pi 4B platform [SIMBRIDGE_PARAMS]",
-    )
+    return environment(os.environ)
 
 
-def _add_security_options(parser: argparse.ArgumentParser, env: Environment) -> None:
-    """Options of docs/security.md: tokens, TLS, origins and limits."""
-    from simbridge.config import Count, Seconds, ServerSettings
+def _add_options(
+    parser: argparse.ArgumentParser, env: dict[str, Any], names: set[str] | None = None
+) -> None:
+    """Add the options the settings declare (:class:`~simbridge.app.settings.Option`).
 
-    defaults = ServerSettings()
-    group = parser.add_argument_group("security and limits (see docs/security.md)")
-    group.add_argument(
-        "--client-tokens",
-        metavar="FILE",
-        default=env.client_tokens,
-        help="YAML file 'tokens: {TOKEN: ROBOT}': clients must connect with ?token=TOKEN and "
-        "may command only their robot (see config/classroom_tokens.example.yaml) "
-        "[SIMBRIDGE_CLIENT_TOKENS]",
-    )
-    group.add_argument(
-        "--auth-secret-file",
-        metavar="FILE",
-        default=env.auth_secret_file,
-        help="file holding a rosauth secret (one line): clients may authenticate with the "
-        "rosbridge 'auth' op [SIMBRIDGE_AUTH_SECRET_FILE]",
-    )
-    group.add_argument(
-        "--allowed-origins",
-        metavar="LIST",
-        default=env.allowed_origins,
-        help="comma-separated Origins whose pages may connect, e.g. https://pi.local:8080 "
-        "(default: any) [SIMBRIDGE_ALLOWED_ORIGINS]",
-    )
-    group.add_argument(
-        "--certfile",
-        metavar="PEM",
-        default=env.certfile,
-        help="TLS certificate chain: serve wss:// and https:// [SIMBRIDGE_CERTFILE]",
-    )
-    group.add_argument(
-        "--keyfile",
-        metavar="PEM",
-        default=env.keyfile,
-        help="TLS private key (default: in the certfile) [SIMBRIDGE_KEYFILE]",
-    )
-    group.add_argument(
-        "--max-clients",
-        type=_typed(Count),
-        default=env.max_clients or defaults.max_clients,
-        help="WebSocket clients at most (default: 200) [SIMBRIDGE_MAX_CLIENTS]",
-    )
-    group.add_argument(
-        "--max-http-connections",
-        type=_typed(Count),
-        default=env.max_http_connections or defaults.max_http_connections,
-        help="open connections of the HTTP port at most (default: 256) "
-        "[SIMBRIDGE_MAX_HTTP_CONNECTIONS]",
-    )
-    group.add_argument(
-        "--max-http-connections-per-address",
-        type=_typed(Count),
-        default=env.max_http_connections_per_address or defaults.max_http_connections_per_address,
-        help="open connections of the HTTP port from one client address at most (default: 16; "
-        "a request with the admin token always gets in) "
-        "[SIMBRIDGE_MAX_HTTP_CONNECTIONS_PER_ADDRESS]",
-    )
-    group.add_argument(
-        "--max-message-size",
-        type=_typed(Count),
-        default=env.max_message_size or defaults.max_message_size,
-        help="largest incoming message, bytes (default: 10000000) [SIMBRIDGE_MAX_MESSAGE_SIZE]",
-    )
-    group.add_argument(
-        "--stall-timeout",
-        type=_typed(Seconds),
-        default=env.stall_timeout or defaults.stall_timeout,
-        help="disconnect a client that reads nothing for this many seconds while messages "
-        "wait for it (default: 30) [SIMBRIDGE_STALL_TIMEOUT]",
-    )
-    group.add_argument(
-        "--ping-interval",
-        type=_typed(Seconds),
-        default=env.ping_interval or defaults.ping_interval,
-        help="keepalive ping every this many seconds; a peer that does not answer within "
-        "as long is dropped (default: 20) [SIMBRIDGE_PING_INTERVAL]",
-    )
+    Each has the field's description, default and variable as its help, the field's type and
+    bounds as its check, and the variable's value (``env``) as its default; ``names``: only
+    those options.
+    """
+    from simbridge.app.settings import RunOptions, ServerSettings, options
+
+    groups: dict[str, argparse._ArgumentGroup] = {}
+    for declared in options(ServerSettings, RunOptions):
+        if names is not None and declared.name not in names:
+            continue
+        group = declared.option.group
+        target: argparse._ActionsContainer = parser
+        if group is not None:
+            if group not in groups:
+                groups[group] = parser.add_argument_group(group)
+            target = groups[group]
+        if declared.flag_only:
+            target.add_argument(
+                declared.flag,
+                action="store_true",
+                default=bool(env.get(declared.name, False)),
+                help=declared.help(),
+            )
+            continue
+        target.add_argument(
+            declared.flag,
+            type=_typed(declared),
+            metavar=declared.option.metavar,
+            default=env.get(declared.name, declared.info.default),
+            help=declared.help(),
+        )
 
 
-def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> None:
-    """Options of ROS 2 over Zenoh (the ``[zenoh]`` extra; see the README)."""
-    group = parser.add_argument_group(
-        'ROS 2 through Zenoh, as rmw_zenoh (needs: pip install "simbridge[zenoh]")'
-    )
-    group.add_argument(
-        "--zenoh",
-        action="store_true",
-        default=bool(env.zenoh),
-        help="join the ROS 2 graph as an rmw_zenoh node does: peer, router tcp/localhost:7447, "
-        "domain ROS_DOMAIN_ID (default 0); ZENOH_SESSION_CONFIG_URI and ZENOH_CONFIG_OVERRIDE "
-        "apply as for rmw_zenoh [SIMBRIDGE_ZENOH]",
-    )
+def _add_zenoh_options(parser: argparse.ArgumentParser) -> None:
+    """Options of ROS 2 over Zenoh that have no variable (repeatable, or read from ROS's own)."""
+    from simbridge.app.settings import ZENOH
+
+    group = next(g for g in parser._action_groups if g.title == ZENOH)
     group.add_argument(
         "--zenoh-connect",
         metavar="ENDPOINT",
@@ -207,15 +136,6 @@ def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> Non
         help="listen on this Zenoh endpoint instead of tcp/localhost:0 (repeatable)",
     )
     group.add_argument(
-        "--ros2-role",
-        metavar="ROLE",
-        default=env.ros2_role,
-        help="what ROS 2 peers may do: none (read only), robot:NAME (drive robot NAME), "
-        "robots (drive every robot), admin (everything: a trusted network only); default: as "
-        "a client without a token, none once client tokens are set (docs/security.md) "
-        "[SIMBRIDGE_ROS2_ROLE]",
-    )
-    group.add_argument(
         "--ros-distro",
         choices=["humble", "jazzy", "kilted"],
         default=None,
@@ -225,68 +145,17 @@ def _add_zenoh_options(parser: argparse.ArgumentParser, env: Environment) -> Non
     )
 
 
-def _add_dds_options(parser: argparse.ArgumentParser, env: Environment) -> None:
-    """Options of ROS 2 over DDS (the ``[dds]`` extra; see the README and docs/dds.md)."""
-    group = parser.add_argument_group(
-        'ROS 2 through DDS, as rmw_fastrtps or rmw_cyclonedds (needs: pip install "simbridge[dds]")'
-    )
-    group.add_argument(
-        "--dds",
-        action="store_true",
-        default=bool(env.dds),
-        help="join the ROS 2 graph over DDS as a default ROS 2 install does: domain "
-        "ROS_DOMAIN_ID (default 0), ROS_LOCALHOST_ONLY and ROS_AUTOMATIC_DISCOVERY_RANGE "
-        "honoured; --ros2-role and --ros-distro apply [SIMBRIDGE_DDS]",
-    )
-
-
-def _add_foxglove_options(parser: argparse.ArgumentParser, env: Environment) -> None:
-    """Options of the Foxglove WebSocket protocol (the ``[foxglove]`` extra; see the README)."""
-    from simbridge.config import Count, Port
-
-    group = parser.add_argument_group(
-        'Foxglove, Lichtblick and PlotJuggler natively (needs: pip install "simbridge[foxglove]")'
-    )
-    group.add_argument(
-        "--foxglove-port",
-        type=_typed(Port),
-        default=env.foxglove_port,
-        help="also serve the Foxglove WebSocket protocol (foxglove.sdk.v1) on this port, e.g. "
-        "8765: ws://HOST:8765 in Foxglove, Lichtblick or PlotJuggler [SIMBRIDGE_FOXGLOVE_PORT]",
-    )
-    group.add_argument(
-        "--foxglove-scope",
-        metavar="ACCESS",
-        default=env.foxglove_scope,
-        help="what every Foxglove client may do: admin, * or a robot name; the protocol "
-        "carries no token, so with --client-tokens the port opens only with this "
-        "[SIMBRIDGE_FOXGLOVE_SCOPE]",
-    )
-    group.add_argument(
-        "--foxglove-max-clients",
-        type=_typed(Count),
-        metavar="N",
-        default=env.foxglove_max_clients,
-        help="connections of the Foxglove port at most (default 200); one past it is closed "
-        "naming this [SIMBRIDGE_FOXGLOVE_MAX_CLIENTS]",
-    )
-
-
-def _foxglove_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """Return the Foxglove settings of the options.
+def _check_foxglove(args: argparse.Namespace) -> None:
+    """Check that the Foxglove extra is there when --foxglove-port asks for it.
 
     Raises:
-        ConfigError: --foxglove-port without the extra (the message gives the install command).
+        ConfigError: it is not (the message gives the install command).
     """
     if args.foxglove_port is None:
-        return {"foxglove_scope": args.foxglove_scope} if args.foxglove_scope else {}
+        return
     from simbridge.foxglove.front import import_foxglove
 
     import_foxglove()  # exits at once, with the install command, when the extra is missing
-    values = {"foxglove_port": args.foxglove_port, "foxglove_scope": args.foxglove_scope}
-    if args.foxglove_max_clients is not None:
-        values["foxglove_max_clients"] = args.foxglove_max_clients
-    return values
 
 
 def _zenoh_options(args: argparse.Namespace) -> Any:
@@ -327,25 +196,21 @@ def _dds_options(args: argparse.Namespace) -> Any:
     return DdsOptions.from_env(distro=args.ros_distro)
 
 
-def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
-    """Return the ServerSettings fields of the security options (files read and checked).
+def _server_values(args: argparse.Namespace) -> dict[str, Any]:
+    """Return the ServerSettings fields of the options (their files read and checked).
 
     Raises:
         ConfigError: a file is missing or malformed, or the TLS options are incomplete.
     """
-    from simbridge.config import load_client_tokens
+    from simbridge.app.config import load_client_tokens
+    from simbridge.app.settings import ServerSettings, options
 
-    out: dict[str, Any] = {
-        "admin_token": args.admin_token or None,
-        "max_clients": args.max_clients,
-        "max_http_connections": args.max_http_connections,
-        "max_http_connections_per_address": args.max_http_connections_per_address,
-        "max_message_size": args.max_message_size,
-        "stall_timeout": args.stall_timeout,
-        "ping_interval": args.ping_interval,
-        "ping_timeout": args.ping_interval,
-        "ros2_role": args.ros2_role or None,
-    }
+    out: dict[str, Any] = {d.field: getattr(args, d.name) for d in options(ServerSettings)}
+    out["http_port"] = None if args.no_http else args.http_port
+    out["ping_timeout"] = args.ping_interval  # one option: a peer answers within as long
+    out["admin_token"] = args.admin_token or None
+    out["ros2_role"] = args.ros2_role or None
+    out["foxglove_scope"] = args.foxglove_scope or None
     if args.client_tokens:
         out["client_tokens"] = load_client_tokens(args.client_tokens)
     if args.auth_secret_file:
@@ -375,118 +240,37 @@ def _security_settings(args: argparse.Namespace) -> dict[str, Any]:
         except (OSError, ssl.SSLError) as err:
             msg = f"TLS: cannot load --certfile/--keyfile: {err}"
             raise ConfigError(msg) from None
-        out["certfile"], out["keyfile"] = args.certfile, args.keyfile
     return out
 
 
-def _run_parser(env: Environment) -> argparse.ArgumentParser:
-    from simbridge.config import Port, ServerSettings
-
-    defaults = ServerSettings()
+def _run_parser(env: dict[str, Any]) -> argparse.ArgumentParser:
     commands = "\n".join(f"  {name:<14} {text}" for name, (text, _) in COMMANDS.items())
     parser = argparse.ArgumentParser(
         prog="simbridge",
         description=(
             "A rosbridge v2 server with a built-in 2D differential-drive robot (LiDAR, /odom, "
             "/tf, /cmd_vel). Point roslibjs, roslibpy or Foxglove at ws://HOST:PORT/ and open "
-            "http://HOST:HTTP-PORT/ to drive the robot from a browser."
+            "http://HOST:HTTP-PORT/ to drive the robot from a browser. Every option but the "
+            "repeatable ones can be set by the variable named after it."
         ),
         epilog=f"sub-commands (simbridge COMMAND --help):\n{commands}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"simbridge {__version__}")
     parser.add_argument(
-        "--host",
-        default=env.host or defaults.host,
-        help="address to listen on; 127.0.0.1 keeps it on this machine "
-        "(default: 0.0.0.0, every interface) [SIMBRIDGE_HOST]",
-    )
-    parser.add_argument(
-        "--port",
-        type=_typed(Port),
-        default=defaults.port if env.port is None else env.port,
-        help="rosbridge WebSocket port, ws://HOST:PORT/ (default: 9090; 0 picks a free port) "
-        "[SIMBRIDGE_PORT]",
-    )
-    parser.add_argument(
-        "--http-port",
-        type=_typed(Port),
-        default=defaults.http_port if env.http_port is None else env.http_port,
-        help="HTTP port of the browser page and /healthz (default: 8080) [SIMBRIDGE_HTTP_PORT]",
-    )
-    parser.add_argument(
         "--no-http",
         action="store_true",
         help="do not serve HTTP on a port of its own (the WebSocket port still answers "
         "/healthz and the page)",
     )
-    _add_config_options(parser, env)
-    _add_security_options(parser, env)
-    _add_zenoh_options(parser, env)
-    _add_dds_options(parser, env)
-    _add_foxglove_options(parser, env)
-    parser.add_argument(
-        "--admin-token",
-        metavar="TOKEN",
-        default=env.admin_token,
-        help="token the instructor's page http://HOST:HTTP-PORT/admin needs for every change "
-        "(default: none, every admin change is refused) [SIMBRIDGE_ADMIN_TOKEN]",
-    )
-    parser.add_argument(
-        "--no-sim",
-        action="store_true",
-        default=bool(env.no_sim),
-        help="run the bridge alone, without the simulated world and robot (with --zenoh: a "
-        "rosbridge in front of ROS 2 nodes, or a classroom front-end) [SIMBRIDGE_NO_SIM]",
-    )
-    parser.add_argument(
-        "--use-sim-time",
-        action="store_true",
-        default=bool(env.use_sim_time),
-        help="stamp headers with the simulated time published on /clock instead of the wall "
-        "clock (as ROS nodes with use_sim_time:=true expect) [SIMBRIDGE_USE_SIM_TIME]",
-    )
-    parser.add_argument(
-        "--demo-nodes",
-        action="store_true",
-        default=bool(env.demo_nodes),
-        help="also run the ROS tutorial nodes: talker/listener on /chatter, /add_two_ints, "
-        "the /fibonacci action (ROS 2 and ROS 1 actionlib); or demo_nodes: true in the world "
-        "file [SIMBRIDGE_DEMO_NODES]",
-    )
-    parser.add_argument(
-        "--record",
-        metavar="DIR",
-        default=env.record,
-        help="record topics into the rosbag2 MCAP bag DIR while serving (finished on stop) "
-        "[SIMBRIDGE_RECORD]",
-    )
+    _add_options(parser, env)
+    _add_zenoh_options(parser)
     parser.add_argument(
         "--record-topics",
         metavar="TOPIC",
         nargs="+",
         default=None,
         help="topics --record records (default: every topic, also later ones)",
-    )
-    parser.add_argument(
-        "--results",
-        metavar="FILE",
-        default=env.results,
-        help="the class's grading results: a journal of JSON lines, appended and read back "
-        "at start (default: none, results are lost on restart) [SIMBRIDGE_RESULTS]",
-    )
-    parser.add_argument(
-        "--tasks",
-        metavar="DIR",
-        default=env.tasks,
-        help="directory of the instructor's task files (*.yaml) that /admin publishes "
-        "(default: the bundled config/tasks) [SIMBRIDGE_TASKS]",
-    )
-    parser.add_argument(
-        "--log-level",
-        default=env.log_level or "info",
-        choices=["debug", "info", "warning", "error"],
-        help="log verbosity (default: info) [SIMBRIDGE_LOG_LEVEL]",
     )
     return parser
 
@@ -685,9 +469,26 @@ def _release_startup_memory() -> None:
     trim(0)
 
 
+def _asks_for_tls(argv: Sequence[str]) -> bool:
+    """Whether this run is given a TLS certificate (``--certfile``, or its variable).
+
+    Read before the options are: pydantic-settings imports asyncio, and asyncio is imported
+    without ssl when no certificate is given (:func:`_import_asyncio`). An option argparse
+    reads as ``--certfile`` (a prefix of it, ``--certfile=PEM``) counts.
+    """
+    if os.environ.get("SIMBRIDGE_CERTFILE", "").strip():
+        return True
+    return any(
+        len(flag) >= 4 and "--certfile".startswith(flag)
+        for flag in (arg.partition("=")[0] for arg in argv)
+    )
+
+
 def _cmd_run(argv: Sequence[str]) -> int:
     _import_hashlib()  # before anything imports hashlib (websockets, through secrets too)
-    from simbridge.config import load_params, load_world, server_settings
+    _import_asyncio(tls=_asks_for_tls(argv))  # before anything imports asyncio
+    from simbridge.app.config import load_params, load_world
+    from simbridge.app.settings import server_settings
 
     try:
         env = _environment()
@@ -697,17 +498,8 @@ def _cmd_run(argv: Sequence[str]) -> int:
     args = _run_parser(env).parse_args(argv)
     setup_logging(args.log_level)
     try:
-        settings = server_settings(
-            host=args.host,
-            port=args.port,
-            http_port=None if args.no_http else args.http_port,
-            use_sim_time=args.use_sim_time,
-            demo_nodes=args.demo_nodes,
-            results_file=args.results,
-            tasks_dir=args.tasks,
-            **_security_settings(args),
-            **_foxglove_settings(args),
-        )
+        _check_foxglove(args)
+        settings = server_settings(**_server_values(args))
         if args.tasks:
             from simbridge.grading import load_tasks
 
@@ -721,7 +513,6 @@ def _cmd_run(argv: Sequence[str]) -> int:
         record = (args.record, args.record_topics) if args.record else None
         zenoh = _zenoh_options(args)
         dds = _dds_options(args)
-        _import_asyncio(tls=settings.certfile is not None)
         raise_file_limit()
         import asyncio
 
@@ -738,7 +529,7 @@ def _count(n: int, noun: str) -> str:
 
 
 def _cmd_check_config(argv: Sequence[str]) -> int:
-    from simbridge.config import load_params, load_world
+    from simbridge.app.config import load_params, load_world
 
     parser = argparse.ArgumentParser(
         prog="simbridge check-config",
@@ -749,10 +540,7 @@ def _cmd_check_config(argv: Sequence[str]) -> int:
     except ConfigError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 2
-    _add_config_options(parser, env)
-    parser.add_argument(
-        "--tasks", metavar="DIR", default=env.tasks, help="also the task files of DIR (*.yaml)"
-    )
+    _add_options(parser, env, {"world", "params", "tasks"})
     args = parser.parse_args(argv)
     try:
         world = load_world(args.world)

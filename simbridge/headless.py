@@ -24,7 +24,7 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-from simbridge.config import Params, WorldSpec, load_params, load_world
+from simbridge.app.config import Params, WorldSpec, load_params, load_world
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.grading.grader import Grader
 from simbridge.grading.results import ResultsLog

@@ -20,14 +20,15 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from simbridge import __version__
-from simbridge.config import (
+from simbridge.app.config import (
     Params,
-    ServerSettings,
     WorldSpec,
     load_params,
     load_world,
     resource_dir,
+    world_spec,
 )
+from simbridge.app.settings import ServerSettings
 from simbridge.grading import install_grader
 from simbridge.graph.assembly import build_robot_graph
 from simbridge.graph.bridge import ROBOT_NODE
@@ -296,7 +297,7 @@ class App:
             "status": "ok",
             "version": __version__,
             "uptime_s": round(time.monotonic() - self._started, 3),
-            "world": self.world.spec.name,
+            "world": world_spec(self.world).name,
             "sim_time_s": round(self.world.time, 3),
             "loop_rate_hz": self.world.params.sim.rate,
             **self.server.stats(),
@@ -328,7 +329,9 @@ class App:
             await self.dds.start()
         if self.foxglove is not None:
             await self.foxglove.start()
-        self.graph.log("info", f"simbridge {__version__} started: world '{self.world.spec.name}'")
+        self.graph.log(
+            "info", f"simbridge {__version__} started: world '{world_spec(self.world).name}'"
+        )
         self.ready.set()
 
     async def stop(self) -> None:

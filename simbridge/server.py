@@ -40,7 +40,7 @@ from websockets.http11 import Request, Response
 from websockets.protocol import State
 from websockets.typing import Origin
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph
 from simbridge.graph.guard import token_access
 from simbridge.graph.topics import SendEntries

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.runner import App
 from tests.helpers import JS_DIR, ROOT, ROSLIBPY_RUN, TIMEOUT_FACTOR, ws_url
 

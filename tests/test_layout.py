@@ -133,6 +133,33 @@ def test_cores_import_no_shell_and_point_one_way() -> None:
     assert wrong == []
 
 
+#: The settings framework: pydantic and the modules that declare settings on it.
+SETTINGS_FRAMEWORK = (
+    "pydantic",
+    "pydantic_core",
+    "pydantic_settings",
+    "simbridge.schema",
+    "simbridge.app.settings",
+    "simbridge.app.config",
+)
+#: Cores that take plain parameters (STYLE.md: "numpy only, plain parameters").
+PLAIN_CORES = ("simbridge.msgs", "simbridge.sim")
+
+
+def test_the_cores_import_no_settings_framework() -> None:
+    """The simulator and the messages take plain parameters: no pydantic, not even lazily."""
+    modules = _modules()
+    known = set(modules)
+    wrong = [
+        f"{name} imports {imported}"
+        for name, path in modules.items()
+        if any(name == c or name.startswith(c + ".") for c in PLAIN_CORES)
+        for imported in _imports(name, path, known)
+        if any(imported == b or imported.startswith(b + ".") for b in SETTINGS_FRAMEWORK)
+    ]
+    assert wrong == []
+
+
 def test_the_server_does_not_import_the_tools() -> None:
     """The tools sit on top: nothing outside simbridge.tools (but the CLI) imports them."""
     graph = _graph()
@@ -151,16 +178,16 @@ def test_top_level_holds_the_parts_and_the_entry_points() -> None:
     top = sorted(p.stem for p in PACKAGE.glob("*.py") if p.stem not in ("__init__", "__main__"))
     packages = sorted(p.parent.name for p in PACKAGE.glob("*/__init__.py"))
     assert packages == [
+        "app",
         "foxglove",
         "grading",
         "graph",
         "msgs",
         "protocol",
+        "ros2",
         "sim",
         "tools",
         "web",
         "zenoh",
     ]
-    # schema: the typed settings records config.py declares its settings with (issue 16: no
-    # pydantic); not inside config, whose name the bundled config/ folder takes in the wheel
-    assert top == ["cli", "config", "errors", "headless", "runner", "schema", "server"]
+    assert top == ["cli", "errors", "headless", "runner", "server"]

@@ -51,7 +51,7 @@ def test_installed_package_runs_from_any_directory(wheel: Path, tmp_path: Path) 
     )
     env = {**os.environ, "PYTHONPATH": str(site)}
     code = (
-        "import simbridge.config as c; "
+        "import simbridge.app.config as c; "
         "print(c.resource_dir('static')); print(c.default_params_path()); "
         "print(c.load_world(None).name)"
     )

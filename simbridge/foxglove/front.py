@@ -55,7 +55,7 @@ itself).
 
 The protocol carries no token (the SDK's handshake reads only the subprotocol, and its Python
 listener sees a client id): every Foxglove client gets the port's one access (see
-:class:`~simbridge.config.ServerSettings` ``foxglove_scope``).
+:class:`~simbridge.app.settings.ServerSettings` ``foxglove_scope``).
 """
 
 from __future__ import annotations

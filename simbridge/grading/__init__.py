@@ -17,7 +17,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from simbridge.config import ServerSettings, resource_dir
+from simbridge.app.config import resource_dir
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError
 from simbridge.grading.grader import GRADE_TYPE, Grader, Run
 from simbridge.grading.results import Offload, ResultsLog

@@ -43,7 +43,8 @@ from typing import Any, Literal
 
 import orjson
 
-from simbridge.config import RealismParams, RobotParams, ValidationError
+from simbridge.app.config import world_spec
+from simbridge.app.settings import SettingsError
 from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.grading.metrics import Trace, clearance, evaluate, resolve_goal, score, thresholds
 from simbridge.grading.report import response_svg
@@ -56,6 +57,7 @@ from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.sim import World
+from simbridge.sim.parameters import RealismLike, RobotLike
 from simbridge.sim.world import PER_ROBOT_PARAMS, Robot
 
 
@@ -302,10 +304,10 @@ class Grader:
                 f"may have (grading_max_attempts {self.max_attempts}); ask the instructor"
             )
             raise ServiceError(msg)
-        if task.world is not None and Path(task.world).stem != self.world.spec.name:
+        if task.world is not None and Path(task.world).stem != world_spec(self.world).name:
             msg = (
                 f"task '{task.id}' is set in world '{Path(task.world).stem}', but this server "
-                f"runs world '{self.world.spec.name}' (start it with --world {task.world})"
+                f"runs world '{world_spec(self.world).name}' (start it with --world {task.world})"
             )
             raise ServiceError(msg)
         if self.world.halted(robot):
@@ -644,7 +646,7 @@ class Grader:
                 )
                 raise ServiceError(msg)
 
-    def _may_speed_up(self, robot: str, task: Task, current: RobotParams) -> None:
+    def _may_speed_up(self, robot: str, task: Task, current: RobotLike) -> None:
         """Refuse a task sent as text whose realism profile makes ``robot`` faster than now.
 
         Under a profile the ground moves by the true wheels (``realism.wheel_radius_*``,
@@ -660,7 +662,7 @@ class Grader:
         own = {k.removeprefix("realism."): v for k, v in params.items() if k.startswith("realism.")}
         try:
             after = shared.replace(**{**body.realism_own, **own})
-        except (ValidationError, TypeError):
+        except (SettingsError, TypeError):
             return  # start() refuses it, naming the value
         r = float(params.get("robot.wheel_radius", current.wheel_radius))
         b = float(params.get("robot.wheelbase", current.wheelbase))
@@ -723,7 +725,7 @@ class Grader:
         )
 
 
-def _speed_up(r: float, b: float, real: RealismParams | None) -> tuple[float, float]:
+def _speed_up(r: float, b: float, real: RealismLike | None) -> tuple[float, float]:
     """How many times as fast as commanded a robot moves under ``real``: (linear, angular)."""
     if real is None or r <= 0 or b <= 0:
         return 1.0, 1.0

@@ -24,13 +24,15 @@ from __future__ import annotations
 import hashlib
 import math
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal, Self
 
 import orjson
+from pydantic import BeforeValidator, Field, model_validator
 
-from simbridge.config import check_numbers, finite_number
+from simbridge.app.config import check_numbers
+from simbridge.app.settings import Float, Record, SettingsError
 from simbridge.errors import ConfigError
-from simbridge.schema import Record, ValidationError, setting
+from simbridge.msgs.convert import finite_number
 
 
 __all__ = [
@@ -91,29 +93,32 @@ def _segment(value: Any) -> Any:
 class WallGoal(Record):
     """Keep ``distance`` metres between the robot's centre and the wall ``segment``."""
 
-    segment: tuple[float, float, float, float] = setting(before=_segment)
-    distance: float = setting(gt=0, le=100)
+    segment: Annotated[tuple[Float, Float, Float, Float], BeforeValidator(_segment)]
+    distance: Float = Field(gt=0, le=100)
 
-    def check(self) -> None:
+    @model_validator(mode="after")
+    def _has_length(self) -> Self:
         """The segment has a length."""
         x1, y1, x2, y2 = self.segment
         if math.hypot(x2 - x1, y2 - y1) < 1e-9:
             msg = "segment: the two ends are the same point"
             raise ValueError(msg)
+        return self
 
 
 class Goal(Record):
     """What the controller must reach: exactly one of the four kinds."""
 
-    heading: float | None = setting(default=None, description="final yaw, rad")
-    position: tuple[float, float] | None = setting(default=None, before=_point)
-    waypoints: list[tuple[float, float]] | None = setting(default=None, before=_points)
+    heading: Float | None = Field(None, description="final yaw, rad")
+    position: Annotated[tuple[Float, Float] | None, BeforeValidator(_point)] = None
+    waypoints: Annotated[list[tuple[Float, Float]] | None, BeforeValidator(_points)] = None
     wall: WallGoal | None = None
     #: Reached when the error is within this (rad for a heading, m otherwise); 0: the kind's
     #: default (0.05 rad, 0.05 m).
-    tolerance: float = setting(default=0.0, ge=0, le=100)
+    tolerance: Float = Field(0.0, ge=0, le=100)
 
-    def check(self) -> None:
+    @model_validator(mode="after")
+    def _one_kind(self) -> Self:
         """Exactly one kind of goal."""
         kinds = [k for k in ("heading", "position", "waypoints", "wall") if k in self.given]
         if len(kinds) != 1:
@@ -121,6 +126,7 @@ class Goal(Record):
                 f" (got {', '.join(kinds)})" if kinds else ""
             )
             raise ValueError(msg)
+        return self
 
     @property
     def kind(self) -> Literal["heading", "position", "waypoints", "wall"]:
@@ -142,14 +148,16 @@ class Goal(Record):
 class Threshold(Record):
     """One rubric line: the metric must be at most ``max`` and/or at least ``min``."""
 
-    max: float | None = None
-    min: float | None = None
+    max: Float | None = None
+    min: Float | None = None
 
-    def check(self) -> None:
+    @model_validator(mode="after")
+    def _a_bound(self) -> Self:
         """At least one bound."""
         if self.max is None and self.min is None:
             msg = "give max or min (e.g. {max: 10})"
             raise ValueError(msg)
+        return self
 
 
 def _rubric(value: Any) -> Any:
@@ -185,28 +193,32 @@ class Task(Record):
     """One task file (see the module docstring)."""
 
     #: The task's id (its file name without ``.yaml``; set by the loader when absent).
-    id: str = setting(default="", max_length=100)
-    name: str = setting(default="", max_length=200)
-    description: str = setting(default="", max_length=2000)
+    id: str = Field("", max_length=100)
+    name: str = Field("", max_length=200)
+    description: str = Field("", max_length=2000)
     #: A world file (relative to the task file); None: the world the server runs.
     world: str | None = None
-    start: tuple[float, float, float] | None = setting(default=None, before=_pose)
+    start: Annotated[tuple[Float, Float, Float] | None, BeforeValidator(_pose)] = None
     frame: Literal["world", "start"] = "world"
     goal: Goal
-    time_limit: float = setting(gt=0, le=600, description="seconds from the first command")
+    time_limit: Float = Field(gt=0, le=600, description="seconds from the first command")
     #: Seconds the server waits for the controller's first (non-zero) command.
-    wait_for_controller: float = setting(default=60.0, gt=0, le=3600)
+    wait_for_controller: Float = Field(60.0, gt=0, le=3600)
     #: This robot's parameters during the run (``robot.mass``...; any per-robot parameter).
-    robot_params: dict[str, float] = setting(default_factory=dict, before=_robot_params)
-    rubric: dict[str, Threshold] = setting(before=_rubric)
+    robot_params: Annotated[dict[str, Float], BeforeValidator(_robot_params)] = Field(
+        default_factory=dict
+    )
+    rubric: Annotated[dict[str, Threshold], BeforeValidator(_rubric)]
 
-    def check(self) -> None:
+    @model_validator(mode="after")
+    def _step_metrics(self) -> Self:
         """Step metrics need a step: none on a waypoints goal."""
         if self.goal.kind == "waypoints":
             bad = sorted(STEP_METRICS & set(self.rubric))
             if bad:
                 msg = f"rubric.{bad[0]}: not defined for a waypoints goal (no single step)"
                 raise ValueError(msg)
+        return self
 
     @property
     def title(self) -> str:
@@ -226,7 +238,7 @@ class Task(Record):
         return hashlib.sha256(orjson.dumps(data, option=orjson.OPT_SORT_KEYS)).hexdigest()[:16]
 
 
-def _describe(err: ValidationError) -> str:
+def _describe(err: SettingsError) -> str:
     return err.errors[0][0] + ": " + err.errors[0][1] if err.errors[0][0] else err.errors[0][1]
 
 
@@ -269,7 +281,7 @@ def parse_task(text: str, *, source: str = "task", task_id: str = "") -> Task:
         data["id"] = task_id
     try:
         task = Task.parse(data)
-    except ValidationError as err:
+    except SettingsError as err:
         raise ConfigError(f"{source}: {_describe(err)}") from None
     if not task.id:
         msg = f"{source}: id: required when the task does not come from a file"

@@ -20,7 +20,8 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING
 
-from simbridge.config import ServerSettings
+from simbridge.app.config import world_spec
+from simbridge.app.settings import ServerSettings
 from simbridge.graph.bridge import RobotBridge
 from simbridge.graph.estop import EStop
 from simbridge.graph.graph import Graph
@@ -153,7 +154,7 @@ def build_robot_graph(
     bridge.on_robot_removed.append(safety.forget)
     hooks: list[Callable[[float], None]] = [tf_republisher.tick, safety.tick]
     tutorials = None
-    if world.spec.demo_nodes or (settings is not None and settings.demo_nodes):
+    if world_spec(world).demo_nodes or (settings is not None and settings.demo_nodes):
         # imported only when asked for (off by default): an idle server need not hold them
         from simbridge.graph.tutorials import install_tutorials
 

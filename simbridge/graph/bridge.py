@@ -33,7 +33,8 @@ from typing import Any
 
 import numpy as np
 
-from simbridge.config import Params
+from simbridge.app.config import Params, world_params, world_spec
+from simbridge.app.settings import SettingsError
 from simbridge.errors import ProtocolError
 from simbridge.graph.cmdvel import STARTUP_ONLY, cmd_vel_type, twist_of
 from simbridge.graph.fleet import (
@@ -43,7 +44,7 @@ from simbridge.graph.fleet import (
     remove_robot_services,
 )
 from simbridge.graph.graph import Graph
-from simbridge.graph.params import ParamNode
+from simbridge.graph.params import ParameterRefused, ParamNode
 from simbridge.graph.rosapi import request_fields
 from simbridge.graph.topics import Peer, Topic
 from simbridge.sim import Robot, RobotState, World
@@ -160,7 +161,7 @@ class RobotBridge:
         graph.add_service("/reset", "std_srvs/srv/Empty", ROBOT_NODE, self._reset)
         self.params = ParamNode(
             ROBOT_NODE,
-            read=lambda: self.world.params.flat(),
+            read=lambda: world_params(self.world).flat(),
             write=self._write_params,
             descriptions=Params.describe(),
             bounds=Params.bounds(),
@@ -173,7 +174,10 @@ class RobotBridge:
         install_fleet(self)
 
     def _write_params(self, flat: dict[str, Any]) -> None:
-        self.world.params = Params.from_flat(flat)
+        try:
+            self.world.params = Params.from_flat(flat)
+        except SettingsError as err:  # it names each refused parameter
+            raise ParameterRefused(str(err)) from None
 
     def _params_changed(self, names: list[str]) -> None:
         self.graph.log("info", f"{ROBOT_NODE} parameters changed: {', '.join(names)}")
@@ -199,7 +203,7 @@ class RobotBridge:
             scan = advertise("scan", "sensor_msgs/msg/LaserScan")
             contact = advertise("contact", CONTACT_TYPE)
             truth = advertise("ground_truth", "nav_msgs/msg/Odometry")
-            kind = cmd_vel_type(self.world.params)
+            kind = cmd_vel_type(world_params(self.world))
             cmd_vel = g.subscribe(robot.topic("cmd_vel"), kind, ROBOT_NODE, on_cmd_vel)
         except ProtocolError as err:
             for name in made:
@@ -263,7 +267,7 @@ class RobotBridge:
             }
             for rt in self.robots.values()
         ]
-        for frame in self.world.spec.frames:
+        for frame in world_spec(self.world).frames:
             x, y, z, roll, pitch, yaw = frame.xyz_rpy()
             transforms.append(
                 {
@@ -336,7 +340,7 @@ class RobotBridge:
         if self._scan_clock is None:
             self._scan_clock = 0.0
             return robots
-        ratio = min(self.world.params.lidar.rate / self.world.params.sim.rate, 1.0)
+        ratio = min(world_params(self.world).lidar.rate / self.world.params.sim.rate, 1.0)
         before = self._scan_clock + 1e-9
         after = before + ratio
         self._scan_clock = (self._scan_clock + ratio) % 1.0  # small: no rounding drift
@@ -376,7 +380,7 @@ class RobotBridge:
 
     def publish_scans(self, now: float, stamp: dict[str, int], robots: list[_RobotTopics]) -> None:
         """Raycast and publish the /scan of ``robots``, of those listened to, in one batch."""
-        lidar = self.world.params.lidar
+        lidar = world_params(self.world).lidar
         increment = 2.0 * math.pi / lidar.rays
         wanted = [rt for rt in robots if rt.scan.subscriptions or rt.scan.internal]
         if not wanted:

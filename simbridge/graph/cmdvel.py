@@ -15,7 +15,7 @@ from __future__ import annotations
 
 from typing import Any
 
-from simbridge.config import Params
+from simbridge.app.config import Params
 
 
 __all__ = [

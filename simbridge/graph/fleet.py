@@ -26,10 +26,10 @@ from __future__ import annotations
 
 from typing import Any, Protocol
 
-from simbridge.config import finite_number
 from simbridge.errors import ServiceError
 from simbridge.graph.graph import Graph
 from simbridge.graph.rosapi import request_fields
+from simbridge.msgs.convert import finite_number
 from simbridge.sim import Robot, World
 
 

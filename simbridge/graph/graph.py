@@ -40,7 +40,7 @@ import time
 from collections.abc import Callable, Iterable
 from typing import TYPE_CHECKING, Any
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings, budgets
 from simbridge.errors import ProtocolError, SimbridgeError
 from simbridge.graph.actions import ActionTable
 from simbridge.graph.admission import (
@@ -60,9 +60,7 @@ from simbridge.protocol import (
     Advertised,
     ClientId,
     Effect,
-    Limits,
     Op,
-    Pool,
     Provided,
     Refusal,
     Reply,
@@ -80,7 +78,7 @@ if TYPE_CHECKING:
     from simbridge.msgs.cdr import CdrWriter
 
 
-__all__ = ["ROSOUT", "Graph", "budgets"]
+__all__ = ["ROSOUT", "Graph"]
 
 logger = logging.getLogger(__name__)
 
@@ -88,43 +86,6 @@ ROSOUT = "/rosout"
 _LOG_LEVELS = {"debug": 10, "info": 20, "warn": 30, "error": 40, "fatal": 50}
 OpHandler = Callable[[Peer, Any, float], None]
 EffectHandler = Callable[[Peer, Any], None]
-
-
-def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
-    """Return the per-client limits and the shared pool that ``settings`` ask for."""
-    s = settings
-    limits = Limits(
-        subscriptions=s.max_subscriptions,
-        subscribe_ids=s.max_subscribe_ids,
-        ids_per_subscription=s.max_ids_per_subscription,
-        advertisements=s.max_advertisements,
-        advertise_ids=s.max_advertise_ids,
-        pending_calls=s.max_pending_calls,
-        call_timeout=s.max_call_timeout,
-        id_length=s.max_id_length,
-        pending_goals=s.max_pending_goals,
-        goal_timeout=s.max_goal_timeout,
-        fragment_sets=s.max_fragment_sets,
-        fragment_bytes=s.max_message_size,
-        frame_values=s.max_frame_values,
-        frame_bytes=min(s.max_frame_bytes, s.max_message_size),
-        latched_bytes=s.max_latched_bytes,
-        publish_rate=s.publish_rate,
-        publish_burst=s.publish_burst,
-        statuses_per_second=s.statuses_per_second,
-        work_share=s.client_work_share,
-    )
-    pool = Pool(
-        {
-            "subscribe_ids": s.global_subscribe_ids,
-            "advertise_ids": s.global_advertise_ids,
-            "pending_calls": s.global_pending_calls,
-            "pending_goals": s.global_pending_goals,
-            "fragment_bytes": s.global_fragment_bytes,
-            "latched_bytes": s.global_latched_bytes,
-        }
-    )
-    return limits, pool
 
 
 class Graph:

@@ -27,7 +27,7 @@ import hmac
 import logging
 from collections.abc import Callable, Iterable
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph.admission import NO_ROBOT
 from simbridge.graph.graph import Graph

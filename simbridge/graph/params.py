@@ -13,12 +13,38 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from simbridge.config import finite_number
 from simbridge.errors import ServiceError
-from simbridge.schema import Bounds, ValidationError
+from simbridge.msgs.convert import finite_number
 
 
-__all__ = ["ParamNode", "ParameterStore", "param_type"]
+__all__ = ["Bounds", "ParamNode", "ParameterRefused", "ParameterStore", "param_type"]
+
+
+@dataclass(frozen=True, slots=True)
+class Bounds:
+    """Declared bounds of a numeric parameter (``describe_parameters`` shows them)."""
+
+    gt: float | None = None
+    ge: float | None = None
+    lt: float | None = None
+    le: float | None = None
+
+    def __bool__(self) -> bool:
+        return any(v is not None for v in (self.gt, self.ge, self.lt, self.le))
+
+    def text(self) -> str:
+        """The bounds in words for a person: ``> 0 and <= 1000`` (``""``: none)."""
+        parts = [
+            f"{sign} {value}"
+            for sign, value in ((">", self.gt), (">=", self.ge), ("<", self.lt), ("<=", self.le))
+            if value is not None
+        ]
+        return " and ".join(parts)
+
+
+class ParameterRefused(ValueError):
+    """A node's ``write`` refuses new values; the text names each refused parameter itself."""
+
 
 #: rcl_interfaces/msg/ParameterType numbers.
 PARAMETER_NOT_SET = 0
@@ -169,7 +195,7 @@ class ParameterStore:
             new[name] = _coerce(name, current[name], value)
         try:
             target.write(new)
-        except ValidationError as err:  # it names each refused parameter itself
+        except ParameterRefused as err:  # it names each refused parameter itself
             raise ServiceError(f"invalid value: {err}") from None
         except ValueError as err:
             msg = f"invalid value for {', '.join(sorted(changes))}: {err}"

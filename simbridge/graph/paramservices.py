@@ -34,7 +34,7 @@ from simbridge.graph.params import (
 
 if TYPE_CHECKING:
     from simbridge.graph.graph import Graph
-    from simbridge.schema import Bounds
+    from simbridge.graph.params import Bounds
 
 __all__ = ["from_parameter_value", "install_parameter_services", "to_parameter_value"]
 

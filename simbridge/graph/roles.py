@@ -31,6 +31,7 @@ from typing import Any
 
 import orjson
 
+from simbridge.app.config import world_spec
 from simbridge.graph.estop import EStop, connection_rights, describe_peer
 from simbridge.graph.graph import Graph
 from simbridge.graph.rosapi import request_fields
@@ -91,7 +92,7 @@ class Roles:
             "robots": robots,
             "any_robot": scope == "*",
             "motion_model": self.world.motion.name,
-            "world": self.world.spec.name,
+            "world": world_spec(self.world).name,
             "robot_info": self.robot_info(),
             "estop": {
                 "held": [n for n in robots if self.world.halted(n)],

@@ -29,12 +29,13 @@ from __future__ import annotations
 import logging
 from typing import Any
 
-from simbridge.config import finite_number
+from simbridge.app.config import world_params
 from simbridge.errors import ProtocolError
 from simbridge.graph.bridge import ROBOT_NODE
 from simbridge.graph.cmdvel import cmd_vel_type, twist_of
 from simbridge.graph.graph import Graph
 from simbridge.graph.topics import InternalCallback, Peer
+from simbridge.msgs.convert import finite_number
 from simbridge.sim import World
 
 
@@ -98,7 +99,7 @@ class Safety:
 
             topic = robot.topic("cmd_vel")
             # the robot's own node: the watchdog is part of its driver, as in turtlesim
-            kind = cmd_vel_type(self.world.params)
+            kind = cmd_vel_type(world_params(self.world))
             try:
                 self.graph.subscribe(topic, kind, ROBOT_NODE, on_cmd_vel)
             except ProtocolError:
@@ -117,7 +118,7 @@ class Safety:
         for name, arrived in self._fresh.items():
             self.last_command[name] = arrived
         self._fresh.clear()
-        timeout = self.world.params.safety.cmd_vel_timeout
+        timeout = world_params(self.world).safety.cmd_vel_timeout
         if timeout <= 0:
             return
         for name, robot in self.world.robots.items():
@@ -129,7 +130,7 @@ class Safety:
 
     def lost(self, peer: Peer) -> None:
         """Stop the robots ``peer`` commanded, when ``safety.stop_on_lost_link`` is on."""
-        if not self.world.params.safety.stop_on_lost_link:
+        if not world_params(self.world).safety.stop_on_lost_link:
             return
         for name in [name for name, p in self.commander.items() if p is peer]:
             robot = self.world.robots.get(name)
@@ -142,7 +143,7 @@ class Safety:
         mine = [name for name, p in self.commander.items() if p is peer]
         for name in mine:
             del self.commander[name]
-        if not self.world.params.safety.stop_on_disconnect:
+        if not world_params(self.world).safety.stop_on_disconnect:
             return
         for name in mine:
             robot = self.world.robots.get(name)

@@ -23,10 +23,10 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Any
 
-from simbridge.config import finite_number
 from simbridge.errors import ServiceError
 from simbridge.graph.graph import Graph
 from simbridge.graph.rosapi import request_fields
+from simbridge.msgs.convert import finite_number
 from simbridge.sim import World
 
 

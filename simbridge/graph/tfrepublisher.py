@@ -45,7 +45,6 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
-from simbridge.config import finite_number
 from simbridge.errors import ServiceError
 from simbridge.graph.actionlib import (
     ABORTED as AL_ABORTED,
@@ -57,6 +56,7 @@ from simbridge.graph.actionlib import (
 from simbridge.graph.actions import ABORTED, CANCELED, Goal
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer, Topic
+from simbridge.msgs.convert import finite_number
 
 
 if TYPE_CHECKING:

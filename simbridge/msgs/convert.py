@@ -32,7 +32,7 @@ import binascii
 import math
 import sys
 from collections.abc import Callable, Sequence
-from typing import Any
+from typing import Any, TypeGuard
 
 import numpy as np
 
@@ -40,7 +40,29 @@ from simbridge.errors import ConversionError
 from simbridge.msgs.registry import FieldSpec, TypeRegistry
 
 
-__all__ = ["FLOAT32_MAX", "INT_RANGES", "NUMPY_DTYPES", "Converter", "Stamp", "positional_args"]
+def finite_number(value: object) -> TypeGuard[int | float]:
+    """Whether ``value`` is a finite number: an int or a float (not a bool), not NaN or infinite.
+
+    The one check for numbers from files, parameters and service requests (JSON has no NaN,
+    but Python's parser and YAML's ``.nan`` do). An int too large for a float is not finite.
+    """
+    if isinstance(value, bool) or not isinstance(value, int | float):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
+__all__ = [
+    "FLOAT32_MAX",
+    "INT_RANGES",
+    "NUMPY_DTYPES",
+    "Converter",
+    "Stamp",
+    "finite_number",
+    "positional_args",
+]
 
 #: A clock giving (sec, nanosec) of "now" for header stamps and ``"now"`` times.
 Stamp = Callable[[], tuple[int, int]]

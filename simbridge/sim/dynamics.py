@@ -39,8 +39,8 @@ from __future__ import annotations
 
 import math
 
-from simbridge.config import RobotParams
 from simbridge.sim.kinematics import RobotState, integrate
+from simbridge.sim.parameters import RobotLike
 
 
 __all__ = ["MAX_SUBSTEP", "DynamicModel"]
@@ -70,9 +70,7 @@ class DynamicModel:
 
     name = "dynamic"
 
-    def step(
-        self, state: RobotState, v: float, omega: float, dt: float, params: RobotParams
-    ) -> None:
+    def step(self, state: RobotState, v: float, omega: float, dt: float, params: RobotLike) -> None:
         """Advance ``state`` by ``dt`` toward the (clamped) command ``v``, ``omega``."""
         n = max(1, math.ceil(dt / MAX_SUBSTEP - 1e-9))
         h = dt / n

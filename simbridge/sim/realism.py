@@ -1,6 +1,6 @@
 """The sim-to-real gap: a robot that moves as the real one does, and odometry from its encoders.
 
-Under a realism profile (:class:`~simbridge.config.RealismParams` with ``enabled``) a robot has
+Under a realism profile (:class:`~simbridge.sim.parameters.RealismLike`, ``enabled``) a robot has
 two poses: the *truth* (:attr:`Robot.state <simbridge.sim.world.Robot.state>`, which collisions
 and the LiDAR use, published on ``/ground_truth``) and its *odometry* (:attr:`Plant.odom`,
 published on ``/odom`` and ``/tf``), integrated from its encoders with the nominal geometry
@@ -43,12 +43,14 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from simbridge.config import RealismParams, RobotParams
 from simbridge.sim.kinematics import RobotState, clamp_command, wrap_angle
+from simbridge.sim.parameters import RealismLike, RobotLike
 
 
 if TYPE_CHECKING:
-    from simbridge.config import FloorPatch
+    from collections.abc import Sequence
+
+    from simbridge.sim.parameters import FloorPatchLike
 
 
 __all__ = ["Floor", "Plant"]
@@ -60,7 +62,7 @@ MAX_PENDING = 4096
 class Floor:
     """The floor patches of a world: where a robot's slip is the patch's own."""
 
-    def __init__(self, patches: list[FloorPatch]) -> None:
+    def __init__(self, patches: Sequence[FloorPatchLike]) -> None:
         self.patches = [
             (np.array(p.polygon, dtype=np.float64).reshape(-1, 2), p.slip) for p in patches
         ]
@@ -126,7 +128,7 @@ class Plant:
         self.cmd = (0.0, 0.0)
         self.odom.v = self.odom.omega = 0.0
 
-    def command(self, now: float, v: float, omega: float, real: RealismParams) -> None:
+    def command(self, now: float, v: float, omega: float, real: RealismLike) -> None:
         """Take a command that arrived at sim time ``now``: in effect at ``now + cmd_latency``."""
         if real.cmd_latency <= 0.0:
             self.pending.clear()
@@ -141,8 +143,8 @@ class Plant:
         state: RobotState,
         t0: float,
         dt: float,
-        limits: RobotParams,
-        real: RealismParams,
+        limits: RobotLike,
+        real: RealismLike,
         slip: float,
     ) -> None:
         """Advance the truth ``state`` and :attr:`odom` over ``[t0, t0 + dt]``.

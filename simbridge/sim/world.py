@@ -14,17 +14,17 @@ from typing import Protocol
 import numpy as np
 import numpy.typing as npt
 
-from simbridge.config import (
-    Params,
-    RealismParams,
-    RobotParams,
-    ValidationError,
-    WorldSpec,
-    check_robot_name,
-)
 from simbridge.sim.collision import Contact, pose_clear, resolve_moves
 from simbridge.sim.kinematics import RobotState, clamp_command, integrate, wrap_angle
 from simbridge.sim.lidar import FloatArray, beam_angles, raycast_batch, segments_array
+from simbridge.sim.parameters import (
+    ParamsLike,
+    RealismLike,
+    RobotLike,
+    WorldLike,
+    check_robot_name,
+    within,
+)
 from simbridge.sim.realism import Floor, Plant
 
 
@@ -56,9 +56,7 @@ class MotionModel(Protocol):
     #: Short name shown to users (``kinematic``...).
     name: str
 
-    def step(
-        self, state: RobotState, v: float, omega: float, dt: float, params: RobotParams
-    ) -> None:
+    def step(self, state: RobotState, v: float, omega: float, dt: float, params: RobotLike) -> None:
         """Advance ``state`` by ``dt`` toward the (already clamped) command ``v``, ``omega``."""
 
 
@@ -67,9 +65,7 @@ class KinematicModel:
 
     name = "kinematic"
 
-    def step(
-        self, state: RobotState, v: float, omega: float, dt: float, params: RobotParams
-    ) -> None:
+    def step(self, state: RobotState, v: float, omega: float, dt: float, params: RobotLike) -> None:
         """Integrate the kinematic equations (see :mod:`simbridge.sim.kinematics`)."""
         integrate(state, v, omega, dt)
 
@@ -89,17 +85,17 @@ class Robot:
     overrides: dict[str, float] = field(default_factory=dict)
     #: The shared parameters and this robot's parameters made from them (rebuilt when the
     #: shared ones are replaced).
-    cached: tuple[RobotParams, RobotParams] | None = None
+    cached: tuple[RobotLike, RobotLike] | None = None
     #: This robot's own realism values (names without ``realism.``) over the shared
     #: ``params.realism``: "group 3 drives the worn robot"; empty: the shared profile.
     realism_own: dict[str, object] = field(default_factory=dict)
     #: The shared realism values and this robot's made from them.
-    realism_cached: tuple[RealismParams, RealismParams] | None = None
+    realism_cached: tuple[RealismLike, RealismLike] | None = None
     #: Its motors, wheels and encoders while it is under a realism profile (else None: /odom
     #: is the true pose).
     plant: Plant | None = None
 
-    def realism(self, shared: RealismParams) -> RealismParams | None:
+    def realism(self, shared: RealismLike) -> RealismLike | None:
         """Return the realism profile this robot moves under, or None (the ideal model)."""
         if not self.realism_own:
             return shared if shared.enabled else None
@@ -112,7 +108,7 @@ class Robot:
         """Return what ``/odom`` reports: the encoders' estimate under a profile, else the truth."""
         return self.state if self.plant is None else self.plant.odom
 
-    def params(self, shared: RobotParams) -> RobotParams:
+    def params(self, shared: RobotLike) -> RobotLike:
         """Return the parameters this robot moves with: ``shared`` with its overrides."""
         if not self.overrides:
             return shared
@@ -149,7 +145,7 @@ _NO_ROW: tuple[None, None] = (None, None)
 class World:
     """Walls and robots, stepped at a fixed ``dt``."""
 
-    def __init__(self, spec: WorldSpec, params: Params, *, seed: int = 0) -> None:
+    def __init__(self, spec: WorldLike, params: ParamsLike, *, seed: int = 0) -> None:
         #: The world file this world was built from.
         self.spec = spec
         #: Live parameters; a change applies at the next step or scan.
@@ -434,12 +430,12 @@ class World:
                     robot.plant.halt()
         self.held = frozenset(names)
 
-    def robot_params(self, name: str) -> RobotParams:
+    def robot_params(self, name: str) -> RobotLike:
         """Return the motion parameters robot ``name`` moves with (its own, or the shared)."""
         robot = self.robots.get(name)
         return self.params.robot if robot is None else robot.params(self.params.robot)
 
-    def set_robot_params(self, name: str, changes: dict[str, float | None]) -> RobotParams:
+    def set_robot_params(self, name: str, changes: dict[str, float | None]) -> RobotLike:
         """Give robot ``name`` values of its own; return the parameters it now moves with.
 
         ``changes`` are names of :data:`PER_ROBOT_PARAMS` (without ``robot.``), None meaning
@@ -459,16 +455,16 @@ class World:
         kept = {k: v for k, v in overrides.items() if v is not None}
         try:
             own = self.params.robot.replace(**kept)
-        except ValidationError as err:
-            raise err.within("robot") from None
+        except ValueError as err:
+            raise within(err, "robot") from None
         robot.overrides = {k: getattr(own, k) for k in kept}
         robot.cached = (self.params.robot, own) if kept else None
         return own
 
-    def set_robot_realism(self, name: str, changes: dict[str, object]) -> RealismParams:
+    def set_robot_realism(self, name: str, changes: dict[str, object]) -> RealismLike:
         """Give robot ``name`` realism values of its own; return its profile (enabled or not).
 
-        ``changes`` are :class:`~simbridge.config.RealismParams` names (without ``realism.``),
+        ``changes`` are :class:`~simbridge.sim.parameters.RealismLike` names (without ``realism.``),
         None meaning back to the shared value; all or nothing.
 
         Raises:
@@ -479,8 +475,8 @@ class World:
         kept = {k: v for k, v in {**robot.realism_own, **changes}.items() if v is not None}
         try:
             own = self.params.realism.replace(**kept)
-        except ValidationError as err:
-            raise err.within("realism") from None
+        except ValueError as err:
+            raise within(err, "realism") from None
         robot.realism_own = {k: getattr(own, k) for k in kept}
         robot.realism_cached = None
         # kept after its values are cleared (a robot whose values are written back directly, as

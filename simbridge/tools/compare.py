@@ -336,7 +336,7 @@ def replay_against(
     """
     import tempfile
 
-    from simbridge.config import WorldSpec, load_params, load_world
+    from simbridge.app.config import WorldSpec, load_params, load_world
     from simbridge.tools.record import replay_headless
 
     real = load_run(real_bag, odom, cmd_vel)

@@ -41,7 +41,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from simbridge.config import Params, load_params
+from simbridge.app.config import Params, load_params
 from simbridge.errors import SimbridgeError
 from simbridge.graph.cmdvel import twist_of
 from simbridge.tools.bag import read_messages

@@ -26,7 +26,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from simbridge.config import Params, WorldSpec
+from simbridge.app.config import Params, WorldSpec
 from simbridge.errors import SimbridgeError
 from simbridge.graph import Graph
 from simbridge.graph.cmdvel import command_type, convert_twist

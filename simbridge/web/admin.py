@@ -37,7 +37,8 @@ from typing import TYPE_CHECKING, Any
 
 import orjson
 
-from simbridge.config import RealismParams, ServerSettings
+from simbridge.app.config import RealismParams
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.graph import ROBOT_NODE, Graph
 from simbridge.graph.estop import INSTRUCTOR, EStop, connection_rights, describe_peer
@@ -137,7 +138,7 @@ def token_from_headers(headers: Mapping[str, str]) -> str | None:
 
 
 #: The realism profile's parameters, which each robot may have of its own (issue 26).
-REALISM_NAMES = frozenset(f"realism.{n}" for n in RealismParams.settings())
+REALISM_NAMES = frozenset(f"realism.{n}" for n in RealismParams.model_fields)
 
 
 def _own(robot: Robot) -> dict[str, object]:

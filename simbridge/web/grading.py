@@ -27,7 +27,7 @@ from typing import Any
 
 import orjson
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.grading.grader import Grader
 from simbridge.grading.report import report_html

@@ -12,7 +12,7 @@ import time
 import pytest
 from playwright.async_api import Page
 
-from simbridge.config import Params, RobotParams
+from simbridge.app.config import Params, RobotParams
 from simbridge.runner import App
 from tests.browser.conftest import OpenPage, PageLog, Watcher, screenshot
 from tests.conftest import AppFactory

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from simbridge.config import resource_dir
+from simbridge.app.config import resource_dir
 from tests.browser.conftest import OpenPage, screenshot
 from tests.conftest import AppFactory
 from tests.helpers import ws_url

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from simbridge.config import WorldSpec
+from simbridge.app.config import WorldSpec
 from tests.browser.conftest import OpenPage, screenshot
 from tests.conftest import AppFactory
 from tests.helpers import wait_for, ws_url

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.runner import App
 from tests.browser.conftest import OpenPage
 from tests.helpers import TIMEOUT_FACTOR, ws_url

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pytest
 
-from simbridge.config import WorldSpec
+from simbridge.app.config import WorldSpec
 from tests.conftest import AppFactory, ClientRunner
 from tests.helpers import ws_url
 

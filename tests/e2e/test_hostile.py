@@ -21,7 +21,7 @@ from hypothesis import HealthCheck, given, settings
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.runner import App
 from tests.e2e.hostile import frames
 from tests.helpers import TIMEOUT_FACTOR

@@ -20,7 +20,7 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
-from simbridge.config import load_params, load_world, resource_dir
+from simbridge.app.config import load_params, load_world, resource_dir
 from simbridge.runner import App
 from tests.conftest import AppFactory
 from tests.helpers import (

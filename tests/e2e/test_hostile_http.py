@@ -22,7 +22,7 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import connect
 
-from simbridge.config import load_world, resource_dir
+from simbridge.app.config import load_world, resource_dir
 from tests.conftest import AppFactory
 from tests.e2e.test_hostile_clients import ADMIN, classroom, odom_watch
 from tests.helpers import TIMEOUT_FACTOR, wait_for, ws_url

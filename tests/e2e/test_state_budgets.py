@@ -23,7 +23,7 @@ import pytest
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
-from simbridge.config import load_world
+from simbridge.app.config import load_world
 from simbridge.graph.guard import rosauth_mac
 from simbridge.protocol.fragments import MESSAGE_COST, PIECE_COST
 from simbridge.runner import App

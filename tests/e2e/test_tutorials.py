@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import WorldSpec
+from simbridge.app.config import WorldSpec
 from simbridge.runner import App
 from tests.conftest import ClientRunner
 from tests.helpers import ROOT, finish_process, ws_url

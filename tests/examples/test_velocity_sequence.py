@@ -13,7 +13,7 @@ import signal
 import sys
 from pathlib import Path
 
-from simbridge.config import Params, RobotParams
+from simbridge.app.config import Params, RobotParams
 from simbridge.tools.bag import read_messages
 from tests.conftest import AppFactory
 from tests.helpers import ROOT, TIMEOUT_FACTOR, finish_process, ws_url

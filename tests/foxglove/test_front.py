@@ -17,7 +17,7 @@ from websockets.asyncio.client import connect
 from websockets.exceptions import InvalidStatus
 from websockets.typing import Subprotocol
 
-from simbridge.config import WorldSpec
+from simbridge.app.config import WorldSpec
 from simbridge.errors import ConfigError
 from tests.conftest import AppFactory, _run_client
 from tests.helpers import JS_DIR, ROOT, TIMEOUT_FACTOR, ws_url
@@ -95,7 +95,7 @@ async def test_in_a_class_the_foxglove_port_drives_only_the_robot_it_was_opened_
 ) -> None:
     tokens = {"student-one-token": "r1", "student-two-token": "r2"}
     with pytest.raises(ConfigError, match="carries no token"):
-        from simbridge.config import server_settings
+        from simbridge.app.settings import server_settings
 
         server_settings(foxglove_port=0, client_tokens=tokens)
     app = await make_app(

@@ -32,7 +32,7 @@ def test_bundled_tasks_load_with_their_file_names_as_ids() -> None:
         (GOOD.replace("overshoot_pct", "overshot"), "rubric: overshot: unknown metric"),
         (GOOD.replace("time_limit: 5", "time_limit: -1"), "time_limit: must be greater than 0"),
         (GOOD.replace("{heading: 1.57}", "{heading: 1.57, position: [1, 0]}"), "goal: give"),
-        (GOOD.replace("{max: 10}", "{}"), "rubric['overshoot_pct']: give max or min"),
+        (GOOD.replace("{max: 10}", "{}"), "rubric.overshoot_pct: give max or min"),
         (GOOD + "robot_params: {mass: 3}\n", "robot_params: mass: a parameter name"),
         (GOOD.replace("{heading: 1.57}", "{waypoints: [[1, 0]]}"), "rubric.overshoot_pct: not"),
         ("goal: [1", "is not valid YAML"),

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph, install_rosapi
 from tests.helpers import RecordingPeer
 

@@ -5,7 +5,8 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import Params, ServerSettings, load_world
+from simbridge.app.config import Params, load_world
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph import Graph, RobotBridge
 from simbridge.graph.admission import Call, GoalRequest, GoalUpdate, Publication, Response

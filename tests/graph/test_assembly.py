@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from websockets.asyncio.client import ClientConnection
 
-from simbridge.config import WorldSpec
+from simbridge.app.config import WorldSpec
 from simbridge.headless import Simulation
 from tests.helpers import recv_until, send_json
 

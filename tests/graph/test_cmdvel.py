@@ -5,7 +5,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import Params, RobotParams, SafetyParams, WorldSpec
+from simbridge.app.config import Params, RobotParams, SafetyParams, WorldSpec
 from simbridge.errors import ServiceError
 from simbridge.graph import ROBOT_NODE, Graph, RobotBridge
 from simbridge.graph.cmdvel import TWIST, TWIST_STAMPED, command_type, convert_twist, twist_of

@@ -5,7 +5,8 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import Params, ServerSettings, load_world
+from simbridge.app.config import Params, load_world
+from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph, RobotBridge
 from simbridge.graph.estop import EStop
 from simbridge.graph.fleet import install_fleet

@@ -6,7 +6,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import Params, WorldSpec
+from simbridge.app.config import Params, WorldSpec
 from simbridge.graph import Graph, RobotBridge
 from simbridge.sim import World
 from tests.helpers import RecordingPeer

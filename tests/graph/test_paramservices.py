@@ -5,7 +5,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import Params, load_world
+from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph, RobotBridge, install_rosapi
 from simbridge.sim import World
 from tests.helpers import RecordingPeer

@@ -3,7 +3,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from simbridge.config import Params, ServerSettings, load_world
+from simbridge.app.config import Params, load_world
+from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph, RobotBridge
 from simbridge.graph.estop import EStop
 from simbridge.graph.guard import Guard

@@ -5,7 +5,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import Params, load_world
+from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph, RobotBridge, install_rosapi
 from simbridge.graph.tutorials import install_tutorials
 from simbridge.sim import World

@@ -3,7 +3,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-from simbridge.config import Params, SafetyParams, WorldSpec
+from simbridge.app.config import Params, SafetyParams, WorldSpec
 from simbridge.graph import Graph, RobotBridge
 from simbridge.graph.safety import Safety
 from simbridge.sim import World

@@ -5,7 +5,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph import Graph
 from tests.helpers import RecordingPeer

@@ -5,7 +5,7 @@ from typing import Any
 
 from websockets.asyncio.client import ClientConnection, connect
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.graph.simclock import MAX_REAL_TIME_FACTOR
 from simbridge.runner import App
 from tests.conftest import AppFactory

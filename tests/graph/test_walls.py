@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import json
 
-from simbridge.config import Params, WorldSpec
+from simbridge.app.config import Params, WorldSpec
 from simbridge.graph import Graph
 from simbridge.graph.walls import LINE_LIST, WallsPublisher
 from simbridge.sim import World

@@ -4,7 +4,7 @@ import math
 
 import pytest
 
-from simbridge.config import RobotParams
+from simbridge.app.config import RobotParams
 from simbridge.sim import DynamicModel, RobotState
 
 

@@ -5,7 +5,7 @@ import math
 import numpy as np
 import pytest
 
-from simbridge.config import WorldSpec
+from simbridge.app.config import WorldSpec
 from simbridge.sim.lidar import beam_angles, raycast, raycast_batch, segments_array
 
 

@@ -7,7 +7,14 @@ import math
 import numpy as np
 import pytest
 
-from simbridge.config import FloorPatch, LidarParams, Params, RealismParams, WorldSpec, load_world
+from simbridge.app.config import (
+    FloorPatch,
+    LidarParams,
+    Params,
+    RealismParams,
+    WorldSpec,
+    load_world,
+)
 from simbridge.sim import World
 
 

@@ -6,7 +6,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from simbridge.config import Params, WorldSpec, load_params, load_world
+from simbridge.app.config import Params, WorldSpec, load_params, load_world
 from simbridge.sim import World, world as world_module
 from simbridge.sim.world import KinematicModel, Robot
 

@@ -13,7 +13,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from simbridge.config import Params, load_params
+from simbridge.app.config import Params, load_params
 from simbridge.headless import Simulation
 from simbridge.msgs import TypeRegistry
 from simbridge.tools.bag import BagWriter

@@ -11,7 +11,7 @@ from rosbags.rosbag2 import Reader
 from rosbags.typesys import Stores, get_typestore
 from websockets.asyncio.client import connect
 
-from simbridge.config import Params, RobotParams
+from simbridge.app.config import Params, RobotParams
 from simbridge.runner import App
 from simbridge.tools.bag import read_messages
 from simbridge.tools.compare import load_run

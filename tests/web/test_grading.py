@@ -18,7 +18,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import resource_dir
+from simbridge.app.config import resource_dir
 from simbridge.runner import App
 from simbridge.tools.client import ClientError, RosbridgeClient
 from tests.conftest import AppFactory

@@ -20,7 +20,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.msgs import TypeRegistry
 from simbridge.runner import App
 from simbridge.zenoh.config import ZenohOptions

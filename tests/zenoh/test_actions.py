@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from websockets.asyncio.client import connect
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.runner import App
 from simbridge.zenoh.typehash import TypeHasher
 from tests.helpers import recv_until, send_json, wait_for, ws_url

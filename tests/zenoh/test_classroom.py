@@ -18,7 +18,7 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import connect
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph
 from simbridge.runner import App
 from simbridge.zenoh.config import ZenohOptions

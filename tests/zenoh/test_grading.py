@@ -16,7 +16,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.runner import App
 from simbridge.tools.client import RosbridgeClient
 from tests.helpers import ROOT, wait_for, ws_url

@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import connect
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.runner import App
 from tests.helpers import ROOT, http_url, wait_for, ws_url
 from tests.zenoh.conftest import Router, zenoh_options
@@ -51,7 +51,7 @@ def test_zenohd_without_the_extra_names_the_command_not_an_option() -> None:
 def test_without_zenoh_nothing_of_it_is_imported() -> None:
     done = _python(
         "import asyncio, sys\n"
-        "from simbridge.config import ServerSettings\n"
+        "from simbridge.app.settings import ServerSettings\n"
         "from simbridge.runner import App\n"
         "async def main():\n"
         "    app = App(ServerSettings(host='127.0.0.1', port=0, http_port=None))\n"

@@ -19,7 +19,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.config import ServerSettings
+from simbridge.app.settings import ServerSettings
 from simbridge.ros2.dds.options import DdsOptions
 from simbridge.runner import App
 from tests.helpers import ROOT, TIMEOUT_FACTOR, wait_for, ws_url

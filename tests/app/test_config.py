@@ -6,19 +6,17 @@ from pathlib import Path
 
 import pytest
 
-from simbridge.config import (
+from simbridge.app.config import (
     Params,
-    ServerSettings,
-    ValidationError,
     default_params_path,
     default_world_path,
-    finite_number,
     load_params,
     load_world,
     resource_dir,
-    server_settings,
 )
+from simbridge.app.settings import ServerSettings, SettingsError, server_settings
 from simbridge.errors import ConfigError
+from simbridge.msgs.convert import finite_number
 
 
 def write(tmp_path: Path, name: str, text: str) -> Path:
@@ -64,7 +62,7 @@ def test_the_defaults_are_built_without_pyyaml_and_a_file_still_loads(tmp_path: 
     """The default run does not import yaml; a world file given imports it where it is read."""
     path = write(tmp_path, "w.yaml", "walls: [[0, 0, 1, 0]]\n")
     code = (
-        "import sys; from simbridge.config import load_params, load_world; "
+        "import sys; from simbridge.app.config import load_params, load_world; "
         "load_params(None); load_world(None); print('yaml' in sys.modules); "
         f"print(load_world({str(path)!r}).walls, 'yaml' in sys.modules)"
     )
@@ -253,7 +251,7 @@ def test_server_settings_are_validated_naming_the_field() -> None:
 def test_server_settings_cannot_be_changed_after_validation() -> None:
     """Settings are validated once: a later assignment is refused, not slipped in."""
     settings = ServerSettings()
-    with pytest.raises(ValidationError):
+    with pytest.raises(SettingsError):
         settings.max_clients = -1  # type: ignore[misc]
 
 
