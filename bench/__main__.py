@@ -74,6 +74,15 @@ FOXGLOVE = {
 }
 
 
+#: Issue 24's figures before and after the restructure (``python -m bench restructure``, about
+#: 10 minutes, not in the default run; ``--only fanout,publish`` for some): the baseline is a
+#: git revision (``--baseline REV``, default main before it) checked out by the benchmark itself.
+RESTRUCTURE = {
+    "restructure": "fan-out, publish, headless, Zenoh outward and hop, idle RSS, cold start: "
+    "a baseline commit vs this checkout, alternated, medians and ratios",
+}
+
+
 def runs(argv: list[str]) -> list[tuple[str, list[str]]]:
     """Split ``argv`` into benchmarks and their arguments.
 
@@ -95,9 +104,18 @@ def runs(argv: list[str]) -> list[tuple[str, list[str]]]:
     return out
 
 
+def _module(name: str) -> object:
+    """The benchmark module ``bench.NAME``, or None when there is none."""
+    if name.startswith("-") or importlib.util.find_spec(f"bench.{name}") is None:
+        return None
+    return importlib.import_module(f"bench.{name}")
+
+
 def main(argv: list[str]) -> int:
     baseline = None
-    if "--baseline" in argv:
+    # a benchmark with a --baseline of its own (bench.restructure: a git revision) takes it
+    owns = bool(argv) and getattr(_module(argv[0]), "OWN_BASELINE", False)
+    if "--baseline" in argv and not owns:
         at = argv.index("--baseline")
         baseline, argv = argv[at + 1], argv[:at] + argv[at + 2 :]
     names = argv or [*QUICK, *SCALE]

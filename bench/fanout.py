@@ -54,15 +54,17 @@ def phase(
     *,
     drive: bool = False,
     checkout: Path | None = None,
+    tree: Path | None = None,
 ) -> dict[str, Any]:
     """Run ``n`` clients against one server kind for ``seconds``; return the figures.
 
     With ``drive``, the first client also publishes /cmd_vel at 10 Hz (the broadcaster reads
     and ignores it), so that simbridge moves its robot, casts a new scan each time and resolves
     contacts with the walls the robot slides along. ``checkout``: simbridge as that checkout
-    has it (the row is then labelled ``before``).
+    has it (the row is then labelled ``before``); ``tree``: that source tree's simbridge with
+    this interpreter (:func:`bench.procs.tree_env`; the row keeps its label).
     """
-    with server(kind, checkout=checkout) as (proc, port):
+    with server(kind, checkout=checkout, tree=tree) as (proc, port):
         clients: list[dict[str, Any]] = [{"subscribe": TOPICS} for _ in range(n)]
         if drive:
             clients[0]["drive"] = "/cmd_vel"

@@ -188,11 +188,25 @@ def groups() -> list[tuple[str, tuple[float, float, float]]]:
     return [(label, (r, a, f)) for label, (r, a, f) in json.loads(proc.stdout)]
 
 
-def idle_server(preload: list[str]) -> tuple[tuple[float, float, float], list[str], list[str]]:
-    """(RSS, anon, file) MB, the modules (in import order) and shared libraries of the server."""
+def idle_server(
+    preload: list[str], tree: Path | None = None
+) -> tuple[tuple[float, float, float], list[str], list[str]]:
+    """(RSS, anon, file) MB, the modules (in import order) and shared libraries of the server.
+
+    ``tree``: that source tree's simbridge with this interpreter (first on ``PYTHONPATH``).
+    """
     cmd = [sys.executable, "-c", _SERVER_CHILD, str(_free_port()), str(_free_port())]
+    env = None
+    if tree is not None:
+        env = dict(os.environ)
+        env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [env.get("PYTHONPATH")])])
     proc = subprocess.run(
-        [*cmd, json.dumps(preload)], capture_output=True, text=True, cwd=ROOT, timeout=180
+        [*cmd, json.dumps(preload)],
+        capture_output=True,
+        text=True,
+        cwd=tree or ROOT,
+        env=env,
+        timeout=180,
     )
     line = next((ln for ln in proc.stderr.splitlines() if ln.startswith("MEMORY ")), None)
     if line is None:

@@ -77,6 +77,7 @@ from bench.procs import (
     percentile,
     start_loadgens,
     stop,
+    tree_env,
     wait_listening,
 )
 
@@ -390,15 +391,20 @@ async def _first_odom(port: int, started: float, timeout: float = 120.0) -> floa
             await asyncio.sleep(0.01)
 
 
-def cold_start(budget: CpuBudget | None) -> float:
-    """Seconds from spawning ``simbridge`` (default world) to the first /odom on a client."""
+def cold_start(budget: CpuBudget | None, tree: Path | None = None) -> float:
+    """Seconds from spawning ``simbridge`` (default world) to the first /odom on a client.
+
+    ``tree``: that source tree's simbridge with this interpreter (:func:`bench.procs.tree_env`).
+    """
     port = free_port()
     cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", str(port)]
     cmd += ["--no-http", "--log-level", "warning"]
+    cwd, env = tree_env(tree) if tree is not None else (ROOT, None)
     started = time.monotonic()
     # its warnings (ticks skipped) are counted from /healthz, not printed
     out = subprocess.DEVNULL
-    proc = subprocess.Popen(budget.wrap(cmd) if budget else cmd, cwd=ROOT, stdout=out, stderr=out)
+    wrapped = budget.wrap(cmd) if budget else cmd
+    proc = subprocess.Popen(wrapped, cwd=cwd, env=env, stdout=out, stderr=out)
     try:
         return asyncio.run(_first_odom(port, started))
     finally:

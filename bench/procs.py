@@ -27,6 +27,18 @@ from websockets.asyncio.client import connect
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def tree_env(tree: Path) -> tuple[Path, dict[str, str]]:
+    """The working directory and environment that run ``tree``'s simbridge with this Python.
+
+    ``tree`` is a source checkout (e.g. a ``git worktree`` of an older commit, without a
+    virtualenv of its own): first on ``PYTHONPATH`` and the working directory, so that its
+    ``simbridge`` (and its ``bench``) shadow the one installed in this interpreter's venv.
+    """
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join([str(tree), *filter(None, [env.get("PYTHONPATH")])])
+    return tree, env
+
+
 def free_port() -> int:
     """Return a TCP port that is free on 127.0.0.1 now."""
     with socket.socket() as s:
@@ -53,17 +65,24 @@ def wait_listening(port: int, timeout: float = 20.0) -> None:
 
 @contextlib.contextmanager
 def server(
-    kind: str, *, world: Path | None = None, checkout: Path | None = None
+    kind: str,
+    *,
+    world: Path | None = None,
+    checkout: Path | None = None,
+    tree: Path | None = None,
 ) -> Iterator[tuple[psutil.Process, int]]:
     """Run a server process: ``simbridge`` or ``broadcaster``; yield (process, port).
 
     ``checkout``: run simbridge as that checkout has it (its code and ``.venv``), e.g. the
-    baseline of a before/after comparison.
+    baseline of a before/after comparison. ``tree``: that source tree's simbridge with this
+    interpreter (:func:`tree_env`).
     """
     port = free_port()
-    python, cwd = sys.executable, ROOT
+    python, cwd, env = sys.executable, ROOT, None
     if checkout is not None:
         python, cwd = str(checkout / ".venv" / "bin" / "python"), checkout
+    if tree is not None and kind == "simbridge":
+        cwd, env = tree_env(tree)
     if kind == "simbridge":
         cmd = [python, "-m", "simbridge", "--host", "127.0.0.1", "--port", str(port)]
         # 500-client runs: above the default --max-clients (200) of a classroom server
@@ -72,7 +91,7 @@ def server(
             cmd += ["--world", str(world)]
     else:
         cmd = [sys.executable, "-m", "bench.broadcaster", str(port)]
-    proc = subprocess.Popen(cmd, cwd=cwd, stdout=subprocess.DEVNULL)
+    proc = subprocess.Popen(cmd, cwd=cwd, env=env, stdout=subprocess.DEVNULL)
     try:
         wait_listening(port)
         yield psutil.Process(proc.pid), port
