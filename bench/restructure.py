@@ -26,10 +26,10 @@ read. The measurements (``--only`` picks some, comma-separated):
   (each tree's ``bench.publish``: median us per op, no sockets), and over the wire (10 clients
   publishing /cmd_vel at 150 Hz each to a server process for 6 s: the server's CPU while they
   publish minus its CPU idle over as long, per publish).
-* ``headless``: ``Simulation.step`` steps per CPU second of the process (the median of 7
-  batches of at least 0.1 s), with no subscriber and with /odom + /scan + /tf + /clock
-  subscribed.
-* ``zenoh``: each tree's ``bench.zenoh hop outward`` for ``--zenoh-seconds`` (default 8;
+* ``headless``: ``Simulation.step`` steps per CPU second of the process (the best of 7
+  batches of at least 0.1 s: a busy neighbour only slows a batch down), with no subscriber and
+  with /odom + /scan + /tf + /clock subscribed.
+* ``zenoh``: each tree's ``bench.zenoh hop outward`` for ``--zenoh-seconds`` (default 6;
   ``ROUNDS`` 2 inside each run, alternating which client goes first): the server
   CPU to one ROS 2 subscriber vs one rosbridge client of 30 robots' topics (issue 24's target:
   <= 1.0x once the JSON round trip is gone), and the /odom p99 through a Zenoh hop.
@@ -209,7 +209,7 @@ def _run_python(tree: Tree, args: list[str], *, timeout: float, **env: str) -> s
 class Options:
     seconds: float = 10.0  # the fanout's window
     wire_seconds: float = 6.0  # the wire publish's (idle, then publishing)
-    zenoh_seconds: float = 8.0  # bench.zenoh's window
+    zenoh_seconds: float = 6.0  # bench.zenoh's window
     zenoh_rounds: int = 2  # runs of bench.zenoh in each tree (each with ROUNDS 2 inside)
     pi_cores: float | None = None
     budget: Any = None  # bench.pi.CpuBudget, made once
@@ -309,7 +309,7 @@ def _wire_publish(tree: Tree, seconds: float) -> dict[str, float]:
 
 
 _HEADLESS_CHILD = r"""
-import json, statistics, sys, time
+import json, sys, time
 import simbridge
 from simbridge.headless import Simulation
 
@@ -331,7 +331,7 @@ for _ in range(7):
     t0 = time.process_time()
     sim.step(n)
     rates.append(n / (time.process_time() - t0))
-print(json.dumps({"file": simbridge.__file__, "rate": statistics.median(rates)}))
+print(json.dumps({"file": simbridge.__file__, "rate": max(rates)}))
 """
 
 HEADLESS_CASES = {
