@@ -52,6 +52,13 @@ MEMORY = {
     "issue-16 cuts",
 }
 
+#: Start-up cost (issue 24; ``python -m bench startup``, about a minute; before/after with
+#: ``--baseline DIR``): idle memory without and with a SIMBRIDGE_* variable, cold start.
+STARTUP = {
+    "startup": "idle default server RSS / RssAnon / RssFile; cold start to the first /odom, "
+    "without a limit and in the Pi 4B budget",
+}
+
 #: Reliability figures of issue 7, run by name (``python -m bench hostile stall churn soak``).
 RELIABILITY = {
     "hostile": "hostile frames against a real server: crashes, /odom rate quiet vs under attack",

@@ -110,7 +110,7 @@ def _add_options(
         target.add_argument(
             declared.flag,
             type=_typed(declared),
-            metavar=declared.option.metavar,
+            metavar=declared.metavar,
             default=env.get(declared.name, declared.info.default),
             help=declared.help(),
         )

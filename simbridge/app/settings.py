@@ -25,6 +25,8 @@ string field: quote it) and unknown keys are refused by name.
 from __future__ import annotations
 
 import os
+import types
+import typing
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Annotated, Any, Literal, Self
@@ -803,11 +805,25 @@ class Declared:
         """Whether the option is a flag (a boolean field)."""
         return self.info.annotation is bool
 
+    @property
+    def metavar(self) -> str | None:
+        """How the value is shown: the declared metavar, ``N`` for integers, or the choices."""
+        if self.option.metavar is not None:
+            return self.option.metavar
+        kind = self.info.annotation
+        if typing.get_origin(kind) in (typing.Union, types.UnionType):
+            kind = next(a for a in typing.get_args(kind) if a is not type(None))
+        if typing.get_origin(kind) is Annotated:
+            kind = typing.get_args(kind)[0]
+        if typing.get_origin(kind) is Literal:
+            return "{" + ",".join(str(a) for a in typing.get_args(kind)) + "}"
+        return "N" if kind is int else None
+
     def help(self) -> str:
         """The option's help: the description, the default and the variable."""
         default = self.option.default
         if default is None and not self.flag_only and self.info.default is not None:
-            default = str(self.info.default)
+            default = _number(self.info.default)
         shown = f" (default: {default})" if default else ""
         return f"{self.info.description}{shown} [{self.variable}]"
 
