@@ -1,19 +1,19 @@
 """simbridge --dds with a ROS 2 node on DDS in another process, and rosbridge clients.
 
 Every test runs in a network namespace of its own (DDS discovery is multicast: nothing may reach
-the machine's interfaces), with a domain id of its own.
+the machine's interfaces), with a domain id of its own (tests/ros2/dds/harness.py). The ROS 2
+side is Fast DDS (``ddspeer``, the library rmw_fastrtps is made of) and Cyclone DDS's own typed
+Python (``cyclone_peer.py``, as rmw_cyclonedds's other library serializes).
 """
 
 from __future__ import annotations
 
 import asyncio
-import ctypes
-import itertools
 import json
 import os
 import subprocess
 import sys
-from collections.abc import AsyncIterator, Iterator
+from collections.abc import AsyncIterator
 from pathlib import Path
 from typing import Any
 
@@ -23,46 +23,25 @@ from simbridge.app.settings import ServerSettings
 from simbridge.ros2.dds.options import DdsOptions
 from simbridge.runner import App
 from tests.helpers import ROOT, TIMEOUT_FACTOR, wait_for, ws_url
+from tests.ros2.dds.harness import NetNamespace
 
 
 pytestmark = pytest.mark.e2e
 
 PEER = Path(__file__).with_name("cyclone_peer.py")
-_CLONE_NEWNET = 0x40000000
-_domains = itertools.count(150 + os.getpid() % 40)
 
 
 @pytest.fixture
-def netns() -> Iterator[int]:
-    """Put this test's thread (and what it starts) in a new network namespace; yield a domain.
-
-    ``lo`` is up with multicast and a 224.0.0.0/4 route, the only interface there.
-    """
-    libc = ctypes.CDLL(None, use_errno=True)
-    home = os.open("/proc/thread-self/ns/net", os.O_RDONLY)
-    try:
-        if libc.unshare(_CLONE_NEWNET) != 0:
-            pytest.skip(f"no network namespace here: {os.strerror(ctypes.get_errno())}")
-        for cmd in (
-            ["ip", "link", "set", "lo", "up", "multicast", "on"],
-            ["ip", "route", "add", "224.0.0.0/4", "dev", "lo"],
-        ):
-            subprocess.run(cmd, check=True, capture_output=True)
-        yield next(_domains)
-    finally:
-        libc.setns(home, _CLONE_NEWNET)
-        os.close(home)
-
-
-@pytest.fixture
-async def dds_app(netns: int) -> AsyncIterator[App]:
-    settings = ServerSettings(host="127.0.0.1", port=0, http_port=0)
-    app = App(settings, dds=DdsOptions(domain=netns))
-    await app.start()
-    try:
-        yield app
-    finally:
-        await app.stop()
+async def dds_app(netns: NetNamespace, dds_domain: int) -> AsyncIterator[App]:
+    """Simbridge --dds with the default world, in the test's namespace (the test runs there)."""
+    with netns.entered():
+        settings = ServerSettings(host="127.0.0.1", port=0, http_port=0)
+        app = App(settings, dds=DdsOptions(domain=dds_domain))
+        await app.start()
+        try:
+            yield app
+        finally:
+            await app.stop()
 
 
 async def _peer(domain: int, *args: str) -> dict[str, Any]:
@@ -98,7 +77,7 @@ def test_dds_without_the_extra_exits_at_once_with_the_install_command() -> None:
     )
 
 
-async def test_a_dds_node_lists_reads_and_drives_the_robot_that_rosbridge_clients_watch(
+async def test_a_cyclone_node_lists_reads_and_drives_the_robot_that_rosbridge_clients_watch(
     dds_app: App, run_js: Any, run_roslibpy: Any
 ) -> None:
     app = dds_app
@@ -131,3 +110,44 @@ async def test_a_dds_node_lists_reads_and_drives_the_robot_that_rosbridge_client
     assert samples["/tf_static"] == [["base_link", "laser"]]  # a late joiner's latched TF
     health = app.health()["dds"]
     assert health["state"] == "running" and health["received"] > 0
+
+
+async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_robot(
+    dds_app: App, ddspeer: Any, run_js: Any, run_roslibpy: Any
+) -> None:
+    app = dds_app
+    echo = ["--echo", "/odom", "--echo", "/scan", "--echo", "/tf", "--echo", "/tf_static@latched"]
+    peer = await ddspeer(*echo, "--cmd-vel", "0.4,0", "--chatter", node="student", distro="jazzy")
+    url = ws_url(app)
+    await wait_for(lambda: "/peer_chatter" in app.graph.topics.topics, 10)
+    watched, echoed = await asyncio.gather(
+        run_js("roslib2", url, "odom_rate", {"count": 20}),
+        run_roslibpy(url, "echo", {"topic": "/peer_chatter", "type": "std_msgs/msg/String"}),
+    )
+    # a roslibjs client watches the robot that the Fast DDS node drives forward
+    first, last = (watched[k]["pose"]["pose"]["position"]["x"] for k in ("first", "last"))
+    assert last > first + 0.05
+    # a roslibpy client reads the Fast DDS node's topic, listed in rosapi with its type
+    assert echoed["messages"][0]["data"].startswith("hello ")
+    assert echoed["topics"]["/peer_chatter"] == "std_msgs/msg/String"
+    assert "/student" in app.graph.nodes
+    # what `ros2 topic list -t`, `ros2 node list` and `ros2 topic echo` show on rmw_fastrtps
+    odom = await peer.sample("/odom")
+    assert (odom["header"]["frame_id"], odom["child_frame_id"]) == ("odom", "base_link")
+    assert len((await peer.sample("/scan"))["ranges"]) == 360
+    tf = await peer.sample("/tf")
+    assert tf["transforms"][0]["child_frame_id"] == "base_link"
+    tf_static = await peer.sample("/tf_static")  # a late joiner: the latched message
+    assert tf_static["transforms"][0]["child_frame_id"] == "laser"
+    graph = peer.graph()
+    topics = graph.topics()
+    assert topics["/odom"] == {"nav_msgs/msg/Odometry"}
+    assert topics["/tf_static"] == {"tf2_msgs/msg/TFMessage"}
+    assert {"/virtual_robot", "/sim", "/rosbridge_websocket"} <= graph.nodes()
+    assert "/odom" in graph.node("/virtual_robot")["publishers"]
+    assert "/cmd_vel" in graph.node("/virtual_robot")["subscribers"]
+    ours = [p for p in graph.participants.values() if p.startswith("enclave=/;")]
+    assert ours, graph.participants
+    assert any(w.user_data.startswith("typehash=RIHS01_") for w in graph.writers("rt/odom")), (
+        "Jazzy's endpoints carry their type hash"
+    )

@@ -1,0 +1,329 @@
+"""ROS 2 over DDS (issue 25): the library's costs, outward publishing, /odom latency.
+
+``python -m bench dds [lib|outward|latency] [SECONDS]`` (default: all three, 10 s). The whole
+benchmark runs inside a network namespace of its own (it re-runs itself under ``unshare -n``,
+``lo`` up with multicast): DDS discovery is multicast and must not reach the machine's network.
+
+* ``lib``: per DDS library, in a fresh process each: import time, resident memory of a process
+  with one participant (idle), and CPU per Odometry written to one reader in another process:
+  Cyclone DDS writing simbridge's CDR bytes (what ``--dds`` does), Cyclone DDS serializing its
+  own typed sample, and dust-dds (the other Python DDS library with wheels) where it can.
+* ``outward``: 30 robots; the server's CPU (its user + system seconds over the window's wall
+  seconds) while one rosbridge client subscribes to every robot's /odom and /scan and /tf, then
+  while one DDS subscriber (another process, one raw Cyclone reader per topic, counting) does;
+  ``ROUNDS`` (default 3) alternating rounds, the median of the ratios. Target: DDS <= 1.0x.
+* ``latency``: one robot; /odom latency (arrival minus the header stamp, the wall clock when
+  the server published it) of a rosbridge client and of a DDS subscriber of the same server,
+  side by side. Target: DDS p99 <= 1.0x rosbridge's.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import json
+import os
+import statistics
+import subprocess
+import sys
+import tempfile
+import textwrap
+import time
+from pathlib import Path
+from typing import Any
+
+from websockets.asyncio.client import connect
+
+from bench.procs import ROOT, cpu_seconds, load_average, percentile
+from bench.zenoh import _simbridge, _world
+
+
+DOMAIN = 77
+
+LIB = r"""
+import json, os, resource, sys, time
+which = sys.argv[1]
+t0 = time.perf_counter()
+if which == "dust-dds":
+    import dust_dds
+else:
+    import cyclonedds.domain, cyclonedds.pub, cyclonedds.sub, cyclonedds.topic
+imported = time.perf_counter() - t0
+def rss():
+    with open("/proc/self/status") as f:
+        return next(int(l.split()[1]) for l in f if l.startswith("VmRSS")) / 1024
+out = {"import_s": imported}
+if which == "dust-dds":
+    f = dust_dds.DomainParticipantFactory.get_instance()
+    p = f.create_participant(domain_id=int(os.environ["DOMAIN"]))
+    from dataclasses import dataclass
+    K = dust_dds.TypeKind
+    time.sleep(2); out["idle_rss_mb"] = rss()
+    T = dataclass(type("nav_msgs::msg::dds_::Odometry_", (), {"__annotations__": {"x": K.float64}}))
+    w = p.create_publisher().create_datawriter(p.create_topic("rt/odom", T))
+    try:
+        w.write(T(1.0)); out["write"] = "ok"
+    except BaseException as e:
+        out["write"] = f"cannot write a float64 member: {e}"
+else:
+    from cyclonedds.core import Policy, Qos
+    from cyclonedds._clayer import ddspy_write
+    p = cyclonedds.domain.DomainParticipant(int(os.environ["DOMAIN"]))
+    time.sleep(2); out["idle_rss_mb"] = rss()  # the participant alone, as dust-dds's
+    from simbridge.msgs import TypeRegistry
+    from simbridge.msgs.cdr import CdrWriter
+    from simbridge.ros2.dds.types import IdlTypes
+    reg = TypeRegistry(); Odom = IdlTypes(reg).get("nav_msgs/msg/Odometry")
+    q = Qos(Policy.Reliability.Reliable(100_000_000), Policy.History.KeepLast(10))
+    w = cyclonedds.pub.DataWriter(p, cyclonedds.topic.Topic(p, "rt/odom", Odom), qos=q)
+    while w.get_publication_matched_status().current_count < 1:
+        time.sleep(0.05)
+    from simbridge.msgs.convert import Converter
+    fields = {"header": {"frame_id": "odom"}, "child_frame_id": "base_link"}
+    msg = Converter(reg, lambda: (1, 2)).from_json("nav_msgs/msg/Odometry", fields)
+    cdr = CdrWriter(reg)
+    data = cdr.serialize("nav_msgs/msg/Odometry", msg)
+    sample = Odom.deserialize(data)
+    n = 20000
+    c0 = time.process_time()
+    if which == "cyclonedds-raw":
+        for _ in range(n):
+            ddspy_write(w._ref, cdr.serialize("nav_msgs/msg/Odometry", msg))
+    else:
+        for _ in range(n):
+            w.write(sample)
+    out["us_per_message"] = (time.process_time() - c0) / n * 1e6
+print(json.dumps(out), flush=True)
+"""
+
+READER = r"""
+import os, sys, time
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.core import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from simbridge.msgs import TypeRegistry
+from simbridge.ros2.dds.types import IdlTypes
+types = IdlTypes(TypeRegistry())
+p = DomainParticipant(int(os.environ["DOMAIN"]))
+q = Qos(Policy.Reliability.Reliable(100_000_000), Policy.History.KeepLast(10))
+r = DataReader(p, Topic(p, "rt/odom", types.get("nav_msgs/msg/Odometry")), qos=q)
+while True:
+    r.take(100)
+    time.sleep(0.01)
+"""
+
+
+def lib() -> bool:
+    env = {**os.environ, "DOMAIN": str(DOMAIN), "PYTHONPATH": str(ROOT)}
+    rows = []
+    for which in ("cyclonedds-raw", "cyclonedds-typed", "dust-dds"):
+        reader = None
+        if which != "dust-dds":
+            reader = subprocess.Popen([sys.executable, "-c", READER], cwd=ROOT, env=env)
+        try:
+            done = subprocess.run(
+                [sys.executable, "-c", LIB, which],
+                cwd=ROOT,
+                env=env,
+                capture_output=True,
+                text=True,
+                timeout=120,
+            )
+        finally:
+            if reader is not None:
+                reader.kill()
+                reader.wait()
+        lines = done.stdout.strip().splitlines()
+        rows.append((which, json.loads(lines[-1]) if lines else {"error": done.stderr[-300:]}))
+    print(f"dds lib: one participant per process, one reader in another process, {load_average()}")
+    print(f"{'':18}{'import s':>10}{'idle RSS MB':>13}{'us/Odometry':>13}  notes")
+    for which, out in rows:
+        us = out.get("us_per_message")
+        note = out.get("write", out.get("error", ""))
+        print(
+            f"{which:18}{out.get('import_s', float('nan')):>10.3f}"
+            f"{out.get('idle_rss_mb', float('nan')):>13.1f}"
+            f"{us if us is not None else float('nan'):>13.2f}  {note}"
+        )
+    return True
+
+
+SUBSCRIBER = r"""
+import json, os, sys, time, threading
+from cyclonedds.domain import DomainParticipant
+from cyclonedds.core import Policy, Qos, Listener
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds._clayer import ddspy_take
+from simbridge.msgs import TypeRegistry
+from simbridge.ros2.dds.types import IdlTypes
+names = json.loads(sys.argv[1]); seconds = float(sys.argv[2]); stamps = sys.argv[3] == "1"
+types = IdlTypes(TypeRegistry())
+p = DomainParticipant(int(os.environ["DOMAIN"]))
+q = Qos(Policy.Reliability.Reliable(100_000_000), Policy.History.KeepLast(10))
+count = [0]; lat = []
+def on_data(reader):
+    for data, info in ddspy_take(reader._ref, 0x7F, 64):
+        count[0] += 1
+        if stamps and info.valid_data:
+            sec = int.from_bytes(data[4:8], "little", signed=True)
+            nsec = int.from_bytes(data[8:12], "little")
+            lat.append(time.time() - (sec + nsec * 1e-9))
+readers = [
+    DataReader(p, Topic(p, "rt/" + n.strip("/"), types.get(t)), qos=q,
+               listener=Listener(on_data_available=on_data))
+    for n, t in names
+]
+time.sleep(3)
+start = count[0]; lat.clear()
+print("start", flush=True)
+time.sleep(seconds)
+print(json.dumps({"messages": count[0] - start, "latencies": lat}), flush=True)
+os._exit(0)
+"""
+
+
+def _dds_subscriber(names: list[tuple[str, str]], seconds: float, stamps: bool = False) -> Any:
+    env = {**os.environ, "DOMAIN": str(DOMAIN), "PYTHONPATH": str(ROOT)}
+    return subprocess.Popen(
+        [sys.executable, "-c", SUBSCRIBER, json.dumps(names), str(seconds), "1" if stamps else "0"],
+        cwd=ROOT,
+        env=env,
+        stdout=subprocess.PIPE,
+        text=True,
+    )
+
+
+def outward(seconds: float) -> bool:
+    n = 30
+    rounds = int(os.environ.get("ROUNDS", "3"))
+    os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
+    with tempfile.TemporaryDirectory() as tmp:
+        world = _world(Path(tmp), "r", n, "outward")
+        topics = [(f"/r{k + 1}/odom", "nav_msgs/msg/Odometry") for k in range(n)]
+        topics += [(f"/r{k + 1}/scan", "sensor_msgs/msg/LaserScan") for k in range(n)]
+        topics += [("/tf", "tf2_msgs/msg/TFMessage")]
+        with _simbridge("", "--world", str(world), "--dds", zenoh=False) as (proc, port):
+            time.sleep(3)
+            t0, c0 = time.monotonic(), cpu_seconds(proc)
+            time.sleep(seconds)
+            idle = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
+
+            async def rosbridge() -> tuple[float, int]:
+                count = 0
+                async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
+                    for name, _ in topics:
+                        await ws.send(json.dumps({"op": "subscribe", "topic": name}))
+                    await asyncio.sleep(2)
+                    t0, c0 = time.monotonic(), cpu_seconds(proc)
+                    end = t0 + seconds
+                    while time.monotonic() < end:
+                        await ws.recv()
+                        count += 1
+                    share = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
+                return share, count
+
+            def dds() -> tuple[float, int]:
+                sub = _dds_subscriber(topics, seconds)
+                assert sub.stdout is not None
+                sub.stdout.readline()  # "start": matched (the server writes) and counting
+                t0, c0 = time.monotonic(), cpu_seconds(proc)
+                line = sub.stdout.readline()
+                share = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
+                sub.wait(timeout=30)
+                return share, int(json.loads(line)["messages"])
+
+            results: list[tuple[tuple[float, int], tuple[float, int]]] = []
+            for k in range(rounds):
+                if k % 2 == 0:
+                    first = asyncio.run(rosbridge())
+                    time.sleep(2)
+                    results.append((first, dds()))
+                else:
+                    second = dds()
+                    time.sleep(2)
+                    results.append((asyncio.run(rosbridge()), second))
+                time.sleep(2)
+    ratios = [d[0] / max(rb[0], 1e-9) for rb, d in results]
+    print(
+        f"dds outward: {n} robots' /odom, /scan and /tf, {rounds} alternating rounds of"
+        f" {seconds:g} s, {load_average()}"
+    )
+    print(f"nobody subscribed: server CPU {100 * idle:.1f} %")
+    print(
+        f"{'round':7}{'rosbridge CPU %':>16}{'messages':>10}{'DDS CPU %':>11}{'messages':>10}"
+        f"{'ratio':>8}"
+    )
+    for k, ((rb, rb_count), (d, d_count)) in enumerate(results):
+        print(
+            f"{k + 1:<7}{100 * rb:>16.1f}{rb_count:>10}{100 * d:>11.1f}{d_count:>10}"
+            f"{ratios[k]:>7.2f}x"
+        )
+    ratio = statistics.median(ratios)
+    ok = ratio <= 1.0
+    print(
+        f"DDS / rosbridge server CPU, median of {rounds} rounds: {ratio:.2f}x"
+        f" (rounds {min(ratios):.2f}-{max(ratios):.2f}x); target <= 1.0x: "
+        f"{'met' if ok else 'NOT met'}"
+    )
+    return ok
+
+
+def latency(seconds: float) -> bool:
+    os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
+    with _simbridge("", "--dds", zenoh=False) as (_proc, port):
+        rosbridge: list[float] = []
+
+        async def client() -> None:
+            async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
+                await ws.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
+                end = time.monotonic() + seconds + 3
+                while time.monotonic() < end:
+                    msg = json.loads(await ws.recv())
+                    if msg.get("topic") == "/odom" and time.monotonic() > end - seconds:
+                        stamp = msg["msg"]["header"]["stamp"]
+                        rosbridge.append(time.time() - (stamp["sec"] + stamp["nanosec"] * 1e-9))
+
+        sub = _dds_subscriber([("/odom", "nav_msgs/msg/Odometry")], seconds, stamps=True)
+        asyncio.run(client())
+        assert sub.stdout is not None
+        sub.stdout.readline()
+        dds = json.loads(sub.stdout.readline())["latencies"]
+        sub.wait(timeout=30)
+    print(f"dds latency: /odom of one robot, {seconds:g} s, {load_average()}")
+    print(f"{'':22}{'messages':>10}{'p50 ms':>10}{'p99 ms':>10}")
+    for label, values in (("rosbridge client", rosbridge), ("DDS subscriber", dds)):
+        p50, p99 = percentile(values, 0.5) * 1e3, percentile(values, 0.99) * 1e3
+        print(f"{label:22}{len(values):>10}{p50:>10.2f}{p99:>10.2f}")
+    ratio = percentile(dds, 0.99) / max(percentile(rosbridge, 0.99), 1e-9)
+    ok = ratio <= 1.0
+    print(f"DDS / rosbridge p99: {ratio:.2f}x; target <= 1.0x: {'met' if ok else 'NOT met'}")
+    return ok
+
+
+def _in_netns(argv: list[str]) -> int:
+    """Run this benchmark again inside a new network namespace (lo only, multicast on)."""
+    script = textwrap.dedent(
+        """
+        ip link set lo up multicast on && ip route add 224.0.0.0/4 dev lo && exec "$@"
+        """
+    )
+    cmd = ["unshare", "-n", "sh", "-c", script, "sh", sys.executable, "-m", "bench.dds", *argv]
+    return subprocess.run(cmd, cwd=ROOT, env={**os.environ, "BENCH_DDS_NETNS": "1"}).returncode
+
+
+def main(argv: list[str] | None = None) -> int:
+    argv = list(sys.argv[1:] if argv is None else argv)
+    if not os.environ.get("BENCH_DDS_NETNS"):
+        return _in_netns(argv)
+    seconds = next((float(a) for a in argv if a.replace(".", "", 1).isdigit()), 10.0)
+    names = [a for a in argv if a in ("lib", "outward", "latency")] or ["lib", "outward", "latency"]
+    ok = True
+    for name in names:
+        ok = {"lib": lambda _s: lib(), "outward": outward, "latency": latency}[name](seconds) and ok
+        print()
+    return 0 if ok else 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())
