@@ -59,6 +59,8 @@ def _typed(declared: Declared) -> Callable[[str], Any]:
     from simbridge.app.settings import check
 
     def parse(text: str) -> Any:
+        if text == declared.info.default:
+            return text  # argparse passes a text default through ``type`` too: it is valid
         try:
             return check(declared, text)
         except ValueError as err:

@@ -29,7 +29,7 @@ import types
 import typing
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Annotated, Any, Literal, Self
+from typing import TYPE_CHECKING, Annotated, Any, Literal, Self
 
 import pydantic
 from pydantic import BaseModel, BeforeValidator, ConfigDict, Field, model_validator
@@ -37,7 +37,10 @@ from pydantic.fields import FieldInfo
 from pydantic_core import ErrorDetails
 
 from simbridge.errors import ConfigError
-from simbridge.protocol.budget import Limits, Pool
+
+
+if TYPE_CHECKING:
+    from simbridge.protocol.budget import Limits, Pool
 
 
 __all__ = [
@@ -697,6 +700,8 @@ def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
     Each comes from the fields declared with a :class:`Budget`; a limit with ``at_most`` is
     capped by that setting.
     """
+    from simbridge.protocol.budget import Limits, Pool  # here: check-config needs no protocol
+
     limits: dict[str, Any] = {}
     pool: dict[str, int] = {}
     for name, info in type(settings).model_fields.items():
