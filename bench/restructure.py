@@ -29,10 +29,11 @@ read. The measurements (``--only`` picks some, comma-separated):
 * ``headless``: ``Simulation.step`` steps per CPU second of the process (the best of 7
   batches of at least 0.1 s: a busy neighbour only slows a batch down), with no subscriber and
   with /odom + /scan + /tf + /clock subscribed.
-* ``zenoh``: each tree's ``bench.zenoh hop outward`` for ``--zenoh-seconds`` (default 6;
-  ``ROUNDS`` 2 inside each run, alternating which client goes first): the server
-  CPU to one ROS 2 subscriber vs one rosbridge client of 30 robots' topics (issue 24's target:
-  <= 1.0x once the JSON round trip is gone), and the /odom p99 through a Zenoh hop.
+* ``zenoh``: each tree's ``bench.zenoh outward`` for ``--zenoh-seconds`` (default 6;
+  ``ROUNDS`` 2 inside each run, alternating which client goes first) and ``bench.zenoh hop``
+  for 12 s (a p99 of 240 /odom messages): the server CPU to one ROS 2 subscriber vs one
+  rosbridge client of 30 robots' topics (issue 24's target: <= 1.0x once the JSON round trip
+  is gone), and the /odom p99 through a Zenoh hop.
 * ``memory``: the idle default server's RSS (both ports, no client, settled: :func:`bench.
   memory.idle_server`), MB = MiB as in tests/test_footprint.py; which pydantic modules it
   imported. Issue 24's target: under 60 MB with pydantic back.
@@ -209,7 +210,8 @@ def _run_python(tree: Tree, args: list[str], *, timeout: float, **env: str) -> s
 class Options:
     seconds: float = 10.0  # the fanout's window
     wire_seconds: float = 6.0  # the wire publish's (idle, then publishing)
-    zenoh_seconds: float = 6.0  # bench.zenoh's window
+    zenoh_seconds: float = 6.0  # bench.zenoh outward's window
+    hop_seconds: float = 12.0  # bench.zenoh hop's (its p99 from 20 Hz of /odom)
     zenoh_rounds: int = 2  # runs of bench.zenoh in each tree (each with ROUNDS 2 inside)
     pi_cores: float | None = None
     budget: Any = None  # bench.pi.CpuBudget, made once
@@ -353,8 +355,9 @@ _FLOAT = r"(-?\d+(?:\.\d+)?)"
 
 
 def measure_zenoh(tree: Tree, opts: Options) -> dict[str, float]:
-    args = ["-m", "bench.zenoh", "hop", "outward", f"{opts.zenoh_seconds:g}"]
-    out = _run_python(tree, args, timeout=600, ROUNDS="2")
+    out = _run_python(tree, ["-m", "bench.zenoh", "hop", f"{opts.hop_seconds:g}"], timeout=300)
+    args = ["-m", "bench.zenoh", "outward", f"{opts.zenoh_seconds:g}"]
+    out += _run_python(tree, args, timeout=600, ROUNDS="2")
     figures = {}
     hop = re.search(rf"via B through the router\s+\d+\s+{_FLOAT}\s+{_FLOAT}", out)
     same = re.search(rf"same process \(A\)\s+\d+\s+{_FLOAT}\s+{_FLOAT}", out)
