@@ -119,10 +119,14 @@ def _module(name: str) -> object:
 
 
 def main(argv: list[str]) -> int:
+    # a benchmark that reads every argument after its name itself (bench.restructure: its
+    # --baseline is a git revision, --only names measurements that are benchmarks here too)
+    first = _module(argv[0]) if argv else None
+    if getattr(first, "OWN_ARGUMENTS", False):
+        code: int = first.main(argv[1:])  # type: ignore[union-attr]
+        return code
     baseline = None
-    # a benchmark with a --baseline of its own (bench.restructure: a git revision) takes it
-    owns = bool(argv) and getattr(_module(argv[0]), "OWN_BASELINE", False)
-    if "--baseline" in argv and not owns:
+    if "--baseline" in argv:
         at = argv.index("--baseline")
         baseline, argv = argv[at + 1], argv[:at] + argv[at + 2 :]
     names = argv or [*QUICK, *SCALE]

@@ -555,18 +555,26 @@ def _targets(figures: list[Figure]) -> None:
         print(f"target (issue 24): {name} {target}: {verdict} ({value:.2f}, current)")
 
 
+OPTIONS = (
+    "--baseline",
+    "--current",
+    "--only",
+    "--rounds",
+    "--seconds",
+    "--zenoh-rounds",
+    "--zenoh-seconds",
+)
+
+
 def _parse(argv: list[str]) -> tuple[str, str | None, list[str], int, Options]:
-    baseline, current, names, rounds, opts = (
-        DEFAULT_BASELINE,
-        None,
-        list(MEASUREMENTS),
-        3,
-        Options(),
-    )
+    baseline, current, names, rounds = DEFAULT_BASELINE, None, list(MEASUREMENTS), 3
+    opts = Options()
     args = list(argv)
     while args:
         word = args.pop(0)
-        if word.startswith("--") and not args:
+        if word not in OPTIONS:
+            raise SystemExit(f"bench restructure: unknown argument {word!r} (see the docstring)")
+        if not args:
             raise SystemExit(f"bench restructure: {word} needs a value")
         if word == "--baseline":
             baseline = args.pop(0)
@@ -588,8 +596,6 @@ def _parse(argv: list[str]) -> tuple[str, str | None, list[str], int, Options]:
             opts.zenoh_rounds = max(1, int(args.pop(0)))
         elif word == "--zenoh-seconds":
             opts.zenoh_seconds = float(args.pop(0))
-        else:
-            raise SystemExit(f"bench restructure: unknown argument {word!r} (see the docstring)")
     if os.environ.get("PI_CORES"):
         opts.pi_cores = float(os.environ["PI_CORES"])
     return baseline, current, names, rounds, opts
@@ -606,9 +612,10 @@ def main(argv: list[str] | None = None) -> int:
         return run(names, baseline, current, rounds, opts)
 
 
-#: ``python -m bench restructure --baseline REV``: the option is this benchmark's own (a git
-#: revision), not the ``--baseline DIR`` of ``python -m bench`` (bench/__main__.py).
-OWN_BASELINE = True
+#: ``python -m bench restructure ARGS``: every argument is this benchmark's own (bench/__main__.py
+#: hands them over as they are): ``--baseline REV`` is a git revision, not the ``--baseline DIR``
+#: of ``python -m bench``, and ``--only zenoh`` names a measurement, not the benchmark ``zenoh``.
+OWN_ARGUMENTS = True
 
 
 if __name__ == "__main__":
