@@ -100,11 +100,11 @@ rows = [("interpreter (python -c)", status())]
 for label, modules in json.loads(sys.argv[1]):
     for name in modules:
         if name == "@asyncio":
-            from simbridge.cli import _import_asyncio
-            _import_asyncio(tls=False)
+            from simbridge.app.tuning import import_asyncio
+            import_asyncio(tls=False)
         elif name == "@hashlib":
-            from simbridge.cli import _import_hashlib
-            _import_hashlib()
+            from simbridge.app.tuning import import_hashlib
+            import_hashlib()
         elif name == "@definitions":  # loaded by the first registry, at start
             from simbridge.msgs.definitions import standard
             standard()
@@ -249,9 +249,9 @@ import ctypes, importlib, json, sys
 
 modules, excluded, own = json.loads(sys.argv[1]), tuple(json.loads(sys.argv[2])), sys.argv[3]
 skipped = ("__main__",) if own == "own" else ("__main__", "simbridge")
-from simbridge.cli import _import_asyncio, _import_hashlib  # as the command imports them
-_import_hashlib()
-_import_asyncio(tls=False)
+from simbridge.app.tuning import import_asyncio, import_hashlib  # as the command imports them
+import_hashlib()
+import_asyncio(tls=False)
 for name in modules:
     if name.startswith(skipped) or name.split(".")[0] in excluded or any(
         name.startswith(e + ".") or name == e for e in excluded

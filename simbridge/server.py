@@ -81,7 +81,7 @@ STUDENT_READ_FACTOR = 2
 
 def tls_context(certfile: str, keyfile: str | None) -> ssl.SSLContext:
     """Return a server TLS context for a PEM certificate chain and key (wss://, https://)."""
-    import ssl  # only a TLS run loads it (see simbridge.cli._import_asyncio)
+    import ssl  # only a TLS run loads it (see simbridge.app.tuning.import_asyncio)
 
     context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
     context.load_cert_chain(certfile, keyfile)

@@ -236,7 +236,7 @@ def test_the_command_hashes_with_cpythons_own_functions_alike() -> None:
     Those of websockets' handshake (SHA-1), rosauth (SHA-512) and the page's ETags.
     """
     code = (
-        "import json, sys; from simbridge.cli import _import_hashlib; _import_hashlib(); "
+        "import json, sys; from simbridge.app.tuning import import_hashlib; import_hashlib(); "
         "import base64, hashlib, hmac; k = b'dGhlIHNhbXBsZSBub25jZQ==' "
         "b'258EAFA5-E914-47DA-95CA-C5AB0DC85B11'; "
         "print(json.dumps([sorted(m for m in ('_hashlib', '_ssl') if m in sys.modules), "
