@@ -29,20 +29,25 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import importlib
+import itertools
 import logging
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable
+from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
+
+import orjson
 
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.guard import ros2_access
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.protocol import Outgoing
+from simbridge.protocol import Frame, Outgoing, Session
+from simbridge.protocol.encoding import encode_json
+from simbridge.protocol.ops import CallService
 from simbridge.ros2.dds.options import DdsOptions
 from simbridge.ros2.dds.types import IdlTypes
 from simbridge.ros2.dds.wire import (
@@ -54,6 +59,8 @@ from simbridge.ros2.dds.wire import (
     gid_size,
     node_entities,
     read_participant_info,
+    reply_topic,
+    request_topic,
     ros_name,
     topic_name,
     typehash_user_data,
@@ -88,6 +95,11 @@ REMOTE_NODE = "a ROS 2 node (DDS)"
 UNKNOWN_NODE = "/_NODE_NAME_UNKNOWN_"
 #: The writer history depth of a volatile topic (rclcpp's default profile).
 DEPTH = 10
+#: Seconds a call from DDS waits for a rosbridge client that provides the service.
+SERVICE_TIMEOUT = 10.0
+#: Bytes of rmw_cyclonedds's request header, after the CDR header: the client's id (the last
+#: 8 bytes of its GUID) and the request's sequence number, both 64-bit.
+REQUEST_HEADER = 16
 
 
 def import_cyclonedds(what: str = "--dds") -> Any:
@@ -156,6 +168,31 @@ class _Remote:
     latched: bool
 
 
+@dataclass(eq=False, slots=True)
+class _Server:
+    """A service simbridge serves on DDS: its request reader and reply writer."""
+
+    name: str
+    type: str
+    node: str
+    reader: Any
+    writer: Any
+    gids: tuple[bytes, bytes]  # reader's, writer's
+
+
+class _Caller:
+    """The peer that makes a DDS client's call through the graph's service table."""
+
+    label = "ROS 2 (DDS)"
+
+    def __init__(self, link: DdsLink, session: Session) -> None:
+        self.link = link
+        self.session = session
+
+    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
+        self.link._service_answer(orjson.loads(frame.data))
+
+
 class DdsLink:
     """The graph's front end on DDS (see the module's docstring)."""
 
@@ -202,12 +239,17 @@ class DdsLink:
         scope, admin = ros2_access(graph.settings)
         session.connect(scope, admin)
         self._session = session
+        self._caller = _Caller(self, session)
+        self._servers: dict[str, _Server] = {}
+        #: Calls from DDS waiting for the graph's answer: op id -> (server, type, header).
+        self._calls: dict[str, tuple[_Server, str, bytes]] = {}
+        self._call_ids = itertools.count(1)
         self._refusals: dict[str, str | None] = {}
         self._forwarding = False
         self._next_reconcile = 0.0
         self._logged: dict[str, float] = {}
-        #: Samples from Cyclone's threads waiting for the event loop: (topic, bytes).
-        self._inbox: deque[tuple[str, bytes]] = deque()
+        #: Samples from Cyclone's threads waiting for the event loop: (taker, name, bytes).
+        self._inbox: deque[tuple[Callable[[str, bytes], None], str, bytes]] = deque()
         self._inbox_bytes = 0
         self._inbox_lock = threading.Lock()
         self._inbox_rung = False
@@ -305,6 +347,8 @@ class DdsLink:
         self.state = "closed"
         self._writers.clear()
         self._readers.clear()
+        self._servers.clear()
+        self._calls.clear()
         self._builtin.clear()
         self._topics.clear()
         self._discovery_writer = self._discovery_reader = None
@@ -325,6 +369,7 @@ class DdsLink:
             "discovery": self.options.discovery,
             "writers": len(self._writers),
             "readers": len(self._readers),
+            "services": len(self._servers),
             "remote_participants": len(self._participants),
             "remote_writers": len(self._remote_writers),
             "remote_readers": len(self._remote_readers),
@@ -618,6 +663,69 @@ class DdsLink:
                 self._log(f"reader {name}", f"DDS: no reader for {name}: {err}")
                 continue
             self.stats["readers_made"] += 1
+        self._export_services()
+
+    def _wanted_services(self) -> dict[str, tuple[str, str]]:
+        """Return the services to serve on DDS: name -> (node, type)."""
+        out: dict[str, tuple[str, str]] = {}
+        registry = self.graph.registry
+        for service in self.graph.services.services.values():
+            if service.type not in registry.services or "/_action/" in service.name:
+                continue
+            node = service.node if service.handler is not None else BRIDGE_NODE
+            out[service.name] = (node, service.type)
+        return out
+
+    def _export_services(self) -> None:
+        wanted = self._wanted_services()
+        for name in [n for n in self._servers if n not in wanted]:
+            gone = self._servers.pop(name)
+            _delete(gone.reader)
+            _delete(gone.writer)
+        for name, (node, type_name) in wanted.items():
+            server = self._servers.get(name)
+            if server is not None and server.type == type_name:
+                server.node = node
+                continue
+            try:
+                self._servers[name] = self._make_server(name, node, type_name)
+            except Exception as err:
+                self._log(f"service {name}", f"DDS: service {name} not served: {err}")
+                continue
+            self.stats["services_made"] += 1
+
+    def _make_server(self, name: str, node: str, type_name: str) -> _Server:
+        core = importlib.import_module("cyclonedds.core")
+        pub = importlib.import_module("cyclonedds.pub")
+        sub = importlib.import_module("cyclonedds.sub")
+        topic_mod = importlib.import_module("cyclonedds.topic")
+        request, response = self.graph.registry.service(type_name)
+        topics = []
+        for dds_name, part in ((request_topic(name), request), (reply_topic(name), response)):
+            key = (dds_name, dds_type(part))
+            found = self._topics.get(key)
+            if found is None:
+                found = topic_mod.Topic(self.participant, dds_name, self.types.wrapped(part))
+                self._topics[key] = found
+            topics.append(found)
+        policy = core.Policy
+        qos = [policy.Reliability.Reliable(100_000_000), policy.History.KeepLast(DEPTH)]
+        if self.options.distro != "humble":
+            qos.append(policy.Userdata(typehash_user_data(self.hasher.service(type_name))))
+
+        def available(reader: Any) -> None:  # a Cyclone thread
+            self.hand_over(name, reader, self._on_call)
+
+        reader = sub.DataReader(
+            self.participant,
+            topics[0],
+            qos=core.Qos(*qos, policy.TypeConsistency.AllowTypeCoercion()),
+            listener=core.Listener(on_data_available=available),
+        )
+        writer = pub.DataWriter(self.participant, topics[1], qos=core.Qos(*qos))
+        return _Server(
+            name, type_name, node, reader, writer, (reader.guid.bytes, writer.guid.bytes)
+        )
 
     def _topic(self, name: str, type_name: str) -> Any:
         key = (topic_name(name), dds_type(type_name))
@@ -668,7 +776,7 @@ class DdsLink:
         sub = importlib.import_module("cyclonedds.sub")
 
         def available(reader: Any) -> None:  # a Cyclone thread
-            self.hand_over(name, reader)
+            self.hand_over(name, reader, self._on_sample)
 
         reader = sub.DataReader(
             self.participant,
@@ -688,6 +796,10 @@ class DdsLink:
             nodes.setdefault(entry.node, ([], []))[1].append(entry.gid)
         for entry in self._readers.values():
             nodes.setdefault(entry.node, ([], []))[0].append(entry.gid)
+        for server in self._servers.values():
+            readers, writers = nodes.setdefault(server.node, ([], []))
+            readers.append(server.gids[0])
+            writers.append(server.gids[1])
         info = ParticipantInfo(self.guid, node_entities(nodes))
         data = encode_participant_info(info, self.gid_size)
         if data == self._announced or self._discovery_writer is None:
@@ -726,7 +838,7 @@ class DdsLink:
 
     # -- samples from DDS -------------------------------------------------------------------
 
-    def hand_over(self, name: str, reader: Any) -> None:
+    def hand_over(self, name: str, reader: Any, take: Callable[[str, bytes], None]) -> None:
         """Take a reader's samples and queue them for the event loop (Cyclone's threads).
 
         Past ``dds_inbox_bytes`` or :data:`INBOX_LIMIT` samples, or over
@@ -748,7 +860,7 @@ class DdsLink:
                 if len(self._inbox) >= INBOX_LIMIT or self._inbox_bytes + size > self.max_inbox:
                     self.stats["dropped_inbox"] += 1
                     continue
-                self._inbox.append((name, data))
+                self._inbox.append((take, name, data))
                 self._inbox_bytes += size
             if self._inbox and not self._inbox_rung:
                 self._inbox_rung = ring = True
@@ -765,9 +877,9 @@ class DdsLink:
             with self._inbox_lock:
                 if not inbox:
                     break
-                name, payload = inbox.popleft()
+                take, name, payload = inbox.popleft()
                 self._inbox_bytes -= len(payload)
-            self._on_sample(name, payload)
+            take(name, payload)
             budget -= len(payload)
             if budget <= 0:
                 break
@@ -801,6 +913,68 @@ class DdsLink:
             self._log(f"refused {name}", f"DDS: {name}: refused here: {err}")
         finally:
             self._forwarding = False
+
+    # -- calls from DDS (rmw_cyclonedds's wire) ----------------------------------------------
+
+    def _on_call(self, name: str, payload: bytes) -> None:
+        """A request from a DDS client: answer it through the graph's service table.
+
+        rmw_cyclonedds writes a request header (client id, sequence number) before the request
+        and expects it back before the response; rmw_fastrtps's clients correlate through the
+        DDS sample identity instead, which this library cannot write (docs/dds.md).
+        """
+        server = self._servers.get(name)
+        if server is None or self.participant is None:
+            return
+        self.stats["calls_in"] += 1
+        try:
+            if len(payload) < 4 + REQUEST_HEADER:
+                msg = (
+                    f"{len(payload)} bytes, without rmw_cyclonedds's request header (an "
+                    "rmw_fastrtps client? Its calls are not answered: docs/dds.md)"
+                )
+                raise ValueError(msg)
+            header = payload[4 : 4 + REQUEST_HEADER]
+            request_type, _ = self.graph.registry.service(server.type)
+            body = payload[:4] + payload[4 + REQUEST_HEADER :]
+            args = orjson.loads(encode_json(self.reader.read(request_type, body)))
+        except Exception as err:  # whatever the network sent: reported, never raised
+            self.stats["bad_payloads"] += 1
+            self._log(
+                f"call {name}", f"DDS: a request to {name} is not CDR of {server.type}: {err}"
+            )
+            return
+        op_id = f"dds:{next(self._call_ids)}"
+        self._calls[op_id] = (server, server.type, header)
+        op = CallService(service=name, args=args, id=op_id, timeout=SERVICE_TIMEOUT)
+        # a client's call as a rosbridge client's: admission (the ROS 2 peers' role), the
+        # caller's pending-call budget, the service table
+        loop = self._loop
+        self.graph.dispatch(self._caller, op, loop.time() if loop is not None else 0.0)
+
+    def _service_answer(self, body: dict[str, Any]) -> None:
+        """The graph answered a call from DDS: write the reply with the request's header."""
+        pending = self._calls.pop(str(body.get("id")), None)
+        if pending is None:
+            return
+        server, type_name, header = pending
+        if not body.get("result"):
+            # rmw has no error reply: the client waits; say why here
+            self.stats["calls_failed"] += 1
+            self._log(
+                f"failed {server.name}", f"DDS: a call to {server.name}: {body.get('values')}"
+            )
+            return
+        try:
+            _, response_type = self.graph.registry.service(type_name)
+            msg = self.graph.converter.from_json(response_type, body.get("values") or {})
+            data = self.cdr.serialize(response_type, msg)
+            _write_raw(server.writer, data[:4] + header + data[4:])
+        except Exception as err:
+            self.stats["calls_failed"] += 1
+            self._log(f"reply {server.name}", f"DDS: no reply to a call of {server.name}: {err}")
+            return
+        self.stats["calls_answered"] += 1
 
     # -- access ------------------------------------------------------------------------------
 

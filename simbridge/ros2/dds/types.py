@@ -88,6 +88,23 @@ class IdlTypes:
         self._made[spec.name] = made
         return made
 
+    def wrapped(self, ros_name: str) -> Any:
+        """Return the class of a service's request or response as rmw_cyclonedds sends it.
+
+        rmw_cyclonedds writes a header before the message's own fields: the client's id (the
+        last 8 bytes of its GUID) and the request's sequence number.
+        """
+        spec = self.registry.spec(ros_name)
+        dds_name = _dds_name(spec.name)
+        found = self._made.get(dds_name)
+        if found is None:
+            t = _cyclone("cyclonedds.idl.types")
+            own = self.get(spec.name)
+            fields = {"client_guid": t.uint64, "sequence_number": t.int64}
+            fields.update(own.__annotations__)
+            found = self.named(dds_name, fields)
+        return found
+
     def named(self, dds_name: str, fields: dict[str, Any]) -> Any:
         """Return a ``@final`` class of DDS name ``dds_name`` with these fields (made once)."""
         found = self._made.get(dds_name)

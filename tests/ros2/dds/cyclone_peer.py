@@ -13,6 +13,7 @@ prints one JSON line: what it saw.
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import time
 from typing import Any
@@ -50,6 +51,14 @@ def main() -> None:
     parser.add_argument("--seconds", type=float, default=10.0)
     parser.add_argument("--drive", type=float, default=0.0, help="linear.x on /cmd_vel")
     parser.add_argument("--distro", default="jazzy")
+    parser.add_argument(
+        "--call",
+        nargs=3,
+        action="append",
+        default=[],
+        metavar=("SERVICE", "TYPE", "JSON"),
+        help="call a service as rmw_cyclonedds does (the request header in the payload)",
+    )
     args = parser.parse_args()
 
     types = IdlTypes(TypeRegistry())
@@ -98,7 +107,8 @@ def main() -> None:
     info_writer.write(info_type.deserialize(data))  # rmw's bytes, through Cyclone's types
     publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
 
-    seen: dict[str, Any] = {"topics": {}, "nodes": [], "samples": {}}
+    calls = [_Client(participant, types, qos(False), *call) for call in args.call]
+    seen: dict[str, Any] = {"topics": {}, "nodes": [], "samples": {}, "replies": {}}
     deadline = time.monotonic() + args.seconds
     while time.monotonic() < deadline:
         for sample in publications.take(200):
@@ -115,11 +125,53 @@ def main() -> None:
             for sample in reader.take(5):
                 if name not in seen["samples"]:
                     seen["samples"][name] = _summary(name, sample)
+        for client in calls:
+            reply = client.poll()
+            if reply is not None:
+                seen["replies"][client.service] = reply
         cmd.write(twist(linear=vector(args.drive, 0.0, 0.0), angular=vector(0.0, 0.0, 0.0)))
         chatter.write(string(data="hello from dds"))
         time.sleep(0.1)
     seen["info_matched"] = info_reader.get_subscription_matched_status().current_count
     print(json.dumps(seen), flush=True)
+
+
+class _Client:
+    """A service client on rmw_cyclonedds's wire: rq/<name>Request and rr/<name>Reply."""
+
+    def __init__(
+        self, participant: Any, types: IdlTypes, qos: Qos, service: str, type_name: str, text: str
+    ) -> None:
+        registry = types.registry
+        request, response = registry.service(type_name)
+        self.service = service
+        self.request = types.wrapped(request)
+        name = service.strip("/")
+        self.writer = DataWriter(
+            participant, Topic(participant, f"rq/{name}Request", self.request), qos=qos
+        )
+        self.reader = DataReader(
+            participant, Topic(participant, f"rr/{name}Reply", types.wrapped(response)), qos=qos
+        )
+        self.args = json.loads(text) or {"structure_needs_at_least_one_member": 0}
+        self.guid = int.from_bytes(self.writer.guid.bytes[8:], "little")
+        self.sent = False
+
+    def poll(self) -> Any:
+        if not self.sent:
+            matched = self.writer.get_publication_matched_status().current_count
+            if matched and self.reader.get_subscription_matched_status().current_count:
+                self.writer.write(
+                    self.request(client_guid=self.guid, sequence_number=1, **self.args)
+                )
+                self.sent = True
+            return None
+        for sample in self.reader.take(5):
+            if sample.client_guid == self.guid and sample.sequence_number == 1:
+                out = dataclasses.asdict(sample)
+                del out["client_guid"], out["sequence_number"]
+                return out
+        return None
 
 
 def _t() -> Any:

@@ -77,11 +77,16 @@ def test_dds_without_the_extra_exits_at_once_with_the_install_command() -> None:
     )
 
 
-async def test_a_cyclone_node_lists_reads_and_drives_the_robot_that_rosbridge_clients_watch(
+async def test_a_cyclone_node_lists_reads_drives_and_calls_the_robot_that_rosbridge_clients_watch(
     dds_app: App, run_js: Any, run_roslibpy: Any
 ) -> None:
     app = dds_app
-    peer = asyncio.create_task(_peer(app.dds.options.domain, "--seconds", "5", "--drive", "0.4"))
+    get = ["/virtual_robot/get_parameters", "rcl_interfaces/srv/GetParameters"]
+    calls = ["--call", "/reset", "std_srvs/srv/Empty", "{}"]
+    calls += ["--call", *get, '{"names": ["robot.max_linear_velocity"]}']
+    peer = asyncio.create_task(
+        _peer(app.dds.options.domain, "--seconds", "4", "--drive", "0.4", *calls)
+    )
     # the peer's /chatter joins the graph under its node, from DDS discovery
     await wait_for(lambda: "/talker" in app.graph.nodes, 10 * TIMEOUT_FACTOR)
     url = ws_url(app)
@@ -108,6 +113,11 @@ async def test_a_cyclone_node_lists_reads_and_drives_the_robot_that_rosbridge_cl
     assert samples["/scan"] == {"frame_id": "laser", "ranges": 360}
     assert samples["/tf"] == [["odom", "base_link"]]
     assert samples["/tf_static"] == [["base_link", "laser"]]  # a late joiner's latched TF
+    # `ros2 service call /reset std_srvs/srv/Empty` and `ros2 param get /virtual_robot
+    # robot.max_linear_velocity` on rmw_cyclonedds: the request header in the payload
+    assert seen["replies"]["/reset"] == {"structure_needs_at_least_one_member": 0}
+    (value,) = seen["replies"]["/virtual_robot/get_parameters"]["values"]
+    assert (value["type"], value["double_value"]) == (3, 0.5)
     health = app.health()["dds"]
     assert health["state"] == "running" and health["received"] > 0
 
