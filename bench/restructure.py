@@ -27,8 +27,8 @@ read. The measurements (``--only`` picks some, comma-separated):
   publishing /cmd_vel at 150 Hz each to a server process for 6 s: the server's CPU while they
   publish minus its CPU idle over as long, per publish).
 * ``headless``: ``Simulation.step`` steps per CPU second of the process (the best of 7
-  batches of at least 0.1 s: a busy neighbour only slows a batch down), with no subscriber and
-  with /odom + /scan + /tf + /clock subscribed.
+  batches of at least 0.1 s: a busy neighbour only slows a batch down; 3x ``--rounds`` runs),
+  with no subscriber and with /odom + /scan + /tf + /clock subscribed.
 * ``zenoh``: each tree's ``bench.zenoh outward`` for ``--zenoh-seconds`` (default 6;
   ``ROUNDS`` 2 inside each run, alternating which client goes first) and ``bench.zenoh hop``
   for 12 s (a p99 of 240 /odom messages): the server CPU to one ROS 2 subscriber vs one
@@ -490,6 +490,17 @@ def _pi_budget(opts: Options) -> None:
     print(f"pi: budget {opts.pi_cores:.3f} of one core here ({opts.budget.version})")
 
 
+def _rounds(name: str, rounds: int, opts: Options) -> int:
+    """Runs of measurement ``name`` in each tree.
+
+    Zenoh's, the longest, ``--zenoh-rounds``; headless steps, a few seconds a run and the
+    noisiest figure (a whole run of the same code 0.6x another on this shared machine), 3x.
+    """
+    if name == "zenoh":
+        return opts.zenoh_rounds
+    return 3 * rounds if name == "headless" else rounds
+
+
 def run(names: list[str], baseline: Tree, current: Tree, rounds: int, opts: Options) -> int:
     """Run each measurement ``rounds`` times per tree, alternating; print the medians."""
     print(f"baseline: {baseline.commit} {baseline.subject}")
@@ -508,7 +519,7 @@ def run(names: list[str], baseline: Tree, current: Tree, rounds: int, opts: Opti
         if name == "pi":
             _pi_budget(opts)
         started = time.monotonic()
-        for r in range(opts.zenoh_rounds if name == "zenoh" else rounds):
+        for r in range(_rounds(name, rounds, opts)):
             for tree in (baseline, current) if r % 2 == 0 else (current, baseline):
                 try:
                     values = measure(tree, opts)
