@@ -506,8 +506,9 @@ def run(names: list[str], baseline: Tree, current: Tree, rounds: int, opts: Opti
     print(f"baseline: {baseline.commit} {baseline.subject}")
     print(f"current:  {current.commit} {current.subject}")
     print(
-        f"{rounds} run(s) of each in each tree, alternating (baseline first, then current "
-        f"first...); medians; ratio = current / baseline; {sys.executable}"
+        f"{rounds} run(s) of each in each tree ({_rounds('headless', rounds, opts)} of headless, "
+        f"{opts.zenoh_rounds} of zenoh), alternating (baseline first, then current first...); "
+        f"medians; ratio = current / baseline; {sys.executable}"
     )
     figures: list[Figure] = []
     failed = 0
