@@ -33,6 +33,7 @@ import select
 import shutil
 import socket
 import subprocess
+import sys
 import threading
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from dataclasses import dataclass, field
@@ -48,6 +49,8 @@ PEER_SOURCES = ROOT / "tests" / "ros2" / "dds" / "peer"
 #: Where scripts/setup-test-deps.sh builds the Fast DDS peer (git-ignored).
 PEER_BUILD = ROOT / "build" / "ddspeer"
 PEER_BIN = PEER_BUILD / "ddspeer"
+#: The second DDS implementation's peer: Cyclone DDS from PyPI, ddspeer's options and events.
+SECOND_PEER = ROOT / "tests" / "ros2" / "dds" / "second_peer.py"
 
 #: ROS_DOMAIN_IDs the tests take turns on (0 is left to manual tries).
 DOMAINS = range(1, 101)
@@ -397,9 +400,13 @@ class PeerProcess:
             del self.stderr[:-50]
 
     def _diagnosis(self) -> str:
-        tail = [json.dumps(e)[:300] for e in self.events[-15:]]
+        counts: dict[str, int] = {}
+        for e in self.events:
+            counts[str(e.get("event"))] = counts.get(str(e.get("event")), 0) + 1
+        others = [e for e in self.events if e.get("event") not in ("sample", "cmd_vel")]
+        tail = [json.dumps(e)[:300] for e in others[-15:]]
         return (
-            f"{self.label} (exit {self.proc.returncode}); last events:\n  "
+            f"{self.label} (exit {self.proc.returncode}); events {counts}; last but samples:\n  "
             + "\n  ".join(tail)
             + ("\nstderr:\n  " + "\n  ".join(self.stderr[-15:]) if self.stderr else "")
         )
@@ -549,6 +556,23 @@ async def ddspeer(
     async def start(*args: str, node: str = "ddspeer", distro: str = "humble") -> PeerProcess:
         argv = [str(ddspeer_bin), "--domain", str(dds_domain), "--node", node, "--distro", distro]
         peer = await start_peer(netns, [*argv, *args], dds_domain, f"ddspeer {node}")
+        peers.append(peer)
+        return peer
+
+    yield start
+    for peer in peers:
+        await peer.stop()
+
+
+@pytest.fixture
+async def cyclonepeer(netns: NetNamespace, dds_domain: int) -> AsyncIterator[PeerFactory]:
+    """Start Cyclone DDS peers (``second_peer.py``) in ``netns`` on ``dds_domain``."""
+    pytest.importorskip("cyclonedds")
+    peers: list[PeerProcess] = []
+
+    async def start(*args: str, node: str = "second_peer", distro: str = "humble") -> PeerProcess:
+        argv = [sys.executable, str(SECOND_PEER), "--domain", str(dds_domain), "--node", node]
+        peer = await start_peer(netns, [*argv, "--distro", distro, *args], dds_domain, node)
         peers.append(peer)
         return peer
 

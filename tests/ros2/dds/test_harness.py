@@ -13,6 +13,8 @@ import socket
 import struct
 import subprocess
 import time
+from collections.abc import Callable
+from typing import Any
 
 import pytest
 
@@ -159,14 +161,17 @@ async def test_reset_reply_is_matched_to_its_request_by_sample_identity(
 ) -> None:
     robot = await ddspeer("--robot", "--serve-reset", node="robot")
     client = await ddspeer("--call-reset", node="client")
-    await client.wait_for(
-        lambda e: e.get("event") == "matched" and e["topic"] == "rr/resetReply",
-        what="the reply reader matched",
-    )
-    await robot.wait_for(
-        lambda e: e.get("event") == "matched" and e["topic"] == "rq/resetRequest",
-        what="the request reader matched",
-    )
+
+    def matched(kind: str, topic: str) -> Callable[[dict[str, Any]], bool]:
+        return lambda e: e.get("event") == "matched" and (e["kind"], e["topic"]) == (kind, topic)
+
+    # a service is available once both of the client's endpoints and the server's reply writer
+    # are matched (rmw_fastrtps's service_is_available and its reply check)
+    await client.wait_for(matched("writer", "rq/resetRequest"), what="the request writer matched")
+    await client.wait_for(matched("reader", "rr/resetReply"), what="the reply reader matched")
+    await robot.wait_for(matched("writer", "rr/resetReply"), what="the reply writer matched")
+    # and a volatile reader drops what a writer sent before the reader matched it
+    await robot.wait_for(matched("reader", "rq/resetRequest"), what="the request reader matched")
     await client.send("call_reset")
     called = await client.wait_for(lambda e: e.get("event") == "called")
     reply = await client.wait_for(lambda e: e.get("event") == "reply", what="a /reset reply")
@@ -174,3 +179,35 @@ async def test_reset_reply_is_matched_to_its_request_by_sample_identity(
     assert reply["sequence"] == called["sequence"]
     request = await robot.wait_for(lambda e: e.get("event") == "request")
     assert request["sequence"] == called["sequence"]
+
+
+async def test_cyclone_peer_lists_reads_and_drives_the_fast_dds_robot(
+    ddspeer: PeerFactory, cyclonepeer: PeerFactory
+) -> None:
+    robot = await ddspeer("--robot", node="robot")
+    driver = await cyclonepeer(
+        "--echo", "/odom", "--echo", "/tf_static", "--cmd-vel", "0.4,0.2", node="cyclone_driver"
+    )
+    graph = await driver.wait_graph(
+        lambda g: "/robot" in g.nodes() and "/cmd_vel" in g.node("/robot")["subscribers"],
+        what="/robot with its topics",
+    )
+    assert graph.node("/robot") == {
+        "publishers": {
+            "/odom": "nav_msgs/msg/Odometry",
+            "/scan": "sensor_msgs/msg/LaserScan",
+            "/tf": "tf2_msgs/msg/TFMessage",
+            "/tf_static": "tf2_msgs/msg/TFMessage",
+        },
+        "subscribers": {"/cmd_vel": "geometry_msgs/msg/Twist"},
+    }
+    command = await robot.wait_for(lambda e: e.get("event") == "cmd_vel", what="/cmd_vel")
+    assert (command["data"]["linear"]["x"], command["data"]["angular"]["z"]) == (0.4, 0.2)
+    odom = await driver.sample("/odom", lambda d: d["pose"]["pose"]["position"]["x"] > 0.05)
+    assert odom["twist"]["twist"]["linear"]["x"] == 0.4
+    [transform] = (await driver.sample("/tf_static"))["transforms"]
+    assert transform["child_frame_id"] == "laser"
+    seen_by_robot = await robot.wait_graph(lambda g: "/cyclone_driver" in g.nodes())
+    assert seen_by_robot.node("/cyclone_driver")["publishers"] == {
+        "/cmd_vel": "geometry_msgs/msg/Twist"
+    }
