@@ -138,7 +138,16 @@ async def test_late_joiner_gets_tf_static_from_a_transient_local_writer(
 async def test_discovery_lists_the_announced_node_and_its_topics(
     ddspeer: PeerFactory, distro: str
 ) -> None:
-    await ddspeer("--chatter", "--echo", "/cmd_vel", node="talker", distro=distro)
+    type_hash = "RIHS01_" + "5e" * 32  # what the peer is told; Iron and later send it
+    await ddspeer(
+        "--chatter",
+        "--echo",
+        "/cmd_vel",
+        "--type-hash",
+        f"std_msgs/msg/String={type_hash}",
+        node="talker",
+        distro=distro,
+    )
     lister = await ddspeer(node="lister", distro=distro)
     graph = await lister.wait_graph(
         lambda g: "/talker" in g.nodes() and bool(g.node("/talker")["publishers"]),
@@ -152,6 +161,7 @@ async def test_discovery_lists_the_announced_node_and_its_topics(
     assert set(graph.participants.values()) == {"enclave=/;\\0"}
     [writer] = graph.writers("rt/peer_chatter")
     assert (writer.reliability, writer.durability) == ("reliable", "volatile")
+    assert writer.user_data == ("" if distro == "humble" else f"typehash={type_hash};")
     gid_size = 24 if distro == "humble" else 16
     assert {e["gid_size"] for e in lister.events if e.get("event") == "nodes"} == {gid_size}
 
@@ -210,4 +220,19 @@ async def test_cyclone_peer_lists_reads_and_drives_the_fast_dds_robot(
     seen_by_robot = await robot.wait_graph(lambda g: "/cyclone_driver" in g.nodes())
     assert seen_by_robot.node("/cyclone_driver")["publishers"] == {
         "/cmd_vel": "geometry_msgs/msg/Twist"
+    }
+
+
+async def test_stand_in_robot_under_a_namespace(ddspeer: PeerFactory) -> None:
+    await ddspeer("--robot", "--namespace", "/robot1", node="robot")
+    driver = await ddspeer(
+        "--echo", "/robot1/odom", "--cmd-vel", "0.2,0", "--cmd-vel-topic", "/robot1/cmd_vel"
+    )
+    await driver.sample("/robot1/odom", lambda d: d["twist"]["twist"]["linear"]["x"] == 0.2)
+    graph = await driver.wait_graph(lambda g: "/robot1/robot" in g.nodes())
+    assert set(graph.node("/robot1/robot")["publishers"]) == {
+        "/robot1/odom",
+        "/robot1/scan",
+        "/robot1/tf",
+        "/robot1/tf_static",
     }

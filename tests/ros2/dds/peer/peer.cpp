@@ -229,6 +229,7 @@ struct Options
     bool serve_reset = false;
     bool call_reset = false;
     double duration = 0.0;
+    std::map<std::string, std::string> type_hashes;  // ROS type -> RIHS01_...
 };
 
 const char* kUsage =
@@ -236,7 +237,7 @@ const char* kUsage =
     "  --domain N            DDS domain (default: $ROS_DOMAIN_ID, else 0)\n"
     "  --distro humble|jazzy|kilted   Gid size on ros_discovery_info: 24 (humble), 16 (later)\n"
     "  --node NAME           this node's name, announced on ros_discovery_info (ddspeer)\n"
-    "  --namespace NS        the node's namespace (/)\n"
+    "  --namespace NS        the node's namespace (/); --robot's topics go under it\n"
     "  --no-announce         publish nothing on ros_discovery_info\n"
     "  --echo TOPIC[=pkg/msg/Type][@default|sensor|latched]   print each sample\n"
     "  --cmd-vel VX,WZ       publish geometry_msgs/msg/Twist on /cmd_vel at --rate\n"
@@ -247,6 +248,8 @@ const char* kUsage =
     "                        driven by /cmd_vel\n"
     "  --serve-reset         serve /reset (std_srvs/srv/Empty); --robot's resets its pose\n"
     "  --call-reset          a client of /reset: stdin `call_reset` sends a request\n"
+    "  --type-hash pkg/msg/Type=RIHS01_<hex>   endpoint USER_DATA typehash= of that type\n"
+    "                        (Iron and later, so not with --distro humble)\n"
     "  --duration S          exit after S seconds (default: until stdin ends)\n";
 
 EchoSpec parse_echo(const std::string& arg)
@@ -344,6 +347,13 @@ Options parse(int argc, char** argv)
             o.serve_reset = true;
         } else if (a == "--call-reset") {
             o.call_reset = true;
+        } else if (a == "--type-hash") {
+            std::string v = value(i);
+            auto eq = v.find('=');
+            if (eq == std::string::npos || v.compare(eq + 1, 7, "RIHS01_") != 0) {
+                fail("--type-hash wants pkg/msg/Type=RIHS01_<64 hex>");
+            }
+            o.type_hashes[v.substr(0, eq)] = v.substr(eq + 1);
         } else if (a == "--duration") {
             o.duration = std::stod(value(i));
         } else {
@@ -361,6 +371,23 @@ Options parse(int argc, char** argv)
 // The DDS name of a ROS topic, and of a ROS type (rmw_fastrtps_shared_cpp namespace_prefix,
 // rmw_fastrtps_cpp type_support_common).
 std::string dds_topic(const std::string& ros_name) { return "rt" + ros_name; }
+
+// nav_msgs::msg::dds_::Odometry_ -> nav_msgs/msg/Odometry
+std::string ros_type_of(const std::string& dds_type)
+{
+    std::string out = dds_type;
+    auto pos = out.find("::dds_::");
+    if (pos != std::string::npos) {
+        out.erase(pos, 6);
+    }
+    for (auto p = out.find("::"); p != std::string::npos; p = out.find("::")) {
+        out.replace(p, 2, "/");
+    }
+    if (!out.empty() && out.back() == '_') {
+        out.pop_back();
+    }
+    return out;
+}
 
 // --- QoS as rmw_fastrtps sets it --------------------------------------------------------------
 
@@ -596,6 +623,23 @@ public:
     }
 
 private:
+    // rmw_dds_common qos.cpp: `typehash=RIHS01_<hex>;` from Iron on, nothing in Humble
+    std::vector<rtps::octet> type_hash_user_data(const std::string& dds_type) const
+    {
+        auto it = o_.type_hashes.find(ros_type_of(dds_type));
+        if (o_.gid_size == 24 || it == o_.type_hashes.end()) {
+            return {};
+        }
+        std::string text = "typehash=" + it->second + ";";
+        return std::vector<rtps::octet>(text.begin(), text.end());
+    }
+
+    // the robot's topics under its node's namespace (/robot1/odom), as multi-robot worlds have
+    std::string robot_topic(const std::string& name) const
+    {
+        return o_.ns == "/" ? name : o_.ns + name;
+    }
+
     std::string node_fqn() const { return o_.ns == "/" ? "/" + o_.node : o_.ns + "/" + o_.node; }
 
     template <typename PubSub>
@@ -625,8 +669,10 @@ private:
     template <typename PubSub>
     DataWriter* writer(const std::string& dds_name, bool latched, int depth)
     {
-        DataWriter* w = publisher_->create_datawriter(topic<PubSub>(dds_name),
-                                                      writer_qos(latched, depth), &writer_listener_);
+        Topic* t = topic<PubSub>(dds_name);
+        DataWriterQos q = writer_qos(latched, depth);
+        q.user_data().data_vec(type_hash_user_data(t->get_type_name()));
+        DataWriter* w = publisher_->create_datawriter(t, q, &writer_listener_);
         if (!w) {
             fail("could not create a writer on " + dds_name);
         }
@@ -639,8 +685,10 @@ private:
                        std::function<void(const T&, const SampleInfo&)> cb)
     {
         auto listener = std::make_unique<TakingListener<T>>(std::move(cb));
-        DataReader* r = subscriber_->create_datareader(topic<PubSub>(dds_name), reader_qos(qos, depth),
-                                                       listener.get());
+        Topic* t = topic<PubSub>(dds_name);
+        DataReaderQos q = reader_qos(qos, depth);
+        q.user_data().data_vec(type_hash_user_data(t->get_type_name()));
+        DataReader* r = subscriber_->create_datareader(t, q, listener.get());
         if (!r) {
             fail("could not create a reader on " + dds_name);
         }
@@ -799,13 +847,13 @@ private:
 
     void robot_setup()
     {
-        odom_writer_ = writer<nav::Odometry_PubSubType>(dds_topic("/odom"), false, 10);
-        scan_writer_ = writer<sen::LaserScan_PubSubType>(dds_topic("/scan"), false, 10);
-        tf_writer_ = writer<tf2::TFMessage_PubSubType>(dds_topic("/tf"), false, 100);
+        odom_writer_ = writer<nav::Odometry_PubSubType>(dds_topic(robot_topic("/odom")), false, 10);
+        scan_writer_ = writer<sen::LaserScan_PubSubType>(dds_topic(robot_topic("/scan")), false, 10);
+        tf_writer_ = writer<tf2::TFMessage_PubSubType>(dds_topic(robot_topic("/tf")), false, 100);
         // tf2's static broadcaster: transient local, depth 1 (tf2_ros qos.hpp)
-        tf_static_writer_ = writer<tf2::TFMessage_PubSubType>(dds_topic("/tf_static"), true, 1);
+        tf_static_writer_ = writer<tf2::TFMessage_PubSubType>(dds_topic(robot_topic("/tf_static")), true, 1);
         reader<geo::Twist_PubSubType, geo::Twist_>(
-            dds_topic("/cmd_vel"), "default", 10, [this](const geo::Twist_& m, const SampleInfo&) {
+            dds_topic(robot_topic("/cmd_vel")), "default", 10, [this](const geo::Twist_& m, const SampleInfo&) {
                 {
                     std::lock_guard<std::mutex> lock(mutex_);
                     vx_ = m.linear().x();
