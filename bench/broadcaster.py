@@ -19,7 +19,8 @@ import time
 from websockets.asyncio.server import ServerConnection, broadcast, serve
 
 from simbridge.app.config import Params, load_world
-from simbridge.graph import Graph, RobotBridge
+from simbridge.graph import Graph
+from simbridge.robot.bridge import RobotBridge
 from simbridge.sim import World
 
 

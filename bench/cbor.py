@@ -12,7 +12,7 @@ from __future__ import annotations
 from bench.cbor_handwritten import encode_cbor as handwritten
 from bench.encoding import _messages, _time
 from simbridge.graph import Graph
-from simbridge.protocol import Outgoing, encode_cbor
+from simbridge.rosbridge import Outgoing, encode_cbor
 
 
 def main() -> int:

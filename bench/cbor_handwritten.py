@@ -1,4 +1,4 @@
-"""The CBOR encoder simbridge had before it used cbor2 (simbridge/protocol/cbor.py at 65d96de).
+"""The CBOR encoder simbridge had before it used cbor2 (simbridge/rosbridge/cbor.py at 65d96de).
 
 Kept only as the baseline of ``python -m bench cbor``: the same RFC 8949 encoding of canonical
 messages (8-byte doubles, bignum tags 2/3, RFC 8746 typed arrays), written by hand.
@@ -12,7 +12,7 @@ from typing import Any
 
 import numpy as np
 
-from simbridge.protocol.cbor import TYPED_ARRAY_TAGS
+from simbridge.rosbridge.cbor import TYPED_ARRAY_TAGS
 
 
 __all__ = ["encode_cbor"]

@@ -19,8 +19,9 @@ from typing import Any
 import numpy as np
 
 from simbridge.app.config import Params, load_world
-from simbridge.graph import Graph, RobotBridge
-from simbridge.protocol import Outgoing
+from simbridge.graph import Graph
+from simbridge.robot.bridge import RobotBridge
+from simbridge.rosbridge import Outgoing
 from simbridge.sim import World
 
 

@@ -29,8 +29,9 @@ from typing import Any
 import numpy as np
 
 from simbridge.app.config import Params, WorldSpec
-from simbridge.graph import Graph, RobotBridge
-from simbridge.protocol import Frame
+from simbridge.graph import Graph
+from simbridge.robot.bridge import RobotBridge
+from simbridge.rosbridge import Frame
 from simbridge.sim import World, raycast
 
 

@@ -60,11 +60,11 @@ GROUPS: list[tuple[str, list[str]]] = [
     ("asyncio (no ssl)", ["@asyncio"]),
     ("numpy", ["numpy"]),
     ("simbridge.msgs (orjson, the shipped definitions)", ["simbridge.msgs", "@definitions"]),
-    ("simbridge.protocol", ["simbridge.protocol"]),
+    ("simbridge.rosbridge", ["simbridge.rosbridge"]),
     ("simbridge.sim", ["simbridge.sim"]),
-    ("simbridge.graph", ["simbridge.graph", "simbridge.graph.assembly"]),
+    ("simbridge.graph", ["simbridge.graph", "simbridge.robot.assembly"]),
     ("websockets", ["websockets.asyncio.server"]),
-    ("server, web (httptools), runner", ["simbridge.server", "simbridge.runner"]),
+    ("server, web (httptools), runner", ["simbridge.rosbridge.server", "simbridge.app.runner"]),
 ]
 
 #: Modules issue 16 took off the default path, and when a run still imports them.
@@ -73,7 +73,7 @@ CUT: list[tuple[str, str]] = [
     ("ssl", "only with --certfile (asyncio's TLS)"),
     ("numpy.random", "only with LiDAR noise > 0"),
     ("cbor2", "only with a cbor / cbor-raw subscription"),
-    ("simbridge.graph.tutorials", "only with --demo-nodes"),
+    ("simbridge.robot.tutorials", "only with --demo-nodes"),
     ("yaml", "only with a --world, --params or --client-tokens file (and the YAML tools)"),
     ("pydantic_settings", "only with a SIMBRIDGE_* variable set (the environment's reader)"),
     ("simbridge.msgs.cdr", "only with a cbor-raw subscription, --zenoh or a bag (the CDR codec)"),

@@ -48,8 +48,8 @@ WORLDS = ("default", "classroom")
 
 def _serve(static: str, world: str) -> None:
     """Child process: a simbridge App serving ``static`` on free ports; prints the ports."""
+    from simbridge.app.runner import App
     from simbridge.app.settings import ServerSettings
-    from simbridge.runner import App
 
     async def run() -> None:
         settings = ServerSettings(host="127.0.0.1", port=0, http_port=0)

@@ -24,8 +24,9 @@ from typing import Any
 from bench.encoding import _time
 from simbridge.app.config import Params, load_world
 from simbridge.app.settings import ServerSettings
-from simbridge.graph import Graph, RobotBridge
+from simbridge.graph import Graph
 from simbridge.graph.guard import Guard
+from simbridge.robot.bridge import RobotBridge
 from simbridge.sim import World
 
 

@@ -5,8 +5,8 @@ from __future__ import annotations
 import asyncio
 import time
 
+from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
-from simbridge.runner import App
 
 
 SECONDS = 2.0

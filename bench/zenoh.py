@@ -205,7 +205,7 @@ def _ros2_subscriber(router: str, names: list[tuple[str, str]], seconds: float) 
     """
     code = f"""
 import json, time, zenoh
-from simbridge.zenoh.names import Entity
+from simbridge.ros2.names import Entity
 conf = zenoh.Config()
 conf.insert_json5("mode", '"peer"')
 conf.insert_json5("connect/endpoints", '["{router}"]')

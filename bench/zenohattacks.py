@@ -171,7 +171,7 @@ class Attacker:
         self.sequence = 0
 
     def entities(self) -> list[Any]:
-        from simbridge.zenoh.names import Entity
+        from simbridge.ros2.names import Entity
 
         out = []
         for reply in self.session.liveliness().get("@ros2_lv/0/**", timeout=5):
@@ -190,7 +190,7 @@ class Attacker:
         raise RuntimeError(msg)
 
     def attachment(self) -> bytes:
-        from simbridge.zenoh.attachment import Attachment
+        from simbridge.ros2.zenoh.attachment import Attachment
 
         self.sequence += 1
         return Attachment(self.sequence, time.time_ns(), b"\x07" * 16).pack()

@@ -170,8 +170,8 @@ def _zenoh_options(args: argparse.Namespace) -> Any:
             msg = "--ros-distro needs --zenoh or --dds"
             raise ConfigError(msg)
         return None
-    from simbridge.zenoh.config import ZenohOptions
-    from simbridge.zenoh.link import import_zenoh
+    from simbridge.ros2.zenoh.config import ZenohOptions
+    from simbridge.ros2.zenoh.link import import_zenoh
 
     import_zenoh()  # exits at once, with the install command, when the extra is missing
     return ZenohOptions.from_env(
@@ -231,7 +231,7 @@ def _server_values(args: argparse.Namespace) -> dict[str, Any]:
     if args.certfile:
         import ssl
 
-        from simbridge.server import tls_context  # imported late: `--help` stays fast
+        from simbridge.rosbridge.server import tls_context  # imported late: `--help` stays fast
 
         try:
             tls_context(args.certfile, args.keyfile)
@@ -311,7 +311,7 @@ async def _serve(
 ) -> int:
     import asyncio
 
-    from simbridge.runner import App  # imported late: `simbridge --help` stays fast
+    from simbridge.app.runner import App  # imported late: `simbridge --help` stays fast
 
     app = App(settings, world=world, params=params, zenoh=zenoh, no_sim=no_sim, dds=dds)
     try:
@@ -533,7 +533,7 @@ def _cmd_param(argv: Sequence[str]) -> int:
 
 
 def _cmd_zenohd(argv: Sequence[str]) -> int:
-    from simbridge.zenoh.router import zenohd_main
+    from simbridge.ros2.zenoh.router import zenohd_main
 
     return zenohd_main(argv)
 

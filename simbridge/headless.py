@@ -28,8 +28,8 @@ from simbridge.app.config import Params, WorldSpec, load_params, load_world
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.grading.grader import Grader
 from simbridge.grading.results import ResultsLog
-from simbridge.graph.assembly import build_robot_graph
 from simbridge.graph.topics import Topic
+from simbridge.robot.assembly import build_robot_graph
 from simbridge.sim import World
 
 

@@ -12,8 +12,8 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import ClientConnection, connect
 
+from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
-from simbridge.runner import App
 from tests.helpers import JS_DIR, ROOT, ROSLIBPY_RUN, TIMEOUT_FACTOR, ws_url
 
 

@@ -13,7 +13,7 @@ from typing import Any
 
 from websockets.asyncio.client import ClientConnection
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -117,7 +117,8 @@ def op(peer: RecordingPeer, graph: Any, now: float = 0.0, **fields: Any) -> None
 
 def clocked_graph() -> Any:
     """A graph with rosapi and a fixed wall clock (stamps 1700000000.5 s)."""
-    from simbridge.graph import Graph, install_rosapi
+    from simbridge.graph import Graph
+    from simbridge.rosbridge.rosapi import install_rosapi
 
     graph = Graph(wall_clock_ns=lambda: 1_700_000_000_500_000_000)
     install_rosapi(graph)

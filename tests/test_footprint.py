@@ -82,7 +82,7 @@ NOT_ON_THE_DEFAULT_PATH = (
     "_hashlib",
     "numpy.random",
     "cbor2",
-    "simbridge.graph.tutorials",
+    "simbridge.robot.tutorials",
     "simbridge.msgs.cdr",
     "urllib.request",
     "http.client",

@@ -13,21 +13,23 @@ from tests.helpers import ROOT
 
 
 PACKAGE = ROOT / "simbridge"
-#: The sans-I/O cores and what each may not import (STYLE.md: server/web/runner -> graph ->
-#: (protocol, sim, msgs)).
+#: The sans-I/O cores and what each may not import (STYLE.md: front ends and app -> robot ->
+#: graph -> (msgs, sim)).
 CORES = {
-    "simbridge.sim": ("simbridge.protocol", "simbridge.graph", "simbridge.msgs"),
-    "simbridge.msgs": ("simbridge.protocol", "simbridge.graph", "simbridge.sim"),
-    "simbridge.protocol": ("simbridge.graph", "simbridge.sim"),
-    "simbridge.graph": (),
+    "simbridge.sim": ("simbridge.graph", "simbridge.robot", "simbridge.msgs", "simbridge.ros2"),
+    "simbridge.msgs": ("simbridge.graph", "simbridge.robot", "simbridge.sim", "simbridge.ros2"),
+    "simbridge.graph": ("simbridge.robot", "simbridge.ros2", "simbridge.sim"),
+    # the robot world's nodes: on the graph, beside no front end
+    "simbridge.robot": ("simbridge.ros2",),
     # the grader: a node on the graph with its pure parts (tasks, metrics, results, report)
     "simbridge.grading": (),
 }
+#: The sans-I/O cores import no front end, no server, no loop.
 SHELL = (
     "asyncio",
     "websockets",
-    "simbridge.server",
-    "simbridge.runner",
+    "simbridge.rosbridge.server",
+    "simbridge.app",
     "simbridge.web",
     "simbridge.cli",
     "simbridge.tools",
@@ -58,7 +60,7 @@ def _imports(name: str, path: Path, known: set[str]) -> set[str]:
                 anchor = package.rsplit(".", node.level - 1)[0] if node.level > 1 else package
                 base = f"{anchor}.{base}" if base else anchor
             found.add(base)
-            # `from simbridge.protocol import ops` imports the module simbridge.protocol.ops
+            # `from simbridge.rosbridge import ops` imports the module simbridge.rosbridge.ops
             found.update(f"{base}.{a.name}" for a in node.names if f"{base}.{a.name}" in known)
     return found
 
@@ -118,7 +120,7 @@ def test_the_cycle_check_finds_a_cycle() -> None:
 
 
 def test_cores_import_no_shell_and_point_one_way() -> None:
-    """protocol, msgs, sim and graph import no asyncio, websockets, server, web or tools."""
+    """The cores import no asyncio, websockets, server, web or tools, and point one way."""
     modules = _modules()
     known = set(modules)
     wrong = []
@@ -183,11 +185,11 @@ def test_top_level_holds_the_parts_and_the_entry_points() -> None:
         "grading",
         "graph",
         "msgs",
-        "protocol",
+        "robot",
         "ros2",
+        "rosbridge",
         "sim",
         "tools",
         "web",
-        "zenoh",
     ]
-    assert top == ["cli", "errors", "headless", "runner", "server"]
+    assert top == ["cli", "errors", "headless"]

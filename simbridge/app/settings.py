@@ -11,7 +11,7 @@ integer > 0) and its description; :class:`Option` makes it the command-line opti
 ``--max-clients`` (help text: the description, the default and the variable) and the
 environment variable ``SIMBRIDGE_MAX_CLIENTS`` (read by pydantic-settings, :func:`environment`);
 :class:`Budget` makes a field one of the rosbridge budgets (:func:`budgets` builds
-:class:`~simbridge.protocol.budget.Limits` and :class:`~simbridge.protocol.budget.Pool` from
+:class:`~simbridge.rosbridge.budget.Limits` and :class:`~simbridge.rosbridge.budget.Pool` from
 those fields, with no hand mapping).
 
 Every refusal is a :class:`SettingsError` naming the field path, the reason and the value, in
@@ -40,7 +40,7 @@ from simbridge.errors import ConfigError
 
 
 if TYPE_CHECKING:
-    from simbridge.protocol.budget import Limits, Pool
+    from simbridge.rosbridge.budget import Limits, Pool
 
 
 __all__ = [
@@ -312,8 +312,8 @@ class Option:
 class Budget:
     """Field metadata: the setting is a per-client limit or a shared pool of the rosbridge budgets.
 
-    ``limit`` names the :class:`~simbridge.protocol.budget.Limits` field it sets, ``pool`` the
-    :class:`~simbridge.protocol.budget.Pool` resource; ``at_most`` the setting that caps it
+    ``limit`` names the :class:`~simbridge.rosbridge.budget.Limits` field it sets, ``pool`` the
+    :class:`~simbridge.rosbridge.budget.Pool` resource; ``at_most`` the setting that caps it
     (a frame is never longer than the largest message).
     """
 
@@ -700,7 +700,7 @@ def budgets(settings: ServerSettings) -> tuple[Limits, Pool]:
     Each comes from the fields declared with a :class:`Budget`; a limit with ``at_most`` is
     capped by that setting.
     """
-    from simbridge.protocol.budget import Limits, Pool  # here: check-config needs no protocol
+    from simbridge.rosbridge.budget import Limits, Pool  # here: check-config needs no protocol
 
     limits: dict[str, Any] = {}
     pool: dict[str, int] = {}

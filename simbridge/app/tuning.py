@@ -1,7 +1,7 @@
 """The production tuning of a simbridge process: what it imports, and its heap once started.
 
 The ``simbridge`` command applies all of it; a program embedding simbridge (its own
-:class:`~simbridge.runner.App`) gets the same by calling :func:`import_hashlib` and
+:class:`~simbridge.app.runner.App`) gets the same by calling :func:`import_hashlib` and
 :func:`import_asyncio` before anything imports them, and :func:`settle` once the server runs:
 
 - :func:`import_hashlib`: hashlib with CPython's own hash functions, not OpenSSL's (3.5 MB);

@@ -5,7 +5,7 @@
 
 * **channels**: every typed topic of a type the registry knows, with its ``ros2msg`` schema
   (the full definition text) and CDR messages. The CDR bytes are the ones cached on the
-  delivery (:attr:`Outgoing.cdr <simbridge.protocol.Outgoing.cdr>`), shared with ``cbor-raw``
+  delivery (:attr:`Outgoing.cdr <simbridge.rosbridge.Outgoing.cdr>`), shared with ``cbor-raw``
   subscribers and Zenoh: serialized once, whatever the number of users. Topics are advertised
   when they appear (spawned robots, client-advertised topics) and unadvertised when they go
   (:meth:`FoxgloveFront.tick` compares the tables' change counters). A subscribed channel
@@ -92,7 +92,7 @@ from simbridge.foxglove.mapping import (
 from simbridge.graph import Graph, Topic
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.protocol import ANY_SCOPE, Frame, Outgoing, Session, ops as o
+from simbridge.rosbridge import ANY_SCOPE, Frame, Outgoing, Session, ops as o
 
 
 __all__ = ["FOXGLOVE_NODE", "ConnectionWatch", "FoxgloveFront", "import_foxglove"]

@@ -1,36 +1,27 @@
-"""The ROS-graph facade between the simulator and the protocol.
+"""The robot's ROS graph, shared by every front end: topics, services, actions, parameters.
 
-Topics with latched caches, services, rosapi, and the virtual robot's ROS interface. No I/O.
+Topics with latched caches, services, actions and the parameters of the in-process nodes,
+carrying canonical messages; the access rules every front end's peers are admitted by. No I/O.
 """
 
 from __future__ import annotations
 
-from simbridge.graph.bridge import ROBOT_NODE, RobotBridge
 from simbridge.graph.graph import ROSOUT, Graph
 from simbridge.graph.params import ParameterStore, ParamNode
-from simbridge.graph.rosapi import ROSAPI_NODE, install_rosapi, request_fields
 from simbridge.graph.services import Service, ServiceTable, service_response
-from simbridge.graph.simclock import SIM_NODE, SimClock
 from simbridge.graph.topics import BRIDGE_NODE, Peer, Topic, TopicTable
 
 
 __all__ = [
     "BRIDGE_NODE",
-    "ROBOT_NODE",
-    "ROSAPI_NODE",
     "ROSOUT",
-    "SIM_NODE",
     "Graph",
     "ParamNode",
     "ParameterStore",
     "Peer",
-    "RobotBridge",
     "Service",
     "ServiceTable",
-    "SimClock",
     "Topic",
     "TopicTable",
-    "install_rosapi",
-    "request_fields",
     "service_response",
 ]

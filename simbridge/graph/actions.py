@@ -43,7 +43,7 @@ from simbridge.errors import ServiceError
 from simbridge.graph.services import ServiceTable, caller
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
-from simbridge.protocol import OpId, Provided, json_frame, ops as o
+from simbridge.rosbridge import OpId, Provided, json_frame, ops as o
 
 
 __all__ = [

@@ -1,7 +1,7 @@
 """Admission: the one place that decides whether a client's op is carried out.
 
 Every op of a client passes :meth:`Admission.admit` between its session's parse (names resolved
-once, strings checked: :meth:`Session.parse <simbridge.protocol.Session.parse>`) and its
+once, strings checked: :meth:`Session.parse <simbridge.rosbridge.Session.parse>`) and its
 handler on the graph, which then only carries it out. The checks, in this order:
 
 1. **authentication**: nothing but ``auth`` from a client that still owes a token;
@@ -38,7 +38,7 @@ What :meth:`Admission.admit` returns is what the op's handler carries out: a
 :class:`Publication`, a :class:`Typed` op, a :class:`Call`, a :class:`GoalRequest`, a
 :class:`Response` or a :class:`GoalUpdate` (the tables receive payloads already validated), or
 the op itself. A refused op raises
-:class:`~simbridge.protocol.Refusal` or :class:`ProtocolError`, answered to its sender only by
+:class:`~simbridge.rosbridge.Refusal` or :class:`ProtocolError`, answered to its sender only by
 the graph (a refused call or goal gets its failed answer, its caller waits for one).
 Admission reads the client's session (its access, what it holds) and changes nothing in it but
 the charge of its publish rate.
@@ -58,7 +58,7 @@ from simbridge.graph.services import Finish, PendingCall, Prepare, Service, Serv
 from simbridge.graph.topics import Peer, Topic, TopicTable
 from simbridge.msgs import normalize_type, positional_args
 from simbridge.msgs.registry import MAX_TYPE_LENGTH
-from simbridge.protocol import (
+from simbridge.rosbridge import (
     ANY_SCOPE,
     NOT_AUTHENTICATED,
     Op,

@@ -1,7 +1,7 @@
 """The ROS-graph facade: what clients see of simbridge, whatever simulates behind it.
 
 :class:`Graph` receives every client frame, turns it into ops (via the client's
-:class:`~simbridge.protocol.Session`), lets its :class:`~simbridge.graph.admission.Admission`
+:class:`~simbridge.rosbridge.Session`), lets its :class:`~simbridge.graph.admission.Admission`
 decide whether each is allowed, hands each allowed op to the client's session (ops in, effects
 out: the session updates what the client holds and says what the graph must do), and carries out
 the effects on its topic, service and action tables (:meth:`Graph.apply`). A bad op is answered
@@ -14,20 +14,20 @@ back to peers through :meth:`Peer.send`. ``tick(now)`` expires what waits on tim
 A ``/cmd_vel`` from a page, in a straight line (each step once):
 
 1. **socket**: the server's connection handler reads the frame (message rate and work share
-   of :mod:`simbridge.server`) and calls :meth:`Graph.receive`;
-2. **session**: :meth:`Session.parse <simbridge.protocol.Session.parse>` decodes it into a
+   of :mod:`simbridge.rosbridge.server`) and calls :meth:`Graph.receive`;
+2. **session**: :meth:`Session.parse <simbridge.rosbridge.Session.parse>` decodes it into a
    typed ``Publish`` op, its topic name resolved once (``cmd_vel`` -> ``/cmd_vel``);
 3. **admission**: :meth:`Admission.admit <simbridge.graph.admission.Admission.admit>` decides
    once (authenticated, publish rate, scope, type, payload) and returns a
    :class:`~simbridge.graph.admission.Publication`: the topic, its type and the validated
    message;
 4. **session, then graph**: :meth:`Graph._publish` hands the publication to the client's session
-   (:meth:`Session.publish <simbridge.protocol.Session.publish>`: the first time, an
+   (:meth:`Session.publish <simbridge.rosbridge.Session.publish>`: the first time, an
    ``Advertised`` effect, counted against its budgets; after that, nothing) and carries out
    what it returns; :meth:`TopicTable.deliver <simbridge.graph.topics.TopicTable.deliver>`
    hands the message, wrapped once, to the subscribers: encoded frames to clients, the message
    to in-process nodes;
-5. **robot**: the robot's subscriber (:class:`~simbridge.graph.bridge.RobotBridge`) sets the
+5. **robot**: the robot's subscriber (:class:`~simbridge.robot.bridge.RobotBridge`) sets the
    command of its robot in the world (``World.command``); a command it refuses (not finite,
    absurd) comes back to the sender as a ``status`` error.
 """
@@ -56,7 +56,7 @@ from simbridge.graph.params import ParameterStore
 from simbridge.graph.services import Handler, ServiceTable, service_response, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, InternalCallback, Peer, Topic, TopicTable
 from simbridge.msgs import Converter, TypeRegistry
-from simbridge.protocol import (
+from simbridge.rosbridge import (
     Advertised,
     ClientId,
     Effect,

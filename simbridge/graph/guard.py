@@ -32,7 +32,7 @@ from simbridge.errors import ProtocolError
 from simbridge.graph.admission import NO_ROBOT
 from simbridge.graph.graph import Graph
 from simbridge.graph.topics import Peer
-from simbridge.protocol import ANY_SCOPE, TokenBucket, ops as o
+from simbridge.rosbridge import ANY_SCOPE, TokenBucket, ops as o
 
 
 __all__ = [

@@ -33,8 +33,8 @@ from typing import Any
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, positional_args, short_type
-from simbridge.protocol import Frame, OpId, json_frame, split_frame
-from simbridge.protocol.ops import CallService, ServiceResponse
+from simbridge.rosbridge import Frame, OpId, json_frame, split_frame
+from simbridge.rosbridge.ops import CallService, ServiceResponse
 
 
 __all__ = [

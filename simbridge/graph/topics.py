@@ -5,7 +5,7 @@ subscribe with another type is refused (rosbridge's TypeConflictException), comp
 canonical ``pkg/msg/Type`` spelling. A subscription to a topic that does not exist yet waits for
 it, with or without a type (rosbridge instead drops an untyped one, #1142).
 
-A message is encoded at most once per encoding (see :class:`~simbridge.protocol.Outgoing`) and
+A message is encoded at most once per encoding (see :class:`~simbridge.rosbridge.Outgoing`) and
 each client receives it once per topic spelling it subscribed with.
 """
 
@@ -18,7 +18,7 @@ from typing import Any, Protocol, cast
 
 from simbridge.errors import ProtocolError, TypeNotFoundError
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
-from simbridge.protocol import (
+from simbridge.rosbridge import (
     Frame,
     OpId,
     Outgoing,

@@ -29,7 +29,7 @@ import numpy as np
 import numpy.typing as npt
 
 from simbridge.errors import SimbridgeError
-from simbridge.graph.cmdvel import twist_of
+from simbridge.robot.cmdvel import twist_of
 from simbridge.tools.bag import read_messages
 
 

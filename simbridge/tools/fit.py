@@ -43,7 +43,7 @@ import numpy.typing as npt
 
 from simbridge.app.config import Params, load_params
 from simbridge.errors import SimbridgeError
-from simbridge.graph.cmdvel import twist_of
+from simbridge.robot.cmdvel import twist_of
 from simbridge.tools.bag import read_messages
 
 

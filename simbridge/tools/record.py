@@ -29,8 +29,8 @@ from typing import Any
 from simbridge.app.config import Params, WorldSpec
 from simbridge.errors import SimbridgeError
 from simbridge.graph import Graph
-from simbridge.graph.cmdvel import command_type, convert_twist
 from simbridge.msgs import Converter, TypeRegistry
+from simbridge.robot.cmdvel import command_type, convert_twist
 from simbridge.tools.bag import BagError, BagWriter, read_messages
 from simbridge.tools.client import ClientError, RosbridgeClient
 from simbridge.tools.rostool import DEFAULT_URL

@@ -40,10 +40,11 @@ import orjson
 from simbridge.app.config import RealismParams
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
-from simbridge.graph import ROBOT_NODE, Graph
-from simbridge.graph.estop import INSTRUCTOR, EStop, connection_rights, describe_peer
+from simbridge.graph import Graph
 from simbridge.graph.guard import token_access
-from simbridge.graph.roles import Roles
+from simbridge.robot.bridge import ROBOT_NODE
+from simbridge.robot.estop import INSTRUCTOR, EStop, connection_rights, describe_peer
+from simbridge.robot.roles import Roles
 from simbridge.sim import KinematicModel, MotionModel, World
 from simbridge.sim.dynamics import DynamicModel
 from simbridge.sim.world import PER_ROBOT_PARAMS, Robot
@@ -51,7 +52,7 @@ from simbridge.web.http import HttpRequest, HttpResponse, WebApp
 
 
 if TYPE_CHECKING:
-    from simbridge.server import Client
+    from simbridge.rosbridge.server import Client
 
 
 __all__ = [

@@ -25,7 +25,7 @@ from simbridge.app.settings import (
     options,
 )
 from simbridge.errors import ConfigError
-from simbridge.protocol.budget import GLOBAL_LIMITS, Limits
+from simbridge.rosbridge.budget import GLOBAL_LIMITS, Limits
 
 
 class Inner(Record):

@@ -19,7 +19,7 @@ import pytest
 from playwright.async_api import Browser, ConsoleMessage, Page, async_playwright
 from websockets.asyncio.client import ClientConnection, connect
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.helpers import ROOT, TIMEOUT_FACTOR, http_url, ws_url
 
 

@@ -15,7 +15,7 @@ import statistics
 import pytest
 from playwright.async_api import Page
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.browser.conftest import OpenPage, Watcher, screenshot
 from tests.conftest import AppFactory
 from tests.helpers import ws_url

@@ -26,8 +26,8 @@ import pytest_asyncio
 from playwright.async_api import Browser, BrowserContext, Page, async_playwright
 from websockets.asyncio.client import connect
 
+from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
-from simbridge.runner import App
 from tests.browser.conftest import CHROMIUM, FLAGS, PageLog, Watcher, screenshot
 from tests.helpers import ROOT, TIMEOUT_FACTOR, http_url, wait_for, ws_url
 

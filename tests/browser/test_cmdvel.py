@@ -13,7 +13,7 @@ import pytest
 from playwright.async_api import Page
 
 from simbridge.app.config import Params, RobotParams
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.browser.conftest import OpenPage, PageLog, Watcher, screenshot
 from tests.conftest import AppFactory
 from tests.helpers import wait_for, ws_url

@@ -17,7 +17,7 @@ import psutil
 import pytest
 from playwright.async_api import Browser, Page
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.browser.conftest import OpenPage, Watcher, screenshot
 from tests.conftest import AppFactory
 from tests.helpers import ROOT, http_url, wait_for, ws_url

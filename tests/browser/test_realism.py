@@ -11,7 +11,7 @@ import io
 
 import pytest
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.browser.conftest import OpenPage, screenshot
 from tests.conftest import AppFactory
 from tests.helpers import ROOT, ws_url

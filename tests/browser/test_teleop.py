@@ -12,7 +12,7 @@ import statistics
 
 import pytest
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.browser.conftest import OpenPage, Watcher, screenshot
 from tests.helpers import ws_url
 

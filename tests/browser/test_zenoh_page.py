@@ -11,11 +11,11 @@ from pathlib import Path
 
 import pytest
 
+from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
-from simbridge.runner import App
 from tests.browser.conftest import OpenPage
 from tests.helpers import TIMEOUT_FACTOR, ws_url
-from tests.zenoh.conftest import Router, room_a_process, zenoh_options
+from tests.ros2.zenoh.conftest import Router, room_a_process, zenoh_options
 
 
 pytestmark = pytest.mark.e2e

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import pytest
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.conftest import ClientRunner
 from tests.deploy.stack import free_port
 from tests.helpers import ROOT, TIMEOUT_FACTOR

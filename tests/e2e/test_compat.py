@@ -15,7 +15,7 @@ from typing import Any
 import pytest
 from websockets.asyncio.client import connect
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.conftest import ClientRunner
 from tests.helpers import ws_url
 

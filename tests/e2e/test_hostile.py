@@ -21,8 +21,8 @@ from hypothesis import HealthCheck, given, settings
 from websockets.exceptions import ConnectionClosed
 from websockets.sync.client import ClientConnection, connect
 
+from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
-from simbridge.runner import App
 from tests.e2e.hostile import frames
 from tests.helpers import TIMEOUT_FACTOR
 

@@ -21,7 +21,7 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
 
 from simbridge.app.config import load_params, load_world, resource_dir
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.conftest import AppFactory
 from tests.helpers import (
     TIMEOUT_FACTOR,

@@ -20,7 +20,7 @@ from rosbags.typesys import Stores, get_typestore
 from rosbags.typesys.msg import get_types_from_msg
 from websockets.asyncio.client import ClientConnection, connect
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.helpers import TIMEOUT_FACTOR, ws_url
 
 

@@ -24,9 +24,9 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from simbridge.app.config import load_world
+from simbridge.app.runner import App
 from simbridge.graph.guard import rosauth_mac
-from simbridge.protocol.fragments import MESSAGE_COST, PIECE_COST
-from simbridge.runner import App
+from simbridge.rosbridge.fragments import MESSAGE_COST, PIECE_COST
 from tests.conftest import AppFactory
 from tests.helpers import (
     ROOT,
@@ -37,7 +37,7 @@ from tests.helpers import (
     wait_for,
     ws_url,
 )
-from tests.protocol.test_png import _pixels
+from tests.rosbridge.test_png import _pixels
 
 
 pytestmark = pytest.mark.e2e
@@ -335,7 +335,7 @@ async def test_row7_fragment_bytes_are_counted_in_utf8_and_pooled(make_app: AppF
     """Five clients send never-completed fragments of 4-byte characters: bytes are counted.
 
     Each client holds at most max_message_size, all of them global_fragment_bytes, counted in
-    UTF-8 bytes plus what each piece and message costs (``tests/protocol/test_fragments.py``:
+    UTF-8 bytes plus what each piece and message costs (``tests/rosbridge/test_fragments.py``:
     the charge covers what Python holds; ``test_session.py``: refused frames are freed at once).
     """
     app = await student_app(make_app, max_message_size=1_000_000, global_fragment_bytes=3_000_000)
@@ -743,7 +743,7 @@ async def test_issue29_png_under_four_spellings_decodes_to_each_spelling(
     """One topic subscribed with png as /r1/big, r1/big, /r1/big/ and r1/big/: one frame each.
 
     Each decodes to the publish under its own spelling (the message is compressed once for
-    all four: tests/protocol/test_png.py).
+    all four: tests/rosbridge/test_png.py).
     """
     app = await student_app(make_app)
     async with observed(app) as steady:

@@ -13,7 +13,7 @@ from typing import Any
 import pytest
 
 from simbridge.app.config import WorldSpec
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.conftest import ClientRunner
 from tests.helpers import ROOT, finish_process, ws_url
 

@@ -20,7 +20,7 @@ from typing import Any
 import pytest
 
 from simbridge.app.config import Params, RobotParams
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.conftest import AppFactory
 from tests.helpers import JS_DIR, ROOT, finish_process, ws_url
 

@@ -148,7 +148,7 @@ async def test_a_connection_past_foxglove_max_clients_is_closed_by_name_and_its_
 
 def test_without_the_option_nothing_of_foxglove_is_imported() -> None:
     code = (
-        "import sys; from simbridge.runner import App; App(); "
+        "import sys; from simbridge.app.runner import App; App(); "
         "print(sorted(m for m in sys.modules if 'foxglove' in m))"
     )
     out = subprocess.run(

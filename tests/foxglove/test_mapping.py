@@ -6,7 +6,7 @@ import numpy as np
 
 from simbridge.foxglove import param_name, split_param, status_of
 from simbridge.foxglove.mapping import plain
-from simbridge.protocol.encoding import json_frame, status_frame
+from simbridge.rosbridge.encoding import json_frame, status_frame
 
 
 def test_parameters_are_named_node_dot_parameter_as_foxglove_bridge_names_them() -> None:

@@ -15,8 +15,8 @@ from typing import Any
 
 import orjson
 
+from simbridge.app.runner import offload
 from simbridge.grading.results import ResultsLog
-from simbridge.runner import offload
 from simbridge.tools.client import RosbridgeClient
 from tests.helpers import ROOT, TIMEOUT_FACTOR
 

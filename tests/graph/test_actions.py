@@ -7,7 +7,8 @@ from typing import Any
 import pytest
 
 from simbridge.app.settings import ServerSettings
-from simbridge.graph import Graph, install_rosapi
+from simbridge.graph import Graph
+from simbridge.rosbridge.rosapi import install_rosapi
 from tests.helpers import RecordingPeer
 
 

@@ -8,10 +8,11 @@ import pytest
 from simbridge.app.config import Params, load_world
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ProtocolError
-from simbridge.graph import Graph, RobotBridge
+from simbridge.graph import Graph
 from simbridge.graph.admission import Call, GoalRequest, GoalUpdate, Publication, Response
 from simbridge.graph.guard import Guard
-from simbridge.protocol import Refusal, ops as o
+from simbridge.robot.bridge import RobotBridge
+from simbridge.rosbridge import Refusal, ops as o
 from simbridge.sim import World
 from tests.helpers import ROOT, RecordingPeer
 

@@ -7,7 +7,7 @@ from typing import Any
 import pytest
 
 from simbridge.app.settings import ServerSettings
-from simbridge.graph import Graph, install_rosapi
+from simbridge.graph import Graph
 from simbridge.graph.guard import (
     NO_ROBOT,
     Guard,
@@ -16,6 +16,7 @@ from simbridge.graph.guard import (
     rosauth_mac,
     token_access,
 )
+from simbridge.rosbridge.rosapi import install_rosapi
 from tests.helpers import RecordingPeer
 
 

@@ -6,7 +6,9 @@ from typing import Any
 import pytest
 
 from simbridge.app.config import Params, load_world
-from simbridge.graph import Graph, RobotBridge, install_rosapi
+from simbridge.graph import Graph
+from simbridge.robot.bridge import RobotBridge
+from simbridge.rosbridge.rosapi import install_rosapi
 from simbridge.sim import World
 from tests.helpers import RecordingPeer
 

@@ -5,7 +5,7 @@ import pytest
 
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.protocol.encoding import encode_json
+from simbridge.rosbridge.encoding import encode_json
 
 
 def test_cdr_round_trips_through_rosbags_with_the_encapsulation_header() -> None:

@@ -9,7 +9,7 @@ from simbridge.errors import TypeNotFoundError
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.cdrcodec import LAYOUTS_KEPT
-from simbridge.protocol.encoding import encode_json
+from simbridge.rosbridge.encoding import encode_json
 
 
 @pytest.fixture(scope="module")

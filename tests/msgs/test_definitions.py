@@ -12,12 +12,12 @@ from rosbags.typesys import Stores, TypesysError, get_typestore
 from rosbags.typesys.msg import get_types_from_msg
 from websockets.asyncio.client import ClientConnection, connect
 
+from simbridge.app.runner import App
 from simbridge.errors import TypeNotFoundError
 from simbridge.headless import Simulation
 from simbridge.msgs import TypeRegistry
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.definitions import standard
-from simbridge.runner import App
 from tests.helpers import ROOT, TIMEOUT_FACTOR, recv_until, send_json, ws_url
 
 

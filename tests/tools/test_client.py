@@ -4,7 +4,7 @@ import asyncio
 
 import pytest
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from simbridge.tools.client import ClientError, RosbridgeClient
 from tests.helpers import wait_for, ws_url
 

@@ -12,7 +12,7 @@ from rosbags.typesys import Stores, get_typestore
 from websockets.asyncio.client import connect
 
 from simbridge.app.config import Params, RobotParams
-from simbridge.runner import App
+from simbridge.app.runner import App
 from simbridge.tools.bag import read_messages
 from simbridge.tools.compare import load_run
 from simbridge.tools.record import replay_headless

@@ -8,7 +8,7 @@ import pytest
 import yaml
 from websockets.asyncio.client import connect
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from simbridge.tools.client import ClientError
 from simbridge.tools.rostool import describe_value, hz_report, parse_yaml
 from tests.helpers import (

@@ -7,7 +7,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from simbridge.web.admin import AdminRefused, check_admin_token, token_from_headers
 from tests.conftest import AppFactory
 from tests.helpers import ROOT, http_url

@@ -19,7 +19,7 @@ from typing import Any
 import pytest
 
 from simbridge.app.config import resource_dir
-from simbridge.runner import App
+from simbridge.app.runner import App
 from simbridge.tools.client import ClientError, RosbridgeClient
 from tests.conftest import AppFactory
 from tests.helpers import http_url, wait_for, ws_url

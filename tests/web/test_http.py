@@ -12,7 +12,7 @@ from typing import Any
 import pytest
 
 from simbridge.app.config import resource_dir
-from simbridge.runner import App
+from simbridge.app.runner import App
 from simbridge.web import HttpRequest, HttpResponse, WebApp, serve_http
 from tests.helpers import http_url
 

@@ -45,9 +45,6 @@ from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.guard import ros2_access
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.protocol import Frame, Outgoing, Session
-from simbridge.protocol.encoding import encode_json
-from simbridge.protocol.ops import CallService
 from simbridge.ros2.dds.options import DdsOptions
 from simbridge.ros2.dds.types import IdlTypes
 from simbridge.ros2.dds.wire import (
@@ -65,8 +62,11 @@ from simbridge.ros2.dds.wire import (
     topic_name,
     typehash_user_data,
 )
-from simbridge.zenoh.names import dds_type, ros_type
-from simbridge.zenoh.typehash import TypeHasher
+from simbridge.ros2.names import dds_type, ros_type
+from simbridge.ros2.typehash import TypeHasher
+from simbridge.rosbridge import Frame, Outgoing, Session
+from simbridge.rosbridge.encoding import encode_json
+from simbridge.rosbridge.ops import CallService
 
 
 __all__ = ["DdsLink", "DdsNode", "import_cyclonedds"]

@@ -19,9 +19,9 @@ from typing import Any
 
 import pytest
 
+from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
 from simbridge.ros2.dds.options import DdsOptions
-from simbridge.runner import App
 from tests.helpers import ROOT, TIMEOUT_FACTOR, wait_for, ws_url
 from tests.ros2.dds.harness import NetNamespace
 
