@@ -20,7 +20,9 @@ from websockets.asyncio.server import ServerConnection, broadcast, serve
 
 from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph
+from simbridge.graph.access import Access
 from simbridge.robot.bridge import RobotBridge
+from simbridge.rosbridge.front import Rosbridge
 from simbridge.sim import World
 
 
@@ -30,6 +32,7 @@ ZERO = b'"stamp":{"sec":0,"nanosec":0}'
 def templates() -> dict[str, bytes]:
     """Return the /odom and /scan publish frames of simbridge with a zero stamp."""
     graph = Graph(wall_clock_ns=lambda: 0)
+    front = Rosbridge(graph)
     world = World(load_world(None), Params())
     bridge = RobotBridge(graph, world)
     frames: dict[str, bytes] = {}
@@ -38,7 +41,11 @@ def templates() -> dict[str, bytes]:
         label = "catch"
 
         def __init__(self) -> None:
-            self.session = graph.new_session()
+            self.session = front.new_session()
+
+        @property
+        def access(self) -> Access:
+            return self.session.access
 
         def send(self, frame: object, key: object = None, limit: int = 0) -> None:
             data = getattr(frame, "data", b"")
@@ -49,7 +56,7 @@ def templates() -> dict[str, bytes]:
 
     peer = Catch()
     for name in ("/odom", "/scan"):
-        graph.receive(peer, f'{{"op":"subscribe","topic":"{name}"}}', 0.0)
+        front.receive(peer, f'{{"op":"subscribe","topic":"{name}"}}', 0.0)
     world.step()
     bridge.publish(0.0)
     assert set(frames) == {"/odom", "/scan"} and all(ZERO in f for f in frames.values())

@@ -30,20 +30,26 @@ import numpy as np
 
 from simbridge.app.config import Params, WorldSpec
 from simbridge.graph import Graph
+from simbridge.graph.access import Access
 from simbridge.robot.bridge import RobotBridge
 from simbridge.rosbridge import Frame
+from simbridge.rosbridge.front import Rosbridge
 from simbridge.sim import World, raycast
 
 
 class SinkPeer:
     """A subscribed client that counts the frames and bytes it is sent."""
 
-    def __init__(self, graph: Graph) -> None:
-        self.session = graph.new_session()
+    def __init__(self, front: Rosbridge) -> None:
+        self.session = front.new_session()
         self.label = "sink"
         self.frames = 0
         self.bytes = 0
-        graph.add_peer(self)
+        front.add_peer(self)
+
+    @property
+    def access(self) -> Access:
+        return self.session.access
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         self.frames += 1
@@ -73,10 +79,11 @@ def arena(n: int, seed: int = 0) -> tuple[World, Graph, RobotBridge, SinkPeer]:
         k += 1
     graph = Graph()
     bridge = RobotBridge(graph, world)
-    sink = SinkPeer(graph)
+    front = Rosbridge(graph)
+    sink = SinkPeer(front)
     for name in world.robots:
         for topic in ("odom", "scan"):
-            graph.receive(sink, f'{{"op":"subscribe","topic":"/{name}/{topic}"}}', 0.0)
+            front.receive(sink, f'{{"op":"subscribe","topic":"/{name}/{topic}"}}', 0.0)
     return world, graph, bridge, sink
 
 

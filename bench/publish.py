@@ -2,7 +2,7 @@
 
 What one ``publish`` op costs the server from the frame to its effect, on the in-process graph
 (no sockets): :meth:`Graph.receive <simbridge.graph.Graph.receive>` of one JSON frame, with a
-:class:`~simbridge.graph.guard.Guard` installed as the server has it (its rate limit set out
+:class:`~simbridge.app.guard.Guard` installed as the server has it (its rate limit set out
 of the way). Rows:
 
 * ``/cmd_vel``: a full ``geometry_msgs/Twist`` to the default robot (session, admission, the
@@ -23,21 +23,27 @@ from typing import Any
 
 from bench.encoding import _time
 from simbridge.app.config import Params, load_world
-from simbridge.app.settings import ServerSettings
+from simbridge.app.guard import Guard
+from simbridge.app.settings import ServerSettings, budgets
 from simbridge.graph import Graph
-from simbridge.graph.guard import Guard
+from simbridge.graph.access import Access
 from simbridge.robot.bridge import RobotBridge
+from simbridge.rosbridge.front import Rosbridge
 from simbridge.sim import World
 
 
 class _Peer:
     """A connected client without a socket: it counts what it is sent."""
 
-    def __init__(self, graph: Graph, label: str) -> None:
-        self.session = graph.new_session()
+    def __init__(self, front: Rosbridge, label: str) -> None:
+        self.session = front.new_session()
         self.label = label
         self.sent = 0
-        graph.add_peer(self)
+        front.add_peer(self)
+
+    @property
+    def access(self) -> Access:
+        return self.session.access
 
     def send(self, frame: Any, key: Hashable | None = None, limit: int = 0) -> None:
         self.sent += 1
@@ -55,12 +61,13 @@ def _cases() -> dict[str, Callable[[], None]]:
     graph = Graph(settings=settings)
     world = World(load_world(None), Params())
     RobotBridge(graph, world)
-    Guard(graph, settings, robots=lambda: world.robots.keys())
-    sender = _Peer(graph, "sender")
+    guard = Guard(graph, settings, robots=lambda: world.robots.keys())
+    front = Rosbridge(graph, *budgets(settings), authenticator=guard)
+    sender = _Peer(front, "sender")
     for k in range(10):
-        peer = _Peer(graph, f"listener {k}")
+        peer = _Peer(front, f"listener {k}")
         sub = {"op": "subscribe", "topic": "/chatter", "type": "std_msgs/msg/String"}
-        graph.receive(peer, json.dumps(sub), 0.0)
+        front.receive(peer, json.dumps(sub), 0.0)
     twist = {"linear": {"x": 0.2, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.5}}
     cmd = _frame("/cmd_vel", twist, "geometry_msgs/msg/Twist")
     chatter = _frame("/chatter", {"data": "hello world"}, "std_msgs/msg/String")
@@ -70,7 +77,7 @@ def _cases() -> dict[str, Callable[[], None]]:
     def send(frame: str) -> Callable[[], None]:
         def run() -> None:
             now[0] += 0.001
-            graph.receive(sender, frame, now[0])
+            front.receive(sender, frame, now[0])
 
         return run
 

@@ -7,6 +7,7 @@ import base64
 import json
 import os
 import socket
+import weakref
 from collections.abc import Callable
 from pathlib import Path
 from typing import Any
@@ -14,6 +15,7 @@ from typing import Any
 from websockets.asyncio.client import ClientConnection
 
 from simbridge.app.runner import App
+from simbridge.graph.access import Access
 
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -110,9 +112,26 @@ async def wait_for(predicate: Callable[[], bool], timeout: float = 3.0, step: fl
         await asyncio.sleep(step)
 
 
+#: The rosbridge front end of each graph a test made (the server's own for an App's graph).
+_FRONTS: weakref.WeakKeyDictionary[Any, Any] = weakref.WeakKeyDictionary()
+
+
+def rosbridge_of(graph: Any, authenticator: Any = None) -> Any:
+    """Return the rosbridge front end of ``graph`` (made once; ``authenticator``: a guard)."""
+    from simbridge.app.settings import budgets
+    from simbridge.rosbridge.front import Rosbridge
+
+    front = _FRONTS.get(graph)
+    if front is None:
+        front = _FRONTS[graph] = Rosbridge(graph, *budgets(graph.settings))
+    if authenticator is not None:
+        front.authenticator = authenticator
+    return front
+
+
 def op(peer: RecordingPeer, graph: Any, now: float = 0.0, **fields: Any) -> None:
     """Deliver one op (its fields as keyword arguments) from ``peer`` to ``graph`` at ``now``."""
-    graph.receive(peer, json.dumps(fields), now)
+    rosbridge_of(graph).receive(peer, json.dumps(fields), now)
 
 
 def clocked_graph() -> Any:
@@ -129,10 +148,15 @@ class RecordingPeer:
     """A graph peer that records what it is sent (the seam where a socket would be)."""
 
     def __init__(self, graph: Any, label: str = "peer", *, token: str | None = None) -> None:
-        self.session = graph.new_session(token)
+        self.front = rosbridge_of(graph)
+        self.session = self.front.new_session(token)
         self.label = label
         self.frames: list[Any] = []
-        graph.add_peer(self)
+        self.front.add_peer(self)
+
+    @property
+    def access(self) -> Access:
+        return self.session.access
 
     def send(self, frame: Any, key: Any = None, limit: int = 0) -> None:
         self.frames.append(frame)

@@ -23,7 +23,7 @@ from cryptography.x509.oid import NameOID
 from websockets.asyncio.client import connect
 from websockets.exceptions import ConnectionClosed, InvalidHandshake, InvalidStatus
 
-from simbridge.graph.guard import rosauth_mac
+from simbridge.app.guard import rosauth_mac
 from tests.conftest import AppFactory, ClientRunner
 from tests.helpers import TIMEOUT_FACTOR, recv_until, send_json, ws_url
 

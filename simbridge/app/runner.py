@@ -28,13 +28,14 @@ from simbridge.app.config import (
     resource_dir,
     world_spec,
 )
-from simbridge.app.settings import ServerSettings
+from simbridge.app.guard import Guard
+from simbridge.app.settings import ServerSettings, budgets
 from simbridge.grading import install_grader
 from simbridge.graph.graph import Graph
-from simbridge.graph.guard import Guard
 from simbridge.robot.assembly import build_robot_graph
 from simbridge.robot.bridge import ROBOT_NODE
 from simbridge.robot.simclock import SIM_NODE
+from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.server import BridgeServer, tls_context
 from simbridge.sim import World
 from simbridge.web import WebApp, serve_http
@@ -213,8 +214,12 @@ class App:
         self.tick_hooks = self.robot.tick_hooks
         #: HTTP answers (page, /healthz).
         self.web = WebApp(static_dir or resource_dir("static"), self.health)
+        #: Access control: who each peer of every front end is (docs/security.md).
+        self.guard = Guard(self.graph, self.settings, robots=lambda: self.world.robots.keys())
+        #: The rosbridge clients: their sessions, budgets and ops.
+        self.rosbridge = Rosbridge(self.graph, *budgets(self.settings), authenticator=self.guard)
         #: The WebSocket server.
-        self.server = BridgeServer(self.graph, self.settings, self.web)
+        self.server = BridgeServer(self.rosbridge, self.settings, self.web)
         #: What each connection may do (/simbridge/access), for pages.
         self.roles = self.robot.roles
         install_admin(
@@ -241,9 +246,6 @@ class App:
         self._started = time.monotonic()
         #: Set once the servers listen and the loop runs.
         self.ready = asyncio.Event()
-        # last, so that it guards whatever the lines above installed (docs/security.md)
-        #: Access control and limits of client ops.
-        self.guard = Guard(self.graph, self.settings, robots=lambda: self.world.robots.keys())
         if self.settings.admin_token is None and not _loopback(self.settings.host):
             logger.warning(
                 "no admin token: anyone who can reach %s may reset the world and change "
@@ -257,14 +259,16 @@ class App:
         if zenoh is not None:
             from simbridge.ros2.zenoh.link import ZenohLink  # the [zenoh] extra, only when asked
 
-            self.zenoh = ZenohLink(self.graph, zenoh, simulator=not no_sim)
+            self.zenoh = ZenohLink(
+                self.graph, zenoh, simulator=not no_sim, rosbridge=self.rosbridge
+            )
             self.tick_hooks.append(self.zenoh.tick)
         #: The ROS 2 graph through DDS (``--dds``), or None.
         self.dds: DdsLink | None = None
         if dds is not None:
             from simbridge.ros2.dds.link import DdsLink  # the [dds] extra, only when asked
 
-            self.dds = DdsLink(self.graph, dds, simulator=not no_sim)
+            self.dds = DdsLink(self.graph, dds, simulator=not no_sim, rosbridge=self.rosbridge)
             self.tick_hooks.append(self.dds.tick)
         #: The Foxglove WebSocket protocol (``--foxglove-port``), or None.
         self.foxglove: FoxgloveFront | None = None
@@ -273,7 +277,11 @@ class App:
             from simbridge.foxglove.front import FoxgloveFront  # the [foxglove] extra, if asked
 
             self.foxglove = FoxgloveFront(
-                self.graph, port=s.foxglove_port, host=s.host, scope=s.foxglove_scope
+                self.graph,
+                port=s.foxglove_port,
+                host=s.host,
+                scope=s.foxglove_scope,
+                rosbridge=self.rosbridge,
             )
             self.tick_hooks.append(self.foxglove.tick)
 

@@ -90,9 +90,11 @@ from simbridge.foxglove.mapping import (
     status_of,
 )
 from simbridge.graph import Graph, Topic
+from simbridge.graph.access import ANY_SCOPE, Access
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.rosbridge import ANY_SCOPE, Frame, Outgoing, Session, ops as o
+from simbridge.rosbridge import Frame, Outgoing, Session, ops as o
+from simbridge.rosbridge.front import Rosbridge
 
 
 __all__ = ["FOXGLOVE_NODE", "ConnectionWatch", "FoxgloveFront", "import_foxglove"]
@@ -288,6 +290,11 @@ class _Client:
         #: Its calls waiting for the graph's answer: op id -> future.
         self.calls: dict[str, asyncio.Future[dict[str, Any]]] = {}
 
+    @property
+    def access(self) -> Access:
+        """Who the peer is for the graph's rules (its session's access)."""
+        return self.session.access
+
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         """Take what the graph tells this client: a refusal or a call's answer."""
         if not frame.text:
@@ -316,9 +323,19 @@ class _Channel:
 class FoxgloveFront:
     """The Foxglove WebSocket server beside the graph (see the module doc)."""
 
-    def __init__(self, graph: Graph, *, port: int, host: str, scope: str | None) -> None:
+    def __init__(
+        self,
+        graph: Graph,
+        *,
+        port: int,
+        host: str,
+        scope: str | None,
+        rosbridge: Rosbridge | None = None,
+    ) -> None:
         #: The graph served.
         self.graph = graph
+        #: Where the clients' messages and calls are carried out as rosbridge ops, for now.
+        self.rosbridge = rosbridge or Rosbridge(graph)
         self.port_asked = port
         self.host = host
         #: Access of every Foxglove client (None: what a rosbridge client without a token gets).
@@ -656,9 +673,9 @@ class FoxgloveFront:
     def _client(self, client_id: int) -> _Client:
         client = self._clients.get(client_id)
         if client is None:
-            session = self.graph.new_session()
+            session = self.rosbridge.new_session()
             client = self._clients[client_id] = _Client(self, client_id, session)
-            self.graph.add_peer(client)  # the guard gives the access of a tokenless client
+            self.rosbridge.add_peer(client)  # the guard gives the access of a tokenless client
             if self.scope == ADMIN_SCOPE:
                 session.connect(ANY_SCOPE, admin=True)
             elif self.scope is not None:
@@ -672,7 +689,7 @@ class FoxgloveFront:
         if client.channels or client.calls or self._clients.get(client.client_id) is not client:
             return
         del self._clients[client.client_id]
-        self.graph.remove_peer(client)
+        self.rosbridge.remove_peer(client)
 
     def _now(self) -> float:
         return self._loop.time() if self._loop is not None else 0.0
@@ -705,7 +722,7 @@ class FoxgloveFront:
         client.channels[channel_id] = (topic, encoding, type_name)
         if type_name is not None:
             op = o.Advertise(topic=topic, type=type_name, id=f"foxglove:{channel_id}")
-            self.graph.dispatch(client, op, self._now())
+            self.rosbridge.dispatch(client, op, self._now())
 
     def unadvertised(self, client_id: int, channel_id: int) -> None:
         """A client unadvertised a channel (or left): a rosbridge ``unadvertise``."""
@@ -715,7 +732,7 @@ class FoxgloveFront:
         entry = client.channels.pop(channel_id, None)
         if entry is not None and entry[2] is not None:
             op = o.Unadvertise(topic=entry[0], id=f"foxglove:{channel_id}")
-            self.graph.dispatch(client, op, self._now())
+            self.rosbridge.dispatch(client, op, self._now())
         self._release(client)
 
     def message(self, client_id: int, channel_id: int, data: bytes) -> None:
@@ -741,7 +758,7 @@ class FoxgloveFront:
             self.status(f"{client.label}: publish {topic}: cannot decode: {err}", "error")
             return
         op = o.Publish(topic=topic, msg=payload, type=type_name)
-        self.graph.dispatch(client, op, self._now())
+        self.rosbridge.dispatch(client, op, self._now())
 
     async def call(self, client_id: int, name: str, encoding: str, payload: bytes) -> bytes:
         """A client's service call: a rosbridge ``call_service`` of its session.
@@ -781,7 +798,7 @@ class FoxgloveFront:
         timeout = self.graph.settings.service_timeout
         try:
             op = o.CallService(service=name, args=args, id=op_id, timeout=timeout)
-            self.graph.dispatch(client, op, loop.time())
+            self.rosbridge.dispatch(client, op, loop.time())
             return await asyncio.wait_for(future, timeout + CALL_MARGIN / 2)
         finally:
             client.calls.pop(op_id, None)

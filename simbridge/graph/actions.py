@@ -12,7 +12,7 @@ Status codes are ``action_msgs/msg/GoalStatus``: 0 unknown, 1 accepted, 2 execut
 3 canceling, 4 succeeded, 5 canceled, 6 aborted. Every goal is answered:
 
 * no such action, or a goal that does not fit a known action type (admission decides, see
-  :meth:`Admission.goal <simbridge.graph.admission.Admission.goal>`): ``action_result`` with
+  :meth:`Admission.goal <simbridge.rosbridge.admission.Admission.goal>`): ``action_result`` with
   ``result: false``, ``status: 0`` and the reason (rosbridge 2.1 hangs here, #1139);
 * the server's ``action_result`` with ``result: true``: status 4 and 5 are passed on, anything
   else becomes 6 (as rosbridge's goal handle does);
@@ -35,7 +35,6 @@ import heapq
 import itertools
 import logging
 import uuid
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Protocol
 
@@ -174,12 +173,6 @@ class ActionTable:
         #: When counted goals to client-served actions time out: (deadline, server id), a heap.
         self.deadlines: list[tuple[float, str]] = []
         self._counter = itertools.count(1)
-
-    def handlers(self) -> dict[type, Callable[[Peer, Any, float], None]]:
-        """Return the graph op handlers of the action ops."""
-        return {
-            o.CancelActionGoal: self._cancel,
-        }
 
     # -- declaration ------------------------------------------------------------------------
 
@@ -373,9 +366,9 @@ class ActionTable:
                 return goal
         return None
 
-    def _cancel(self, peer: Peer, op: o.CancelActionGoal, now: float) -> None:
-        name = op.name
-        goal = self._find_own(peer, op.id, name)
+    def cancel_own(self, peer: Peer, op_id: OpId | None, name: str) -> None:
+        """Cancel the goal ``peer`` sent to action ``name`` under its id ``op_id``, if any."""
+        goal = self._find_own(peer, op_id, name)
         if goal is None:
             return  # already finished or never sent: nothing to cancel (as rosbridge)
         self.cancel_goal(goal)

@@ -8,7 +8,7 @@ service, a handler error, a timeout, a provider that unadvertised or disconnecte
 Replies from client providers (``service_response``) are routed back by the server-chosen id
 ``service_request:<service>:<n>``. Clients disagree on the reply shape (protocol reference
 section 8, item 14), so simbridge reads it as follows (:meth:`Admission.response
-<simbridge.graph.admission.Admission.response>`, then :meth:`ServiceTable.respond`):
+<simbridge.rosbridge.admission.Admission.response>`, then :meth:`ServiceTable.respond`):
 
 * ``values`` an object: success, whatever ``result`` says. This is rosbridge's behaviour (its
   ``service_response`` capability builds the ROS response from ``values`` and never reads

@@ -17,6 +17,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol, cast
 
 from simbridge.errors import ProtocolError, TypeNotFoundError
+from simbridge.graph.access import Access
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
 from simbridge.rosbridge import (
     Frame,
@@ -43,6 +44,10 @@ class Peer(Protocol):
     session: Session
     #: A short label for logs ("client 3 127.0.0.1:50412").
     label: str
+
+    @property
+    def access(self) -> Access:
+        """Who the peer is for the graph's rules (scope, admin rights, token)."""
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         """Queue one frame for the client (``key``/``limit``: drop-oldest per subscription)."""

@@ -8,7 +8,7 @@ or the world file (``demo_nodes: true``) ask for them. :class:`~simbridge.app.ru
 in real time and :class:`~simbridge.headless.Simulation` step by step, so the two cannot offer
 different graphs.
 
-Client access control (:class:`~simbridge.graph.guard.Guard`) is not part of it: it sits between
+Client access control (:class:`~simbridge.app.guard.Guard`) is not part of it: it sits between
 the sockets and the graph, and the headless API has no clients.
 """
 

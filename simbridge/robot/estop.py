@@ -34,7 +34,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from simbridge.errors import ServiceError
-from simbridge.graph.admission import NO_ROBOT
+from simbridge.graph.access import NO_ROBOT
 from simbridge.graph.graph import Graph
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer, Topic
@@ -65,7 +65,7 @@ INSTRUCTOR = "the instructor (/admin)"
 def connection_rights(peer: Peer | None) -> tuple[str, bool]:
     """Return ``(scope, admin)`` of a connection: ``"*"`` (any robot) or its robot's name.
 
-    The guard (:mod:`simbridge.graph.guard`) gives every client its access on connect; a graph
+    The guard (:mod:`simbridge.app.guard`) gives every client its access on connect; a graph
     without a guard (a test, a tool) trusts everyone.
     """
     if peer is None or not peer.session.guarded:

@@ -30,7 +30,6 @@ from simbridge.rosbridge.ops import (
 )
 from simbridge.rosbridge.queue import SendQueue
 from simbridge.rosbridge.session import (
-    ANY_SCOPE,
     NOT_AUTHENTICATED,
     STATUS_LEVELS,
     Advertised,
@@ -48,7 +47,6 @@ from simbridge.rosbridge.session import (
 
 
 __all__ = [
-    "ANY_SCOPE",
     "GLOBAL_LIMITS",
     "NOT_AUTHENTICATED",
     "STATUS_LEVELS",

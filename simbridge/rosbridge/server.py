@@ -40,12 +40,13 @@ from websockets.http11 import Request, Response
 from websockets.protocol import State
 from websockets.typing import Origin
 
+from simbridge.app.guard import token_access
 from simbridge.app.settings import ServerSettings
-from simbridge.graph import Graph
-from simbridge.graph.guard import token_access
+from simbridge.graph.access import Access
 from simbridge.graph.topics import SendEntries
 from simbridge.msgs.registry import generate_interfaces_soon
 from simbridge.rosbridge import Frame, SendQueue, Session, TokenBucket, status_frame
+from simbridge.rosbridge.front import Rosbridge
 from simbridge.web import HttpRequest, WebApp, parse_target
 
 
@@ -168,6 +169,11 @@ class Client:
         if data and not self.closed and self.ws.protocol.state is State.OPEN:
             self.ws.transport.write(data[0] if len(data) == 1 else b"".join(data))
 
+    @property
+    def access(self) -> Access:
+        """Who the peer is for the graph's rules (its session's access)."""
+        return self.session.access
+
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         """Write a frame now if the socket keeps up, else queue it (drop-oldest)."""
         if self.closed:
@@ -213,9 +219,13 @@ _background: set[asyncio.Task[None]] = set()
 class BridgeServer:
     """rosbridge v2 over WebSocket on ``settings.host:settings.port``."""
 
-    def __init__(self, graph: Graph, settings: ServerSettings, web: WebApp | None = None) -> None:
-        #: The graph that handles every op.
-        self.graph = graph
+    def __init__(
+        self, front: Rosbridge, settings: ServerSettings, web: WebApp | None = None
+    ) -> None:
+        #: What carries out every op of the clients.
+        self.front = front
+        #: The robot's graph.
+        self.graph = front.graph
         #: Network settings.
         self.settings = settings
         #: Answers plain HTTP requests on the WebSocket port (``/healthz``, the page).
@@ -239,7 +249,7 @@ class BridgeServer:
         #: Clients with corked frames, and the callback that writes them.
         self._corked: list[Client] = []
         self._uncork_handle: asyncio.Handle | None = None
-        graph.topics.send_many = self._send_many
+        self.graph.topics.send_many = self._send_many
 
     def _send_many(self, frame: Frame, entries: SendEntries) -> None:
         """Write ``frame`` to many subscribers that keep up, framed once for all.
@@ -448,7 +458,7 @@ class BridgeServer:
                     f"not authenticated within {s.auth_timeout:g} s (the server's auth_timeout): "
                     "connect with ?token=YOUR_TOKEN or send an auth op first"
                 )
-                self.graph.apply(client, client.session.status("error", text))
+                self.front.apply(client, client.session.status("error", text))
                 client.close_soon(1008, "authentication timeout")
 
         client.auth_timer = asyncio.get_running_loop().call_later(s.auth_timeout, deadline)
@@ -487,7 +497,7 @@ class BridgeServer:
             self.refused_total += 1
             logger.warning("%s refused after auth: %s", client.label, refusal)
             session.connect(session.scope, False, authenticated=False)  # owes a token again
-            self.graph.apply(client, session.status("error", refusal))
+            self.front.apply(client, session.status("error", refusal))
             client.close_soon(CloseCode.TRY_AGAIN_LATER, "too many connections")
             return
         client.unauthenticated = False
@@ -544,13 +554,13 @@ class BridgeServer:
                 f"too many messages: more than {s.message_rate:g} per second (the server's "
                 f"message_rate, burst {s.message_burst}); messages were dropped"
             )
-            self.graph.apply(client, client.session.status("error", text))
+            self.front.apply(client, client.session.status("error", text))
         return True
 
     async def _handler(self, ws: ServerConnection) -> None:
-        graph = self.graph
+        front = self.front
         token = _query_token(ws.request.path) if ws.request else None
-        session = graph.new_session(token)
+        session = front.new_session(token)
         work = self._share(token, session)
         try:
             client = Client(ws, session, self.settings, work)
@@ -567,7 +577,7 @@ class BridgeServer:
             self.clients.add(client)
             self.connections_total += 1
             generate_interfaces_soon()  # off the loop, before a client's first rosapi call
-            graph.add_peer(client)
+            front.add_peer(client)
             if not session.authenticated:  # set on connect by the guard (none: all admitted)
                 self._owes_token(client)
             else:
@@ -583,7 +593,7 @@ class BridgeServer:
                 # socket (256 kB: thousands of small frames), once held the loop 190 ms
                 if not self._rate_limited(client, now):
                     try:
-                        graph.receive(client, message, now)
+                        front.receive(client, message, now)
                     except Exception as err:  # a bug must not cost the client its connection
                         logger.exception("%s: internal error", client.label)
                         client.send(status_frame("error", f"internal error: {err}"))
@@ -619,7 +629,7 @@ class BridgeServer:
             self.clients.discard(client)
             self._leave(client)
             lost = not closed_on_purpose(ws.protocol.close_rcvd)
-            graph.remove_peer(client, lost=lost)
+            front.remove_peer(client, lost=lost)
             logger.info(
                 "%s disconnected (code %s%s)", client.label, ws.close_code, ", lost" if lost else ""
             )

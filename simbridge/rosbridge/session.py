@@ -17,7 +17,7 @@ messages that arrive less than ``throttle_rate`` ms after the last one sent (les
 jitter allowance).
 
 Ops in, effects out (the sans-I/O shape of python-websockets and h11): the graph hands the
-session a client op once :class:`~simbridge.graph.admission.Admission` has allowed it, with what
+session a client op once :class:`~simbridge.rosbridge.admission.Admission` has allowed it, with what
 the graph decided for it (a canonical type); the session updates only its own state, within
 its budgets, and returns **effects**, typed data saying what the graph must do for this client
 (:class:`Reply`, :class:`Subscribed`, :class:`Unsubscribed`, :class:`Advertised`,
@@ -44,7 +44,7 @@ import dataclasses
 import math
 import re
 from dataclasses import dataclass, field
-from typing import Literal, TypeAlias
+from typing import TYPE_CHECKING, Literal, TypeAlias
 
 from simbridge.errors import ProtocolError
 from simbridge.rosbridge.budget import Limits, Pool, TokenBucket
@@ -67,8 +67,11 @@ from simbridge.rosbridge.ops import (
 )
 
 
+if TYPE_CHECKING:
+    from simbridge.graph.access import Access
+
+
 __all__ = [
-    "ANY_SCOPE",
     "NOT_AUTHENTICATED",
     "STATUS_LEVELS",
     "Advertised",
@@ -88,8 +91,6 @@ __all__ = [
 #: ``status`` levels, most verbose first (ROSBRIDGE_PROTOCOL.md section 3.2).
 STATUS_LEVELS: tuple[str, ...] = ("info", "warning", "error", "none")
 _COMPRESSION_RANK = {"none": 0, "png": 1, "cbor": 2, "cbor-raw": 3}
-#: The scope that reaches every topic (what an unauthenticated server gives everyone).
-ANY_SCOPE = "*"
 #: What a client that still owes a token is told for anything but ``auth``.
 NOT_AUTHENTICATED = (
     "not authenticated: this server requires a token; connect with "
@@ -281,12 +282,9 @@ class Session:
         self.limits = limits
         #: What every client together may hold (shared by the sessions of one graph).
         self.pool = pool or Pool()
-        # access (set on connect from the token, or by a successful ``auth`` op; see the
-        # properties below)
-        self._authenticated = True
-        self._scope = ANY_SCOPE
-        self._admin = False
-        self._guarded = False
+        #: Who the client is for the graph's rules (set on connect from the token, or by a
+        #: successful ``auth`` op; read through the properties below).
+        self.access = _access(token, client_id)
         #: ``publish`` rate limit.
         self.publishes = TokenBucket(limits.publish_rate, limits.publish_burst)
         # -- what the client holds --
@@ -323,8 +321,6 @@ class Session:
         self.refusals_untold = 0
         self._told: dict[str, float] = {}
         self._statuses = TokenBucket(limits.statuses_per_second, limits.statuses_per_second)
-        #: The token the client connected with (``?token=``), if any: the guard reads its access.
-        self.token = token
         self.closed = False
 
     # -- access: decided by the graph's guard, read by its admission ------------------------
@@ -332,40 +328,47 @@ class Session:
     @property
     def authenticated(self) -> bool:
         """The client is admitted: its ops are carried out (else only ``auth`` is read)."""
-        return self._authenticated
+        return self.access.authenticated
 
     @property
     def scope(self) -> str:
         """``"*"`` (any topic) or a robot name (its namespace only)."""
-        return self._scope
+        return self.access.scope
 
     @property
     def admin(self) -> bool:
         """The client may call administrative services."""
-        return self._admin
+        return self.access.admin
 
     @property
     def guarded(self) -> bool:
         """A guard gave this client its access (a graph without one trusts everyone)."""
-        return self._guarded
+        return self.access.guarded
+
+    @property
+    def token(self) -> str | None:
+        """The token the client connected with (``?token=``), if any: the guard reads it."""
+        return self.access.token
 
     def connect(self, scope: str, admin: bool, *, authenticated: bool = True) -> None:
         """Take the access a guard gives on connect; ``authenticated=False``: a token is owed."""
-        self._guarded = True
-        self._scope, self._admin = scope, admin
-        self._authenticated = authenticated
+        access = self.access
+        access.guarded = True
+        access.scope, access.admin = scope, admin
+        access.authenticated = authenticated
 
     def admit(self, scope: str, admin: bool) -> None:
         """Admit the client with an access (a token on connect, or a good ``auth`` op)."""
-        self._authenticated = True
-        self._scope = scope
-        self._admin = admin
+        access = self.access
+        access.authenticated = True
+        access.scope = scope
+        access.admin = admin
 
     def take_publish(self, now: float) -> bool:
         """Charge one ``publish`` to the client's rate (``publish_rate``); whether it fits.
 
         Admission decides by it (:meth:`Admission.admit
-        <simbridge.graph.admission.Admission.admit>`); the token bucket is the client's.
+        <simbridge.rosbridge.admission.Admission.admit>`); the token bucket is the client's.
         """
         return self.publishes.take(now)
 
@@ -403,9 +406,9 @@ class Session:
         yields nothing yet. Before the client is admitted only a small frame holding ``auth``
         is read: anything else is refused unparsed, fragments are not reassembled.
         """
-        if not self._authenticated:
+        if not self.access.authenticated:
             return self._parse_unadmitted(data)
-        if not self._admin:
+        if not self.access.admin:
             refused = self._too_costly(data)
             if refused is not None:
                 return [refused]
@@ -980,3 +983,10 @@ def _bare(err: ProtocolError) -> ProtocolError:
     full garbage collection (issue 17 row 7: 5 clients' refused fragments took 400 MB).
     """
     return err.with_traceback(None)
+
+
+def _access(token: str | None, client_id: int) -> Access:
+    # imported here: the graph's package imports this module (its tables still hold sessions)
+    from simbridge.graph.access import Access
+
+    return Access(token=token, peer_id=client_id)

@@ -38,10 +38,10 @@ from typing import TYPE_CHECKING, Any
 import orjson
 
 from simbridge.app.config import RealismParams
+from simbridge.app.guard import token_access
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.graph import Graph
-from simbridge.graph.guard import token_access
 from simbridge.robot.bridge import ROBOT_NODE
 from simbridge.robot.estop import INSTRUCTOR, EStop, connection_rights, describe_peer
 from simbridge.robot.roles import Roles

@@ -24,8 +24,8 @@ from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed, InvalidStatus
 
 from simbridge.app.config import load_world
+from simbridge.app.guard import rosauth_mac
 from simbridge.app.runner import App
-from simbridge.graph.guard import rosauth_mac
 from simbridge.rosbridge.fragments import MESSAGE_COST, PIECE_COST
 from tests.conftest import AppFactory
 from tests.helpers import (
@@ -150,7 +150,7 @@ async def test_row1_fragments_before_auth_are_not_reassembled(make_app: AppFacto
         assert told and all("not authenticated" in t for t in told), told[:3]
         assert len(told) <= 3  # one a second, the rest counted
         client = server_side(app, 1)
-        assert len(client.session.defrag) == 0 and app.graph.pool.used["fragment_bytes"] == 0
+        assert len(client.session.defrag) == 0 and app.rosbridge.pool.used["fragment_bytes"] == 0
         assert client.session.refusals_untold >= 1_000
         # a frame bigger than an auth op is not decoded (or not even read in: closed, 1009)
         await ws.send(json.dumps({"op": "fragment", "id": "big", "data": "y" * 60_000}))
@@ -178,7 +178,7 @@ async def test_row2_subscribe_ids_are_capped_per_topic_and_client(make_app: AppF
             session = client.session
             assert session.subscribe_ids == 100 == len(session.subscriptions["/odom"].ids)
             reader.cancel()
-        await wait_for(lambda: app.graph.pool.used["subscribe_ids"] == 1)  # only the observer
+        await wait_for(lambda: app.rosbridge.pool.used["subscribe_ids"] == 1)  # only the observer
         await steady()
 
 
@@ -200,8 +200,8 @@ async def test_row3_advertise_ids_are_capped(make_app: AppFactory) -> None:
             told = await statuses(ws, 1.0)
             assert any("max_advertise_ids" in t for t in told), told[:3]
             session = server_side(app, 1).session
-            assert session.advertise_ids == 1_000 == app.graph.pool.used["advertise_ids"]
-        await wait_for(lambda: app.graph.pool.used["advertise_ids"] == 0)
+            assert session.advertise_ids == 1_000 == app.rosbridge.pool.used["advertise_ids"]
+        await wait_for(lambda: app.rosbridge.pool.used["advertise_ids"] == 0)
         assert "/r1/chatter" not in app.graph.topics.topics
         await steady()
 
@@ -235,10 +235,10 @@ async def test_row4_pending_calls_are_capped_and_timeout_0_is_the_maximum(
             assert refused["result"] is False and "max_pending_calls" in refused["values"]
             services = app.graph.services
             loop_now = asyncio.get_running_loop().time()
-            assert len(services.pending) == 100 == app.graph.pool.used["pending_calls"]
+            assert len(services.pending) == 100 == app.rosbridge.pool.used["pending_calls"]
             assert all(c.deadline <= loop_now + 60.0 for c in services.pending.values())
         await wait_for(lambda: not app.graph.services.pending)
-        assert app.graph.pool.used["pending_calls"] == 0
+        assert app.rosbridge.pool.used["pending_calls"] == 0
         await steady()
 
 
@@ -259,7 +259,7 @@ async def test_row5_latched_bytes_are_capped(make_app: AppFactory) -> None:
             assert app.graph.topics.topics.get("/r1/big2") is None or not (
                 app.graph.topics.topics["/r1/big2"].latched
             )
-        await wait_for(lambda: app.graph.pool.used["latched_bytes"] == 0)
+        await wait_for(lambda: app.rosbridge.pool.used["latched_bytes"] == 0)
         assert "/r1/big0" not in app.graph.topics.topics
         await steady()
 
@@ -364,8 +364,8 @@ async def test_row7_fragment_bytes_are_counted_in_utf8_and_pooled(make_app: AppF
             # bytes, not characters, and what each piece and message costs beyond its data
             each = 200_000 + PIECE_COST + MESSAGE_COST + sys.getsizeof("w0-0")
             assert all(s.defrag.buffered == len(s.defrag) * each for s in sessions)
-            assert app.graph.pool.used["fragment_bytes"] <= 3_000_000
-        await wait_for(lambda: app.graph.pool.used["fragment_bytes"] == 0)
+            assert app.rosbridge.pool.used["fragment_bytes"] <= 3_000_000
+        await wait_for(lambda: app.rosbridge.pool.used["fragment_bytes"] == 0)
         await steady()
 
 
@@ -572,7 +572,7 @@ async def test_issue29_long_ids_are_refused_and_goals_to_its_own_action_are_capp
             refused = await recv_until(ws, lambda m: m.get("id") == "t")
             assert "its action_type is 5002 characters long: at most 256" in refused["values"]
             assert len(goals) == 5
-        await wait_for(lambda: app.graph.pool.used["pending_goals"] == 0)
+        await wait_for(lambda: app.rosbridge.pool.used["pending_goals"] == 0)
         assert not app.graph.actions.goals
         await steady()
 

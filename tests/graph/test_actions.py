@@ -9,7 +9,7 @@ import pytest
 from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph
 from simbridge.rosbridge.rosapi import install_rosapi
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 @pytest.fixture
@@ -20,7 +20,7 @@ def graph() -> Graph:
 
 
 def op(peer: RecordingPeer, graph: Graph, **body: Any) -> None:
-    graph.receive(peer, json.dumps(body), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(body), 0.0)
 
 
 def served(graph: Graph) -> tuple[RecordingPeer, RecordingPeer]:
@@ -90,7 +90,7 @@ def test_failures_are_answered_with_status(graph: Graph) -> None:
     assert (missing["status"], missing["result"], missing["id"]) == (0, False, 1)
     assert "does not exist" in missing["values"] and "order" in bad["values"]
     op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=3)
-    graph.remove_peer(server)
+    rosbridge_of(graph).remove_peer(server)
     (gone,) = caller.take()
     assert (gone["status"], gone["result"]) == (6, False) and "unadvertised" in gone["values"]
 
@@ -121,7 +121,7 @@ def test_caller_leaving_cancels_its_goals(graph: Graph) -> None:
     server, caller = served(graph)
     op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=1)
     (goal,) = server.take()
-    graph.remove_peer(caller)
+    rosbridge_of(graph).remove_peer(caller)
     (cancel,) = server.take()
     assert cancel == {"op": "cancel_action_goal", "id": goal["id"], "action": "fib"}
     assert graph.actions.goals == {}
@@ -190,18 +190,18 @@ def test_goals_are_counted_per_client_and_their_arguments_are_not_kept() -> None
     server, caller = served(graph)
     for k in range(3):
         goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": f"g{k}"}
-        graph.receive(caller, json.dumps(goal), 0.0)
+        rosbridge_of(graph).receive(caller, json.dumps(goal), 0.0)
     (refused,) = caller.take()
     assert refused["id"] == "g2" and refused["result"] is False
     assert "max_pending_goals" in refused["values"]
-    assert caller.session.pending_goals == 2 == graph.pool.used["pending_goals"]
+    assert caller.session.pending_goals == 2 == rosbridge_of(graph).pool.used["pending_goals"]
     assert all(g.args is None for g in graph.actions.goals.values())  # sent on, not kept
     first = server.take()[0]
     result = {"op": "action_result", "action": "fib", "id": first["id"], "values": {}}
-    graph.receive(server, json.dumps(result | {"status": 4, "result": True}), 0.0)
+    rosbridge_of(graph).receive(server, json.dumps(result | {"status": 4, "result": True}), 0.0)
     assert caller.session.pending_goals == 1
-    graph.remove_peer(caller)
-    assert graph.pool.used["pending_goals"] == 0 and not graph.actions.goals
+    rosbridge_of(graph).remove_peer(caller)
+    assert rosbridge_of(graph).pool.used["pending_goals"] == 0 and not graph.actions.goals
 
 
 def test_a_goal_without_result_times_out_and_is_cancelled() -> None:
@@ -209,7 +209,7 @@ def test_a_goal_without_result_times_out_and_is_cancelled() -> None:
     graph = Graph(settings=ServerSettings(max_goal_timeout=30.0))
     server, caller = served(graph)
     goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": "g"}
-    graph.receive(caller, json.dumps(goal), 10.0)
+    rosbridge_of(graph).receive(caller, json.dumps(goal), 10.0)
     (sent,) = server.take()
     graph.tick(39.0)
     assert not caller.take()

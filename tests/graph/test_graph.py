@@ -3,7 +3,7 @@ from __future__ import annotations
 import pytest
 
 from simbridge.graph import Graph
-from tests.helpers import RecordingPeer, clocked_graph, op
+from tests.helpers import RecordingPeer, clocked_graph, op, rosbridge_of
 
 
 @pytest.fixture
@@ -14,7 +14,7 @@ def graph() -> Graph:
 def test_bad_frames_and_ops_get_status_errors_and_nothing_else(graph: Graph) -> None:
     """Invalid JSON, unknown ops and wrong fields are answered with status errors."""
     a = RecordingPeer(graph)
-    graph.receive(a, "{not json", 0.0)
+    rosbridge_of(graph).receive(a, "{not json", 0.0)
     op(a, graph, op="teleport_me")
     op(a, graph, op="subscribe", topic=5)
     statuses = a.take()

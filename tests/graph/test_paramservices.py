@@ -10,7 +10,7 @@ from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
 from simbridge.rosbridge.rosapi import install_rosapi
 from simbridge.sim import World
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 @pytest.fixture
@@ -24,7 +24,7 @@ def graph() -> Graph:
 def call(graph: Graph, service: str, args: Any) -> dict[str, Any]:
     peer = RecordingPeer(graph)
     body = {"op": "call_service", "service": service, "id": 1, "args": args}
-    graph.receive(peer, json.dumps(body), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(body), 0.0)
     (reply,) = peer.take()
     assert reply["result"] is True, reply
     return dict(reply["values"])
@@ -92,7 +92,7 @@ def test_a_request_of_too_many_names_is_refused_before_its_answer_is_built(
     ):
         peer = RecordingPeer(graph)
         body = {"op": "call_service", "service": f"/virtual_robot/{service}", "args": args}
-        graph.receive(peer, json.dumps(body), 0.0)
+        rosbridge_of(graph).receive(peer, json.dumps(body), 0.0)
         (reply,) = peer.take()
         assert reply["result"] is False, service
         assert f"{limit + 1} " in reply["values"] and "max_parameter_names" in reply["values"]

@@ -8,7 +8,7 @@ import pytest
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph import Graph
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 @pytest.fixture
@@ -17,7 +17,7 @@ def graph() -> Graph:
 
 
 def op(peer: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> None:
-    graph.receive(peer, json.dumps(fields), now)
+    rosbridge_of(graph).receive(peer, json.dumps(fields), now)
 
 
 def test_in_process_service_answers_with_values_and_the_request_id(graph: Graph) -> None:
@@ -151,10 +151,10 @@ def test_timeout_0_waits_the_maximum_not_forever_and_calls_are_budgeted() -> Non
     assert caller.take() == [] and caller.session.pending_calls == 2
     graph.tick(12.1)
     assert [m["id"] for m in caller.take()] == [0, 1]
-    assert caller.session.pending_calls == 0 == graph.pool.used["pending_calls"]
+    assert caller.session.pending_calls == 0 == rosbridge_of(graph).pool.used["pending_calls"]
     op(caller, graph, 13.0, op="call_service", service="/slow", id="late")
-    graph.remove_peer(caller)
-    assert not graph.services.pending and graph.pool.used["pending_calls"] == 0
+    rosbridge_of(graph).remove_peer(caller)
+    assert not graph.services.pending and rosbridge_of(graph).pool.used["pending_calls"] == 0
 
 
 def test_provider_disconnect_fails_pending_calls(graph: Graph) -> None:
@@ -162,7 +162,7 @@ def test_provider_disconnect_fails_pending_calls(graph: Graph) -> None:
     provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
     op(provider, graph, op="advertise_service", service="/s", type="std_srvs/Trigger")
     op(caller, graph, op="call_service", service="/s", id="x")
-    graph.remove_peer(provider)
+    rosbridge_of(graph).remove_peer(provider)
     (answer,) = caller.take()
     assert answer["result"] is False and "unadvertised" in answer["values"]
     op(caller, graph, op="call_service", service="/s", id="y")

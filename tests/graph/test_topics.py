@@ -5,7 +5,7 @@ from __future__ import annotations
 import pytest
 
 from simbridge.graph import Graph
-from tests.helpers import RecordingPeer, clocked_graph, op
+from tests.helpers import RecordingPeer, clocked_graph, op, rosbridge_of
 
 
 @pytest.fixture
@@ -122,5 +122,5 @@ def test_disconnect_removes_subscriptions_advertisements_and_topics(graph: Graph
     a = RecordingPeer(graph)
     op(a, graph, op="advertise", topic="/mine", type="std_msgs/String")
     op(a, graph, op="subscribe", topic="/mine")
-    graph.remove_peer(a)
+    rosbridge_of(graph).remove_peer(a)
     assert "/mine" not in graph.topics.topics

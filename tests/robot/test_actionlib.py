@@ -14,7 +14,7 @@ from simbridge.robot.actionlib import (
     ActionlibServer,
 )
 from simbridge.robot.tfrepublisher import install_tf_republisher
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 GOAL_TYPE = "actionlib_tutorials/FibonacciActionGoal"
@@ -45,7 +45,7 @@ class Echo:
 
 
 def op(peer: RecordingPeer, graph: Graph, **fields: Any) -> None:
-    graph.receive(peer, json.dumps(fields), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(fields), 0.0)
 
 
 def send_goal(peer: RecordingPeer, graph: Graph, goal_id: str, **stamp: int) -> None:
@@ -134,7 +134,7 @@ def test_a_leaving_client_s_goals_are_cancelled_and_forgotten() -> None:
     node = Echo(graph)
     c = RecordingPeer(graph)
     send_goal(c, graph, "g")
-    graph.remove_peer(c)
+    rosbridge_of(graph).remove_peer(c)
     assert [g.goal_id["id"] for g in node.cancelled] == ["g"] and node.server.goals == []
 
 

@@ -12,7 +12,7 @@ from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
 from simbridge.rosbridge.rosapi import install_rosapi
 from simbridge.sim import World
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 @pytest.fixture
@@ -23,11 +23,13 @@ def setup() -> tuple[Graph, World, RobotBridge]:
 
 
 def sub(peer: RecordingPeer, graph: Graph, topic: str) -> None:
-    graph.receive(peer, json.dumps({"op": "subscribe", "topic": topic}), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps({"op": "subscribe", "topic": topic}), 0.0)
 
 
 def pub(peer: RecordingPeer, graph: Graph, topic: str, msg: Any) -> None:
-    graph.receive(peer, json.dumps({"op": "publish", "topic": topic, "msg": msg}), 0.0)
+    rosbridge_of(graph).receive(
+        peer, json.dumps({"op": "publish", "topic": topic, "msg": msg}), 0.0
+    )
 
 
 def test_odom_carries_pose_quaternion_and_applied_twist(setup: Any) -> None:
@@ -146,7 +148,7 @@ def _steps(
 
 def _call(peer: RecordingPeer, graph: Graph, service: str, args: Any) -> Any:
     op = {"op": "call_service", "service": service, "args": args, "id": "c"}
-    graph.receive(peer, json.dumps(op), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(op), 0.0)
     (reply,) = [m for m in peer.take() if m["op"] == "service_response"]
     return reply
 
@@ -248,7 +250,7 @@ def test_ground_truth_is_odom_by_default_and_odom_drifts_from_it_under_a_profile
 def _service(graph: Graph, service: str, args: Any) -> dict[str, Any]:
     peer = RecordingPeer(graph)
     body = {"op": "call_service", "service": service, "id": 1, "args": args}
-    graph.receive(peer, json.dumps(body), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(body), 0.0)
     (reply,) = peer.take()
     assert reply["result"] is True, reply
     return dict(reply["values"])

@@ -12,7 +12,7 @@ from simbridge.robot.bridge import ROBOT_NODE, RobotBridge
 from simbridge.robot.cmdvel import TWIST, TWIST_STAMPED, command_type, convert_twist, twist_of
 from simbridge.robot.safety import Safety
 from simbridge.sim import World
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 def make(stamped: bool, **safety: Any) -> tuple[Graph, World, Safety]:
@@ -24,7 +24,7 @@ def make(stamped: bool, **safety: Any) -> tuple[Graph, World, Safety]:
 
 
 def send(peer: RecordingPeer, graph: Graph, op: dict[str, Any], now: float = 0.0) -> None:
-    graph.receive(peer, json.dumps(op), now)
+    rosbridge_of(graph).receive(peer, json.dumps(op), now)
 
 
 STAMPED = {

@@ -6,14 +6,14 @@ from typing import Any
 import pytest
 
 from simbridge.app.config import Params, load_world
+from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph
-from simbridge.graph.guard import Guard
 from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.estop import EStop
 from simbridge.robot.fleet import install_fleet
 from simbridge.sim import World
-from tests.helpers import ROOT, RecordingPeer
+from tests.helpers import ROOT, RecordingPeer, rosbridge_of
 
 
 @pytest.fixture
@@ -25,13 +25,17 @@ def setup() -> tuple[Graph, World, EStop]:
 
 
 def call(peer: RecordingPeer, graph: Graph, service: str) -> Any:
-    graph.receive(peer, json.dumps({"op": "call_service", "service": service, "id": "c"}), 0.0)
+    rosbridge_of(graph).receive(
+        peer, json.dumps({"op": "call_service", "service": service, "id": "c"}), 0.0
+    )
     return next(m for m in peer.take() if m.get("op") == "service_response")
 
 
 def pub(peer: RecordingPeer, graph: Graph, v: float, w: float) -> None:
     msg = {"linear": {"x": v}, "angular": {"z": w}}
-    graph.receive(peer, json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": msg}), 0.0)
+    rosbridge_of(graph).receive(
+        peer, json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": msg}), 0.0
+    )
 
 
 def test_estop_halts_at_once_and_ignores_cmd_vel_until_reset(setup: Any) -> None:
@@ -66,7 +70,7 @@ def test_estop_state_is_latched_for_late_subscribers(setup: Any) -> None:
     caller = RecordingPeer(graph)
     call(caller, graph, "/estop")
     late = RecordingPeer(graph)
-    graph.receive(late, json.dumps({"op": "subscribe", "topic": "/estop/state"}), 0.0)
+    rosbridge_of(graph).receive(late, json.dumps({"op": "subscribe", "topic": "/estop/state"}), 0.0)
     assert [m["msg"] for m in late.take()] == [{"data": True}]
     call(caller, graph, "/estop/reset")
     assert [m["msg"] for m in late.take()] == [{"data": False}]
@@ -76,7 +80,7 @@ def test_estop_refuses_request_fields(setup: Any) -> None:
     graph, world, _ = setup
     peer = RecordingPeer(graph)
     frame = {"op": "call_service", "service": "/estop", "args": {"bogus": 1}, "id": "x"}
-    graph.receive(peer, json.dumps(frame), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(frame), 0.0)
     reply = next(m for m in peer.take() if m.get("op") == "service_response")
     assert reply["result"] is False and "bogus" in reply["values"]
     assert not world.estopped
@@ -99,6 +103,7 @@ def classroom() -> tuple[Graph, World, EStop, Guard]:
     install_fleet(bridge)
     settings = ServerSettings(client_tokens=TOKENS, admin_token=ADMIN)
     guard = Guard(graph, settings, robots=lambda: world.robots.keys())
+    rosbridge_of(graph, guard)
     return graph, world, estop, guard
 
 
@@ -111,12 +116,12 @@ def student(graph: Graph, guard: Guard, token: str) -> RecordingPeer:
 def drive(graph: Graph, peer: RecordingPeer, robot: str, v: float) -> None:
     msg = {"linear": {"x": v}, "angular": {"z": 0.0}}
     frame = {"op": "publish", "topic": f"/{robot}/cmd_vel", "msg": msg}
-    graph.receive(peer, json.dumps(frame), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(frame), 0.0)
 
 
 def state_of(graph: Graph, guard: Guard, topic: str) -> bool:
     watcher = student(graph, guard, ADMIN)
-    graph.receive(watcher, json.dumps({"op": "subscribe", "topic": topic}), 0.0)
+    rosbridge_of(graph).receive(watcher, json.dumps({"op": "subscribe", "topic": topic}), 0.0)
     return bool(watcher.take()[-1]["msg"]["data"])
 
 
@@ -165,7 +170,7 @@ def test_the_instructors_estop_is_global_and_only_they_release_it(classroom: Any
     # a robot spawned under the global stop is held too
     call_args = {"x": 0.0, "y": 1.2, "theta": 0.0, "name": "late"}
     frame = {"op": "call_service", "service": "/spawn", "args": call_args, "id": "s"}
-    graph.receive(teacher, json.dumps(frame), 0.0)
+    rosbridge_of(graph).receive(teacher, json.dumps(frame), 0.0)
     assert world.halted("late")
     (latch,) = estop.latches.values()
     estop.release_latch(latch.id)  # /admin releases it
@@ -185,7 +190,9 @@ def test_a_robot_estop_covers_that_robot_and_a_reconnected_page_may_release_it(
     other_tab = student(graph, guard, "token-for-r1-aaaa")
     reply = call(other_tab, graph, "/r1/estop/reset")
     assert world.halted("r1"), "another live connection of the same token may not release it"
-    graph.remove_peer(alice)  # the page lost its link; it comes back with the same token
+    rosbridge_of(graph).remove_peer(
+        alice
+    )  # the page lost its link; it comes back with the same token
     again = student(graph, guard, "token-for-r1-aaaa")
     reply = call(again, graph, "/r1/estop/reset")
     assert reply["values"]["success"] is True and not world.halted("r1")
@@ -203,7 +210,7 @@ def test_latches_are_counted_a_repeated_stop_keeps_one_latch(classroom: Any) -> 
         reply = call(alice, graph, "/r1/estop")
         assert reply["result"] is True and "latched for r1" in reply["values"]["message"]
     assert len(estop.latches) == 1
-    graph.remove_peer(alice)
+    rosbridge_of(graph).remove_peer(alice)
     again = student(graph, guard, "token-for-r1-aaaa")
     call(again, graph, "/estop")  # her robot again: the gone page's latch becomes hers
     (latch,) = estop.latches.values()

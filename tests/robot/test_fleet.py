@@ -10,7 +10,7 @@ from simbridge.app.config import Params, WorldSpec
 from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
 from simbridge.sim import World
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 BOX = {"walls": [[-5, -5, 5, -5], [5, -5, 5, 5], [5, 5, -5, 5], [-5, 5, -5, -5]]}
@@ -27,7 +27,7 @@ def setup() -> tuple[Graph, World, RobotBridge]:
 
 
 def call(peer: RecordingPeer, graph: Graph, service: str, args: Any) -> Any:
-    graph.receive(
+    rosbridge_of(graph).receive(
         peer, json.dumps({"op": "call_service", "service": service, "args": args, "id": "c"}), 0.0
     )
     (reply,) = [m for m in peer.take() if m["op"] == "service_response"]
@@ -35,7 +35,7 @@ def call(peer: RecordingPeer, graph: Graph, service: str, args: Any) -> Any:
 
 
 def sub(peer: RecordingPeer, graph: Graph, topic: str) -> None:
-    graph.receive(peer, json.dumps({"op": "subscribe", "topic": topic}), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps({"op": "subscribe", "topic": topic}), 0.0)
 
 
 def test_each_named_robot_has_namespaced_topics_and_frames_on_shared_tf(setup: Any) -> None:
@@ -65,7 +65,7 @@ def test_cmd_vel_of_one_robot_moves_only_that_robot(setup: Any) -> None:
     graph, world, _ = setup
     peer = RecordingPeer(graph)
     msg = {"op": "publish", "topic": "/r2/cmd_vel", "msg": {"linear": {"x": 0.3}}}
-    graph.receive(peer, json.dumps(msg), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(msg), 0.0)
     assert (world.robots["r1"].cmd_v, world.robots["r2"].cmd_v) == (0.0, 0.3)
 
 

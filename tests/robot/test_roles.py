@@ -4,14 +4,14 @@ import json
 from typing import Any
 
 from simbridge.app.config import Params, load_world
+from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph
-from simbridge.graph.guard import Guard
 from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.estop import EStop
 from simbridge.robot.roles import Roles
 from simbridge.sim import World
-from tests.helpers import ROOT, RecordingPeer
+from tests.helpers import ROOT, RecordingPeer, rosbridge_of
 
 
 TOKENS = {"token-for-r3-cccc": "r3"}
@@ -22,14 +22,16 @@ def setup(**settings: Any) -> tuple[Graph, Guard, World]:
     world = World(load_world(ROOT / "config" / "worlds" / "classroom.yaml"), Params())
     RobotBridge(graph, world)
     Roles(graph, world, EStop(graph, world))
-    return graph, Guard(graph, ServerSettings(**settings), robots=world.robots.keys), world
+    guard = Guard(graph, ServerSettings(**settings), robots=world.robots.keys)
+    rosbridge_of(graph, guard)
+    return graph, guard, world
 
 
 def access(graph: Graph, guard: Guard, token: str | None) -> Any:
     peer = RecordingPeer(graph, token=token)
     guard.connect(peer)
     frame = {"op": "call_service", "service": "/simbridge/access", "id": "a"}
-    graph.receive(peer, json.dumps(frame), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(frame), 0.0)
     return next(m for m in peer.take() if m.get("op") == "service_response")
 
 

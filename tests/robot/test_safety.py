@@ -8,7 +8,7 @@ from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.safety import Safety
 from simbridge.sim import World
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 def make(**safety: Any) -> tuple[Graph, World, Safety]:
@@ -20,7 +20,9 @@ def make(**safety: Any) -> tuple[Graph, World, Safety]:
 
 def drive(graph: Graph, peer: RecordingPeer, x: Any, now: float) -> None:
     msg = {"linear": {"x": x}, "angular": {"z": 0.0}}
-    graph.receive(peer, json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": msg}), now)
+    rosbridge_of(graph).receive(
+        peer, json.dumps({"op": "publish", "topic": "/cmd_vel", "msg": msg}), now
+    )
 
 
 def test_watchdog_is_off_by_default_the_robot_keeps_its_last_command() -> None:
@@ -53,7 +55,7 @@ def test_refused_non_finite_commands_do_not_feed_the_watchdog() -> None:
     drive(graph, peer, 0.3, 0.0)
     safety.tick(0.0)
     for k in range(1, 10):
-        graph.receive(
+        rosbridge_of(graph).receive(
             peer,
             '{"op":"publish","topic":"/cmd_vel","msg":{"linear":{"x":NaN}}}',
             k * 0.1,
@@ -66,9 +68,9 @@ def test_stop_on_disconnect_stops_only_the_robot_of_the_client_that_left() -> No
     graph, world, safety = make(stop_on_disconnect=True)
     driver, other = RecordingPeer(graph), RecordingPeer(graph)
     drive(graph, driver, 0.2, 0.0)
-    graph.remove_peer(other)
+    rosbridge_of(graph).remove_peer(other)
     assert world.robots[""].cmd_v == 0.2
-    graph.remove_peer(driver)
+    rosbridge_of(graph).remove_peer(driver)
     assert world.robots[""].cmd_v == 0.0 and safety.stops == 1
 
 
@@ -76,7 +78,7 @@ def test_disconnect_leaves_the_robot_moving_when_the_option_is_off() -> None:
     graph, world, _ = make()
     driver = RecordingPeer(graph)
     drive(graph, driver, 0.2, 0.0)
-    graph.remove_peer(driver)
+    rosbridge_of(graph).remove_peer(driver)
     assert world.robots[""].cmd_v == 0.2
 
 
@@ -85,18 +87,18 @@ def test_a_lost_commander_stops_its_robot_by_default_a_closed_one_does_not() -> 
     graph, world, safety = make()
     driver, other = RecordingPeer(graph), RecordingPeer(graph)
     drive(graph, driver, 0.2, 0.0)
-    graph.remove_peer(other, lost=True)  # not the one whose command the robot follows
+    rosbridge_of(graph).remove_peer(other, lost=True)  # not the one whose command the robot follows
     assert world.robots[""].cmd_v == 0.2
-    graph.remove_peer(driver, lost=True)
+    rosbridge_of(graph).remove_peer(driver, lost=True)
     assert world.robots[""].cmd_v == 0.0 and safety.stops == 1
     driver = RecordingPeer(graph)
     drive(graph, driver, 0.2, 1.0)
-    graph.remove_peer(driver)
+    rosbridge_of(graph).remove_peer(driver)
     assert world.robots[""].cmd_v == 0.2 and safety.stops == 1
     graph, world, safety = make(stop_on_lost_link=False)
     driver = RecordingPeer(graph)
     drive(graph, driver, 0.2, 0.0)
-    graph.remove_peer(driver, lost=True)
+    rosbridge_of(graph).remove_peer(driver, lost=True)
     assert world.robots[""].cmd_v == 0.2
 
 

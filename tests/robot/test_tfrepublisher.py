@@ -9,7 +9,7 @@ import pytest
 from simbridge.errors import ProtocolError
 from simbridge.graph import Graph
 from simbridge.robot.tfrepublisher import TfBuffer, TfRepublisher
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 def tf(parent: str, child: str, x: float, yaw: float) -> dict[str, Any]:
@@ -37,7 +37,7 @@ def test_buffer_composes_through_the_common_ancestor() -> None:
 
 
 def call(graph: Graph, peer: RecordingPeer, **body: Any) -> None:
-    graph.receive(peer, json.dumps(body), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(body), 0.0)
 
 
 def test_republish_service_feeds_a_topic_and_drops_it_after_the_timeout() -> None:
@@ -174,7 +174,7 @@ def test_a_goal_that_would_fail_or_cost_too_much_is_refused(args: Any, error: st
     if isinstance(op, ProtocolError):  # a lone surrogate: the session refuses the whole frame
         assert error in str(op)
         return
-    graph.dispatch(client, op, 0.0)
+    rosbridge_of(graph).dispatch(client, op, 0.0)
     (result,) = client.take()
     assert (result["op"], result["result"]) == ("action_result", False)
     assert error in result["values"]
@@ -198,5 +198,5 @@ def test_requests_are_counted_per_client_and_go_with_it() -> None:
     assert len(refused) == 1 and "tf_requests_per_client" in refused[0]["values"]
     call(graph, two, **goal_op("mine"))
     assert two.take() == [] and len(repub.requests) == 11
-    graph.remove_peer(one)
+    rosbridge_of(graph).remove_peer(one)
     assert [r.owner for r in repub.requests] == [two]

@@ -9,7 +9,7 @@ import pytest
 from simbridge.errors import ServiceError
 from simbridge.graph import Graph
 from simbridge.robot.tutorials import MAX_GOALS, TutorialNodes, install_tutorials
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 @pytest.fixture
@@ -23,7 +23,7 @@ def nodes(graph: Graph) -> TutorialNodes:
 
 
 def op(peer: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> None:
-    graph.receive(peer, json.dumps(fields), now)
+    rosbridge_of(graph).receive(peer, json.dumps(fields), now)
 
 
 def run(nodes: TutorialNodes, start: float, end: float, dt: float = 0.05) -> None:
@@ -155,7 +155,7 @@ def test_fibonacci_refuses_an_order_that_overflows_and_too_many_goals(
         )
     (refused,) = c.take()
     assert refused["id"] == str(MAX_GOALS) and "at most" in refused["values"]
-    graph.remove_peer(c)
+    rosbridge_of(graph).remove_peer(c)
     assert nodes.runs == []
 
 

@@ -6,7 +6,7 @@ from simbridge.app.config import Params, WorldSpec
 from simbridge.graph import Graph
 from simbridge.robot.walls import LINE_LIST, WallsPublisher
 from simbridge.sim import World
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 def test_walls_are_a_latched_line_list_of_every_segment() -> None:
@@ -15,7 +15,7 @@ def test_walls_are_a_latched_line_list_of_every_segment() -> None:
     world = World(spec, Params())
     WallsPublisher(graph, world).publish(0.0)
     peer = RecordingPeer(graph)
-    graph.receive(peer, json.dumps({"op": "subscribe", "topic": "/walls"}), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps({"op": "subscribe", "topic": "/walls"}), 0.0)
     (msg,) = peer.take()
     marker = msg["msg"]
     assert marker["type"] == LINE_LIST and marker["header"]["frame_id"] == "odom"

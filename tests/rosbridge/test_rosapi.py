@@ -11,7 +11,7 @@ from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.tutorials import install_tutorials
 from simbridge.rosbridge.rosapi import install_rosapi
 from simbridge.sim import World
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 @pytest.fixture
@@ -27,7 +27,7 @@ def call(graph: Graph, service: str, args: Any = None) -> dict[str, Any]:
     body: dict[str, Any] = {"op": "call_service", "service": service, "id": 1}
     if args is not None:
         body["args"] = args
-    graph.receive(peer, json.dumps(body), 0.0)
+    rosbridge_of(graph).receive(peer, json.dumps(body), 0.0)
     (reply,) = peer.take()
     return reply
 
@@ -119,7 +119,9 @@ def test_every_known_topic_type_has_its_text_and_an_unknown_one_an_empty_definit
     """
     install_tutorials(graph)
     client = RecordingPeer(graph)
-    graph.receive(client, json.dumps({"op": "advertise", "topic": "/x", "type": "my_pkg/X"}), 0.0)
+    rosbridge_of(graph).receive(
+        client, json.dumps({"op": "advertise", "topic": "/x", "type": "my_pkg/X"}), 0.0
+    )
     values = call(graph, "/rosapi/topics_and_raw_types", {})["values"]
     rows = list(zip(values["topics"], values["types"], values["typedefs_full_text"], strict=True))
     assert {"/chatter", "/fibonacci/goal", "/x"} <= {name for name, _t, _x in rows}

@@ -40,9 +40,9 @@ from typing import Any
 
 import orjson
 
+from simbridge.app.guard import ros2_access
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
-from simbridge.graph.guard import ros2_access
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.ros2.dds.options import DdsOptions
@@ -66,6 +66,7 @@ from simbridge.ros2.names import dds_type, ros_type
 from simbridge.ros2.typehash import TypeHasher
 from simbridge.rosbridge import Frame, Outgoing, Session
 from simbridge.rosbridge.encoding import encode_json
+from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.ops import CallService
 
 
@@ -189,6 +190,11 @@ class _Caller:
         self.link = link
         self.session = session
 
+    @property
+    def access(self) -> Access:
+        """Who the peer is for the graph's rules (its session's access)."""
+        return self.session.access
+
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         self.link._service_answer(orjson.loads(frame.data))
 
@@ -196,7 +202,14 @@ class _Caller:
 class DdsLink:
     """The graph's front end on DDS (see the module's docstring)."""
 
-    def __init__(self, graph: Graph, options: DdsOptions, *, simulator: bool = False) -> None:
+    def __init__(
+        self,
+        graph: Graph,
+        options: DdsOptions,
+        *,
+        simulator: bool = False,
+        rosbridge: Rosbridge | None = None,
+    ) -> None:
         #: The graph mapped onto DDS.
         self.graph = graph
         #: Domain, distribution, discovery range.
@@ -234,11 +247,15 @@ class DdsLink:
         self._markers: dict[str, dict[DdsNode, Callable[[Any, Any], None]]] = {}
         self._marker_ids: set[int] = set()
         self._remote_nodes: set[str] = set()
-        session = graph.new_session()
-        # whatever comes from DDS passes admission as one client of the ROS 2 peers' role
+        #: Where DDS calls are carried out as rosbridge ops, for now (the graph's service table
+        #: takes calls of its own next).
+        self.rosbridge = rosbridge or Rosbridge(graph)
+        # whatever comes from DDS is admitted as one peer of the ROS 2 peers' role
+        session = self.rosbridge.new_session()
         scope, admin = ros2_access(graph.settings)
         session.connect(scope, admin)
         self._session = session
+        self._access = session.access
         self._caller = _Caller(self, session)
         self._servers: dict[str, _Server] = {}
         #: Calls from DDS waiting for the graph's answer: op id -> (server, type, header).
@@ -950,7 +967,7 @@ class DdsLink:
         # a client's call as a rosbridge client's: admission (the ROS 2 peers' role), the
         # caller's pending-call budget, the service table
         loop = self._loop
-        self.graph.dispatch(self._caller, op, loop.time() if loop is not None else 0.0)
+        self.rosbridge.dispatch(self._caller, op, loop.time() if loop is not None else 0.0)
 
     def _service_answer(self, body: dict[str, Any]) -> None:
         """The graph answered a call from DDS: write the reply with the request's header."""
@@ -986,7 +1003,7 @@ class DdsLink:
             pass
         if len(self._refusals) >= 100_000:
             self._refusals.clear()
-        text = self.graph.admission.publish_refusal(self._session, name)
+        text = self.graph.access.publish_refusal(self._access, name)
         self._refusals[name] = text
         return text
 

@@ -40,6 +40,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import orjson
 
 from simbridge.errors import ConversionError, ProtocolError, SimbridgeError, TypeNotFoundError
+from simbridge.graph.access import Access
 from simbridge.graph.actions import ABORTED, CANCELED, SUCCEEDED, UNKNOWN, Action, Goal
 from simbridge.ros2.names import DEFAULT_QOS, LATCHED_QOS, Entity, Qos, dds_type
 from simbridge.ros2.zenoh.attachment import Attachment
@@ -71,6 +72,7 @@ class ZenohLink(Protocol):
     _loop: asyncio.AbstractEventLoop | None
     _declared: dict[tuple[str, str, str], Any]
     _caller: Any
+    rosbridge: Any
 
     def _decode(self, type_name: str, payload: bytes) -> Any: ...
     def _reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None: ...
@@ -158,6 +160,11 @@ class _ActionProvider:
         self.node = ""
         self.label = f"ROS 2 action {name} (Zenoh)"
         self.subscriber: Any = None
+
+    @property
+    def access(self) -> Access:
+        """Who the peer is for the graph's rules (its session's access)."""
+        return self.session.access
 
     def send(self, frame: Frame, key: object = None, limit: int = 0) -> None:
         self.bridge._provider_frame(self, orjson.loads(frame.data))
@@ -254,7 +261,7 @@ class ActionBridge:
 
         mine = [s for s in self._served.values() if s.action == name and not s.done]
         # the scope rule of a rosbridge client's send_action_goal, for the ROS 2 peers' role
-        refusal = self.graph.admission.reach_refusal(self.link._caller.session, name)
+        refusal = self.graph.access.reach_refusal(self.link._caller.access, name)
         if refusal is None and (name, goal_id) in self._by_uuid:
             refusal = f"goal id {goal_id.hex()} is in use"
         elif refusal is None and len(mine) >= MAX_GOALS:
@@ -269,7 +276,7 @@ class ActionBridge:
         self._by_uuid[(name, goal_id)] = served
         args = orjson.loads(_json(request["goal"]))
         try:
-            admitted = self.graph.admission.goal(name, args)  # the goal validated
+            admitted = self.link.rosbridge.admission.goal(name, args)  # the goal validated
         except ProtocolError as err:
             self._forget(op_id)
             self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {err}")
@@ -474,7 +481,7 @@ class ActionBridge:
                     f"bridged: {existing.node} here serves it already",
                 )
                 continue
-            provider = _ActionProvider(self, self.graph.new_session(), name, type_name)
+            provider = _ActionProvider(self, self.link.rosbridge.new_session(), name, type_name)
             provider.parts = parts
             provider.node = entity.node_fqn
             actions.add_provider(name, type_name, entity.node_fqn, provider)

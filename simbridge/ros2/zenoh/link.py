@@ -40,9 +40,10 @@ from typing import Any
 
 import orjson
 
+from simbridge.app.guard import ros2_access
 from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
-from simbridge.graph.guard import ros2_access
+from simbridge.graph.access import Access
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
@@ -65,6 +66,7 @@ from simbridge.ros2.zenoh.actions import ActionBridge, split_action
 from simbridge.ros2.zenoh.attachment import Attachment, pack_attachment
 from simbridge.ros2.zenoh.config import ZenohOptions, session_config
 from simbridge.rosbridge import Frame, Outgoing, Session
+from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.ops import CallService, ServiceResponse
 
 
@@ -200,6 +202,11 @@ class _Caller:
         self.link = link
         self.session = session
 
+    @property
+    def access(self) -> Access:
+        """Who the peer is for the graph's rules (its session's access)."""
+        return self.session.access
+
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         body = orjson.loads(frame.data)
         if body.get("op") in ("action_feedback", "action_result"):
@@ -217,6 +224,11 @@ class _Provider:
         self.entity = entity
         self.label = f"ROS 2 service {entity.name} of {entity.node_fqn} (Zenoh)"
 
+    @property
+    def access(self) -> Access:
+        """Who the peer is for the graph's rules (its session's access)."""
+        return self.session.access
+
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
         self.link._remote_call(self, frame)
 
@@ -224,9 +236,19 @@ class _Provider:
 class ZenohLink:
     """One Zenoh session joining simbridge's graph to the ROS 2 graph (see the module doc)."""
 
-    def __init__(self, graph: Graph, options: ZenohOptions, *, simulator: bool = False) -> None:
+    def __init__(
+        self,
+        graph: Graph,
+        options: ZenohOptions,
+        *,
+        simulator: bool = False,
+        rosbridge: Rosbridge | None = None,
+    ) -> None:
         #: The graph mapped onto ROS 2.
         self.graph = graph
+        #: Where ROS 2 calls are carried out as rosbridge ops, for now (the graph's service
+        #: table takes calls of its own next).
+        self.rosbridge = rosbridge or Rosbridge(graph)
         #: Whether this process simulates robots (not ``--no-sim``): it takes a turn in the
         #: step period with the other simulators (:attr:`tick_share`).
         self.simulator = simulator
@@ -300,7 +322,7 @@ class ZenohLink:
         self._queries: dict[str, tuple[Any, str, Attachment]] = {}
         #: Calls to ROS 2 waiting for a reply: server id -> (provider, response type).
         self._calls: dict[str, tuple[_Provider, str]] = {}
-        caller_session = graph.new_session()
+        caller_session = self.rosbridge.new_session()
         # whatever comes from ROS 2 (samples, calls, goals, remote publishers and services)
         # passes admission as one client of the role the instructor chose (--ros2-role; in
         # class mode by default a student without a robot: it reads, it drives nothing)
@@ -807,7 +829,7 @@ class ZenohLink:
         op = CallService(service=name, args=args, id=op_id, timeout=SERVICE_TIMEOUT)
         # the straight line of a client's call: admission (the request validated), the
         # caller's session (pending-call budget), the service table
-        self.graph.dispatch(self._caller, op, asyncio.get_running_loop().time())
+        self.rosbridge.dispatch(self._caller, op, asyncio.get_running_loop().time())
 
     def _service_answer(self, body: dict[str, Any]) -> None:
         """The graph answered a call from ROS 2: reply to the query."""
@@ -1097,7 +1119,7 @@ class ZenohLink:
             )
             self.stats["unknown_types"] += 1
             return
-        provider = _Provider(self, self.graph.new_session(), entity)
+        provider = _Provider(self, self.rosbridge.new_session(), entity)
         service = self.graph.services.advertise(provider, name, entity.type)
         service.node = entity.node_fqn
         self._providers[name] = provider
@@ -1505,7 +1527,7 @@ class ZenohLink:
             service=provider.entity.name, id=server_id, values=values, result=ok, has_values=True
         )
         try:
-            response = self.graph.admission.response(provider, op)  # read and validated
+            response = self.rosbridge.admission.response(provider, op)  # read and validated
         except ProtocolError as err:
             logger.debug("Zenoh: %s", err)
             return
@@ -1625,7 +1647,7 @@ class ZenohLink:
             # names come from the graph's topics and the remote tokens (at most
             # zenoh_max_remote_tokens): a clear is rare, and the cache then fills again
             self._refusals.clear()
-        text = self.graph.admission.publish_refusal(self._caller.session, name)
+        text = self.graph.access.publish_refusal(self._caller.access, name)
         self._refusals[name] = text
         return text
 

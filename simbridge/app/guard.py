@@ -1,10 +1,11 @@
 """Who a client is: authentication, and the access each connection gets.
 
-A :class:`Guard` authenticates the clients of a :class:`~simbridge.graph.Graph` and gives each
-session its access: a scope (``"*"``, every topic, or a robot's name, its namespace only) and
-admin rights. It turns on the graph's access rules, which
-:class:`~simbridge.graph.admission.Admission` applies to every op with the type and payload
-checks (the one place that decides; see there): nothing but ``auth`` before a client has
+A :class:`Guard` authenticates the peers of a :class:`~simbridge.graph.Graph`, whatever their
+front end, and gives each its :class:`~simbridge.graph.access.Access`: a scope (``"*"``, every
+topic, or a robot's name, its namespace only) and admin rights. It turns on the graph's access
+rules (:class:`~simbridge.graph.access.AccessRules`), which every front end applies to its
+peers; rosbridge's :class:`~simbridge.rosbridge.admission.Admission` applies them to every op
+with the type and payload checks: nothing but ``auth`` before a client has
 authenticated (when ``client_tokens`` or ``auth_secret`` is set; see ``docs/security.md``),
 names within the client's scope, administrative services (:data:`DEFAULT_ADMIN_SERVICES`) for
 admin rights only, the per-client publish rate.
@@ -29,10 +30,10 @@ from collections.abc import Callable, Iterable
 
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ProtocolError
-from simbridge.graph.admission import NO_ROBOT
+from simbridge.graph.access import ANY_SCOPE, NO_ROBOT, Access
 from simbridge.graph.graph import Graph
 from simbridge.graph.topics import Peer
-from simbridge.rosbridge import ANY_SCOPE, TokenBucket, ops as o
+from simbridge.rosbridge import ops as o
 
 
 __all__ = [
@@ -41,7 +42,6 @@ __all__ = [
     "DEFAULT_ADMIN_SERVICES",
     "NO_ROBOT",
     "Guard",
-    "TokenBucket",
     "ros2_access",
     "rosauth_mac",
     "token_access",
@@ -130,20 +130,19 @@ class Guard:
         #: Names of the robots (their namespaces are off limits to other robots' clients).
         self.robots = robots
         self._wall_time = wall_time or (lambda: graph.wall_clock_ns() / 1e9)
-        admission = graph.admission
-        admission.guarded = True
-        admission.robots = robots
-        admission.admin_services.update(DEFAULT_ADMIN_SERVICES)
+        rules = graph.access
+        rules.guarded = True
+        rules.robots = robots
+        rules.admin_services.update(DEFAULT_ADMIN_SERVICES)
         graph.on_connect.append(self.connect)
-        graph.handlers[o.Auth] = self._auth
 
     # -- access ----------------------------------------------------------------------------
 
     def connect(self, peer: Peer) -> None:
-        """Give a new client its access from its connection token (``session.token``)."""
+        """Give a new peer its access from its connection token (``access.token``)."""
         s = self.settings
-        session = peer.session
-        granted = token_access(s, session.token)
+        access = peer.access
+        granted = token_access(s, access.token)
         if granted is not None:
             scope, admin = granted
         else:
@@ -151,12 +150,19 @@ class Guard:
         # without an admin token, administration is open to whoever may use every topic
         admin = admin or (s.admin_token is None and scope == ANY_SCOPE)
         # without a token where one is required, only auth is read until it succeeds
-        session.connect(scope, admin, authenticated=granted is not None or not s.auth_required)
+        access.guarded = True
+        access.scope, access.admin = scope, admin
+        access.authenticated = granted is not None or not s.auth_required
 
     # -- the auth op ---------------------------------------------------------------------
 
-    def _auth(self, peer: Peer, op: o.Auth, now: float) -> None:
-        session = peer.session
+    def auth(self, peer: Peer, op: o.Auth, now: float) -> tuple[str, str]:
+        """Check a rosbridge ``auth`` op; admit ``peer`` or not; return the status to send.
+
+        Raises:
+            ProtocolError: this server takes no rosauth MAC.
+        """
+        access = peer.access
         secret = self.settings.auth_secret
         if secret is None:
             msg = "auth: this server takes no rosauth MAC; connect with ?token=YOUR_TOKEN"
@@ -168,18 +174,17 @@ class Guard:
         if not (fresh and hmac.compare_digest(expected, op.mac.lower())):
             why = "expired or clock skew" if not fresh else "wrong MAC"
             logger.warning("%s failed authentication (%s)", peer.label, why)
-            self.graph.apply(peer, session.status("error", f"auth: authentication failed ({why})"))
-            close = getattr(peer, "close_soon", None)
-            if callable(close):
-                close(1008, "authentication failed")
-            return
+            return "error", f"auth: authentication failed ({why})"
         if op.level == ADMIN_SCOPE:
-            session.admit(ANY_SCOPE, True)
+            _admit(access, ANY_SCOPE, True)
         elif op.level and op.level in set(self.robots()):
-            session.admit(op.level, False)
+            _admit(access, op.level, False)
         else:  # "user" and other rosauth levels: every topic, admin only without admin token
-            session.admit(ANY_SCOPE, self.settings.admin_token is None)
-        logger.info("%s authenticated (scope %s)", peer.label, session.scope)
-        self.graph.apply(
-            peer, session.status("info", f"auth: authenticated, scope {session.scope}")
-        )
+            _admit(access, ANY_SCOPE, self.settings.admin_token is None)
+        logger.info("%s authenticated (scope %s)", peer.label, access.scope)
+        return "info", f"auth: authenticated, scope {access.scope}"
+
+
+def _admit(access: Access, scope: str, admin: bool) -> None:
+    access.authenticated = True
+    access.scope, access.admin = scope, admin

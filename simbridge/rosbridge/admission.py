@@ -27,7 +27,7 @@ handler on the graph, which then only carries it out. The checks, in this order:
    the response type become a failed answer to the caller) and of an ``action_feedback`` or
    ``action_result`` (refused), each for a call or goal that this client serves.
 
-Checks 1-4 are access rules. They apply once a :class:`~simbridge.graph.guard.Guard` is
+Checks 1-4 are access rules. They apply once a :class:`~simbridge.app.guard.Guard` is
 installed (it authenticates clients and gives each session its scope and rights, and sets
 :attr:`Admission.guarded`); a graph without one trusts every client. What a client may *hold*
 (subscriptions, advertisements, pending calls, latched bytes) is not decided here but by its
@@ -48,30 +48,24 @@ from __future__ import annotations
 
 import json
 import logging
-from collections.abc import Callable, Iterable
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
 from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
+from simbridge.graph.access import ANY_SCOPE, AccessRules, in_namespace
 from simbridge.graph.actions import Action, ActionTable, Goal
 from simbridge.graph.services import Finish, PendingCall, Prepare, Service, ServiceTable
 from simbridge.graph.topics import Peer, Topic, TopicTable
 from simbridge.msgs import normalize_type, positional_args
 from simbridge.msgs.registry import MAX_TYPE_LENGTH
-from simbridge.rosbridge import (
-    ANY_SCOPE,
-    NOT_AUTHENTICATED,
-    Op,
-    Refusal,
-    Session,
-    ops as o,
-)
+from simbridge.rosbridge import ops as o
+from simbridge.rosbridge.ops import Op, Refusal
+from simbridge.rosbridge.session import NOT_AUTHENTICATED, Session
 
 
 __all__ = [
-    "ADMIN_SUFFIXES",
     "MIN_FRAGMENT_SIZE",
-    "NO_ROBOT",
     "Admission",
     "Call",
     "GoalRequest",
@@ -79,23 +73,12 @@ __all__ = [
     "Publication",
     "Response",
     "Typed",
-    "in_namespace",
 ]
 
 logger = logging.getLogger(__name__)
 
 #: Smallest ``fragment_size`` accepted (smaller ones would cost a message per few bytes).
 MIN_FRAGMENT_SIZE = 256
-#: The scope of a connection that may drive no robot (a ROS 2 peer in class mode): not a
-#: robot name, so no name lies in its namespace (see :mod:`simbridge.graph.guard`).
-NO_ROBOT = "-"
-#: Name endings of administrative services of any node (ROS 2 parameter services).
-ADMIN_SUFFIXES = ("/set_parameters", "/set_parameters_atomically")
-
-
-def in_namespace(scope: str, name: str) -> bool:
-    """Return whether the absolute name ``name`` lies in the scope's namespace."""
-    return scope == ANY_SCOPE or name == f"/{scope}" or name.startswith(f"/{scope}/")
 
 
 @dataclass(frozen=True, slots=True)
@@ -172,6 +155,7 @@ class Admission:
         topics: TopicTable,
         services: ServiceTable,
         actions: ActionTable,
+        rules: AccessRules | None = None,
         *,
         prepare: Prepare | None = None,
         finish: Finish | None = None,
@@ -186,12 +170,13 @@ class Admission:
         #: provides).
         self.services = services
         self.actions = actions
-        #: Access rules (checks 1-4) apply: a guard authenticates the clients.
-        self.guarded = False
-        #: Services that need admin rights (the guard adds the defaults).
-        self.admin_services: set[str] = set()
-        #: Names of the robots: their namespaces are off limits to other robots' clients.
-        self.robots: Callable[[], Iterable[str]] = lambda: ()
+        #: The graph's access rules (checks 1-4 apply once a guard turned them on).
+        self.rules = rules or AccessRules()
+
+    @property
+    def guarded(self) -> bool:
+        """Access rules (checks 1-4) apply: a guard authenticates the clients."""
+        return self.rules.guarded
 
     def admit(self, peer: Peer, op: Op, now: float) -> Any:
         """Return what the op's handler carries out, or ``None`` if the op is dropped.
@@ -304,13 +289,12 @@ class Admission:
         if not self.guarded:
             return self.call(op)
         name = op.name
-        admin_only = name in self.admin_services or name.endswith(ADMIN_SUFFIXES)
-        if admin_only and not session.admin:
+        if self.rules.admin_only(name) and not session.admin:
             reason = (
                 f"service {name} is administrative: connect with the admin token "
                 "(?token=ADMIN_TOKEN) to call it"
             )
-        elif not self._may_reach(session, name):
+        elif not self.rules.may_reach(session.access, name):
             reason = f"service {name} belongs to another robot; this connection may not call it"
         else:
             return self.call(op)
@@ -320,7 +304,7 @@ class Admission:
     def _send_action_goal(
         self, peer: Peer, session: Session, op: o.SendActionGoal, now: float
     ) -> Any:
-        if self.guarded and not self._may_reach(session, op.name):
+        if self.guarded and not self.rules.may_reach(session.access, op.name):
             msg = f"action {op.name} belongs to another robot; this connection may not use it"
             raise Refusal(msg, op="send_action_goal", target=op.action, op_id=op.id)
         if len(op.action_type) > MAX_TYPE_LENGTH:  # a goal keeps it while it runs
@@ -448,35 +432,6 @@ class Admission:
             msg = f"{what} for {goal.action.name}: {err}"
             raise ProtocolError(msg) from None
 
-    # -- peers outside the protocol (ROS 2 over Zenoh): the same rules, asked by name --------
-
-    def publish_refusal(self, session: Session, name: str) -> str | None:
-        """Return why ``session`` may not publish on (or provide) ``name``; None if it may.
-
-        Check 4's scope rule of ``publish``, ``advertise`` and ``advertise_service``, for a
-        peer whose messages do not come as ops (a ROS 2 publisher, service or action server):
-        it is asked once per name, and the names are not counted against the session's budgets.
-        """
-        if not self.guarded or in_namespace(session.scope, name):
-            return None
-        if session.scope == NO_ROBOT:
-            return f"{name}: not allowed; this peer may drive no robot and publishes nothing here"
-        return f"{name}: not allowed; this peer may only use names under /{session.scope}/"
-
-    def reach_refusal(self, session: Session, name: str) -> str | None:
-        """Return why ``session`` may not call service or action ``name``; None if it may.
-
-        Check 4 of ``call_service`` (administrative services; other robots' namespaces) and
-        of ``send_action_goal``, for callers outside the protocol.
-        """
-        if not self.guarded:
-            return None
-        if (name in self.admin_services or name.endswith(ADMIN_SUFFIXES)) and not session.admin:
-            return f"{name} is administrative: this peer has no admin rights"
-        if not self._may_reach(session, name):
-            return f"{name} belongs to another robot; this peer may not use it"
-        return None
-
     # -- scope -----------------------------------------------------------------------------
 
     def _may_own(self, session: Session, what: str, name: str, new: bool) -> None:
@@ -487,15 +442,6 @@ class Admission:
             )
             raise Refusal(msg, cause=f"scope {what}")
         session.may_own(what, name, new)
-
-    def _may_reach(self, session: Session, name: str) -> bool:
-        """Whether a call or goal to ``name`` stays out of other robots' namespaces."""
-        if session.scope == ANY_SCOPE:
-            return True
-        return not any(
-            robot and robot != session.scope and in_namespace(robot, name)
-            for robot in self.robots()
-        )
 
 
 def _interface_type(type_name: str, kind: Literal["srv", "action"], op: str) -> str:

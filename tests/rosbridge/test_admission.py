@@ -6,22 +6,22 @@ from typing import Any
 import pytest
 
 from simbridge.app.config import Params, load_world
+from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph import Graph
-from simbridge.graph.admission import Call, GoalRequest, GoalUpdate, Publication, Response
-from simbridge.graph.guard import Guard
 from simbridge.robot.bridge import RobotBridge
 from simbridge.rosbridge import Refusal, ops as o
+from simbridge.rosbridge.admission import Call, GoalRequest, GoalUpdate, Publication, Response
 from simbridge.sim import World
-from tests.helpers import ROOT, RecordingPeer
+from tests.helpers import ROOT, RecordingPeer, rosbridge_of
 
 
 TWIST = {"linear": {"x": 0.2, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.5}}
 
 
 def op(peer: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> list[Any]:
-    graph.receive(peer, json.dumps(fields), now)
+    rosbridge_of(graph).receive(peer, json.dumps(fields), now)
     return peer.take()
 
 
@@ -36,7 +36,7 @@ def test_a_publish_is_admitted_once_with_its_topic_type_and_completed_message() 
     op(peer, graph, op="advertise", topic="/v", type="geometry_msgs/Vector3")
     (publish,) = peer.session.parse(json.dumps({"op": "publish", "topic": "v", "msg": {}}), 0.0)
     assert isinstance(publish, o.Publish)
-    admitted = graph.admission.admit(peer, publish, 0.0)
+    admitted = rosbridge_of(graph).admission.admit(peer, publish, 0.0)
     assert isinstance(admitted, Publication)
     assert admitted.topic is graph.topics.topics["/v"]
     assert admitted.type == "geometry_msgs/msg/Vector3"
@@ -68,14 +68,14 @@ def test_access_rules_apply_once_a_guard_is_installed() -> None:
     for guarded in (False, True):
         graph = Graph(settings=settings)
         if guarded:
-            Guard(graph, settings)
+            rosbridge_of(graph, Guard(graph, settings))
         sender, listener = RecordingPeer(graph), RecordingPeer(graph)
         op(listener, graph, op="subscribe", topic="/n", type="std_msgs/Int32")
         for k in range(4):
             op(sender, graph, now=0.0, op="publish", topic="/n", msg={"data": k})
         received = [m["msg"]["data"] for m in listener.take()]
         assert received == ([0, 1] if guarded else [0, 1, 2, 3])
-        assert graph.admission.guarded is guarded
+        assert rosbridge_of(graph).admission.guarded is guarded
 
 
 def test_cmd_vel_reaches_its_robot_and_another_robots_client_is_refused_by_scope() -> None:
@@ -85,6 +85,7 @@ def test_cmd_vel_reaches_its_robot_and_another_robots_client_is_refused_by_scope
     RobotBridge(graph, world)
     settings = ServerSettings(client_tokens={"r1-token-aaaa": "r1"})
     guard = Guard(graph, settings, robots=world.robots.keys)
+    rosbridge_of(graph, guard)
     r1 = RecordingPeer(graph, token="r1-token-aaaa")
     guard.connect(r1)  # its access from its token, as on connect
     assert op(r1, graph, op="publish", topic="r1/cmd_vel", msg=TWIST) == []
@@ -103,7 +104,7 @@ def test_a_call_is_admitted_with_its_service_and_its_request_validated() -> None
     graph = Graph()
     peer = RecordingPeer(graph)
     graph.add_service("/add", "example_interfaces/srv/AddTwoInts", "/n", lambda r: {"sum": 0})
-    call = graph.admission.admit(peer, o.CallService("add", args=[1]), 0.0)
+    call = rosbridge_of(graph).admission.admit(peer, o.CallService("add", args=[1]), 0.0)
     assert isinstance(call, Call) and call.service is graph.services.services["/add"]
     assert call.request == {"a": 1, "b": 0}
 
@@ -115,7 +116,9 @@ def test_a_call_with_a_bad_request_or_to_no_service_is_refused_before_any_table(
     advertise = {"op": "advertise_service", "service": "/add"}
     op(provider, graph, **advertise, type="example_interfaces/AddTwoInts")
     with pytest.raises(Refusal, match=r"Message type .* does not have a field c") as refused:
-        graph.admission.admit(caller, o.CallService("/add", args={"c": 1}, id="x"), 0.0)
+        rosbridge_of(graph).admission.admit(
+            caller, o.CallService("/add", args={"c": 1}, id="x"), 0.0
+        )
     assert (refused.value.op, refused.value.target, refused.value.op_id) == (
         "call_service",
         "/add",
@@ -135,7 +138,7 @@ def test_a_goal_is_admitted_with_its_action_and_its_message_validated() -> None:
     fib = {"op": "advertise_action", "action": "fib", "type": "example_interfaces/Fibonacci"}
     op(server, graph, **fib)
     send = o.SendActionGoal("fib", "example_interfaces/Fibonacci", args=[5], id="g")
-    goal = graph.admission.admit(client, send, 0.0)
+    goal = rosbridge_of(graph).admission.admit(client, send, 0.0)
     assert isinstance(goal, GoalRequest) and goal.action is graph.actions.actions["/fib"]
     assert goal.message == {"order": 5} and goal.op is send
     bad = {"op": "send_action_goal", "action": "fib", "action_type": "x/Y", "id": "b"}
@@ -160,11 +163,11 @@ def test_a_providers_answers_are_admitted_validated_for_the_calls_and_goals_it_s
     (forwarded,) = provider.take()
     answer = o.ServiceResponse("/add", values={}, id=forwarded["id"], result=True)
     with pytest.raises(ProtocolError, match="from a client that does not provide it"):
-        graph.admission.admit(other, answer, 0.0)
-    response = graph.admission.admit(provider, answer, 0.0)
+        rosbridge_of(graph).admission.admit(other, answer, 0.0)
+    response = rosbridge_of(graph).admission.admit(provider, answer, 0.0)
     assert isinstance(response, Response) and response.ok and response.values == {"sum": 0}
     bad = o.ServiceResponse("/add", values={"total": 3}, id=forwarded["id"], result=True)
-    response = graph.admission.admit(provider, bad, 0.0)
+    response = rosbridge_of(graph).admission.admit(provider, bad, 0.0)
     assert isinstance(response, Response) and not response.ok
     assert response.values.startswith("service provider sent an invalid response")
     assert caller.take() == [] and len(graph.services.pending) == 1  # nothing routed yet
@@ -175,10 +178,10 @@ def test_a_providers_answers_are_admitted_validated_for_the_calls_and_goals_it_s
     op(caller, graph, **goal, id="g")
     (sent,) = provider.take()
     feedback = o.ActionFeedback("/fib", values={"sequence": [0]}, id=sent["id"])
-    update = graph.admission.admit(provider, feedback, 0.0)
+    update = rosbridge_of(graph).admission.admit(provider, feedback, 0.0)
     assert isinstance(update, GoalUpdate) and update.values == {"sequence": [0]}
     wrong = o.ActionFeedback("/fib", values={"order": 1}, id=sent["id"])
     with pytest.raises(ProtocolError, match="action_feedback for /fib"):
-        graph.admission.admit(provider, wrong, 0.0)
+        rosbridge_of(graph).admission.admit(provider, wrong, 0.0)
     with pytest.raises(ProtocolError, match="unknown or finished goal id"):
-        graph.admission.admit(other, feedback, 0.0)
+        rosbridge_of(graph).admission.admit(other, feedback, 0.0)

@@ -6,18 +6,19 @@ from typing import Any
 
 import pytest
 
-from simbridge.app.settings import ServerSettings
-from simbridge.graph import Graph
-from simbridge.graph.guard import (
+from simbridge.app.guard import (
     NO_ROBOT,
     Guard,
-    TokenBucket,
     ros2_access,
     rosauth_mac,
     token_access,
 )
+from simbridge.app.settings import ServerSettings
+from simbridge.graph import Graph
+from simbridge.graph.access import Access
+from simbridge.rosbridge import TokenBucket
 from simbridge.rosbridge.rosapi import install_rosapi
-from tests.helpers import RecordingPeer
+from tests.helpers import RecordingPeer, rosbridge_of
 
 
 WALL = 1_700_000_000.0
@@ -30,6 +31,7 @@ def make(**settings: Any) -> tuple[Graph, Guard]:
     install_rosapi(graph)
     graph.add_service("/reset", "std_srvs/srv/Empty", "/virtual_robot", lambda args: {})
     guard = Guard(graph, s, robots=lambda: ["r1", "r2"])
+    rosbridge_of(graph, guard)
     return graph, guard
 
 
@@ -40,7 +42,7 @@ def peer(graph: Graph, guard: Guard, token: str | None = None) -> RecordingPeer:
 
 
 def op(p: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> list[Any]:
-    graph.receive(p, json.dumps(fields), now)
+    rosbridge_of(graph).receive(p, json.dumps(fields), now)
     return p.take()
 
 
@@ -82,11 +84,9 @@ def test_ros2_peers_get_the_role_chosen_and_in_class_mode_by_default_no_robot() 
 
 def test_a_peer_outside_the_protocol_is_asked_the_same_rules_by_name() -> None:
     graph, _guard = make(client_tokens=TOKENS, admin_token="the-admin-token")
-    admission = graph.admission
-    nobody = graph.new_session()
-    nobody.connect(NO_ROBOT, False)
-    student = graph.new_session()
-    student.connect("r1", False)
+    admission = graph.access
+    nobody = Access(NO_ROBOT, False, guarded=True)
+    student = Access("r1", False, guarded=True)
     for name in ("/cmd_vel", "/r1/cmd_vel", "/chatter", "/tf"):
         assert admission.publish_refusal(nobody, name) is not None
     assert admission.publish_refusal(student, "/r1/cmd_vel") is None
