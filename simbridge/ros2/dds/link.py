@@ -43,6 +43,7 @@ import orjson
 from simbridge.app.guard import ros2_access
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
+from simbridge.graph.access import Access
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.ros2.dds.options import DdsOptions
