@@ -274,6 +274,15 @@ def ros_type(dds_type: str) -> str:
     return dds_type
 
 
+def service_type(dds_type: str) -> str:
+    """``std_srvs::srv::dds_::Empty_Request_`` -> ``std_srvs/srv/Empty``."""
+    name = ros_type(dds_type)
+    for suffix in ("_Request", "_Response"):
+        if name.endswith(suffix):
+            return name[: -len(suffix)]
+    return name
+
+
 @dataclass
 class Endpoint:
     kind: str  # "reader" | "writer"
@@ -342,20 +351,40 @@ class DdsGraph:
         return names
 
     def node(self, fqn: str) -> dict[str, dict[str, str]]:
-        """A node's publishers and subscribers (ROS topic -> ROS type), from its gids."""
+        """A node's publishers, subscribers, services and clients, as ``ros2 node info``.
+
+        ROS name -> ROS type each, from the gids the node lists on ``ros_discovery_info``.
+        """
         for nodes in self.node_infos.values():
             for n in nodes:
                 if f"{n['namespace'].rstrip('/')}/{n['name']}" != fqn:
                     continue
-                out: dict[str, dict[str, str]] = {"publishers": {}, "subscribers": {}}
-                for role, gids in (("publishers", n["writers"]), ("subscribers", n["readers"])):
-                    for gid in gids:
-                        e = self.endpoints.get(gid)
-                        name = ros_topic(e.topic) if e else None
-                        if e and name:
-                            out[role][name] = ros_type(e.type)
+                out: dict[str, dict[str, str]] = {
+                    "publishers": {},
+                    "subscribers": {},
+                    "services": {},
+                    "clients": {},
+                }
+                for gid in [*n["writers"], *n["readers"]]:
+                    e = self.endpoints.get(gid)
+                    if e is None:
+                        continue
+                    if e.topic.startswith("rt/"):
+                        role = "publishers" if e.kind == "writer" else "subscribers"
+                        out[role]["/" + e.topic[3:]] = ros_type(e.type)
+                    elif e.topic.startswith("rq/") and e.topic.endswith("Request"):
+                        role = "services" if e.kind == "reader" else "clients"
+                        out[role]["/" + e.topic[3 : -len("Request")]] = service_type(e.type)
                 return out
         raise KeyError(f"no node {fqn} on ros_discovery_info (nodes: {sorted(self.nodes())})")
+
+    def services(self) -> dict[str, set[str]]:
+        """ROS service name -> types, as ``ros2 service list -t`` (from ``rq/`` readers)."""
+        out: dict[str, set[str]] = {}
+        for e in self.endpoints.values():
+            if e.kind == "reader" and e.topic.startswith("rq/") and e.topic.endswith("Request"):
+                out.setdefault("/" + e.topic[3 : -len("Request")], set()).add(service_type(e.type))
+        return out
 
     def writers(self, topic: str) -> list[Endpoint]:
         return [e for e in self.endpoints.values() if e.kind == "writer" and e.topic == topic]

@@ -156,6 +156,8 @@ async def test_discovery_lists_the_announced_node_and_its_topics(
     assert graph.node("/talker") == {
         "publishers": {"/peer_chatter": "std_msgs/msg/String"},
         "subscribers": {"/cmd_vel": "geometry_msgs/msg/Twist"},
+        "services": {},
+        "clients": {},
     }
     assert graph.topics()["/peer_chatter"] == {"std_msgs/msg/String"}
     assert set(graph.participants.values()) == {"enclave=/;\\0"}
@@ -189,6 +191,9 @@ async def test_reset_reply_is_matched_to_its_request_by_sample_identity(
     assert reply["sequence"] == called["sequence"]
     request = await robot.wait_for(lambda e: e.get("event") == "request")
     assert request["sequence"] == called["sequence"]
+    graph = await client.wait_graph(lambda g: "/robot" in g.nodes())
+    assert graph.services() == {"/reset": {"std_srvs/srv/Empty"}}
+    assert graph.node("/robot")["services"] == {"/reset": "std_srvs/srv/Empty"}
 
 
 async def test_cyclone_peer_lists_reads_and_drives_the_fast_dds_robot(
@@ -210,6 +215,8 @@ async def test_cyclone_peer_lists_reads_and_drives_the_fast_dds_robot(
             "/tf_static": "tf2_msgs/msg/TFMessage",
         },
         "subscribers": {"/cmd_vel": "geometry_msgs/msg/Twist"},
+        "services": {},
+        "clients": {},
     }
     command = await robot.wait_for(lambda e: e.get("event") == "cmd_vel", what="/cmd_vel")
     assert (command["data"]["linear"]["x"], command["data"]["angular"]["z"]) == (0.4, 0.2)
