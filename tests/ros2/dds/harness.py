@@ -12,7 +12,9 @@ Three ways into a namespace:
   ``simbridge --dds`` server, a peer);
 - ``with ns.entered():``: the calling thread joins the namespace (``setns``); every socket it
   creates and every process it starts (Node, roslibpy, Chromium) is inside, so an in-process
-  simbridge ``App`` and its clients can run there together;
+  simbridge ``App`` and its clients can run there together. Threads started inside stay inside
+  (and keep the namespace alive) after the block: stop what was started there (the App, its
+  DDS participant, an executor made inside) before the block ends;
 - ``ns.forward(port)``: a host port on 127.0.0.1 that forwards each TCP connection to
   ``127.0.0.1:port`` inside the namespace, for clients that stay on the host.
 
