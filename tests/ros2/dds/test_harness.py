@@ -107,7 +107,9 @@ async def test_forwarder_reaches_a_server_that_the_host_cannot(netns: NetNamespa
 
 async def test_fast_dds_peer_drives_the_stand_in_robot(ddspeer: PeerFactory) -> None:
     robot = await ddspeer("--robot", node="robot")
-    driver = await ddspeer("--cmd-vel", "0.5,0.3", "--echo", "/odom", node="driver")
+    driver = await ddspeer(
+        "--cmd-vel", "0.5,0.3", "--echo", "/odom", "--echo", "/scan@sensor", node="driver"
+    )
     command = await robot.wait_for(lambda e: e.get("event") == "cmd_vel", what="/cmd_vel")
     assert command["data"]["linear"]["x"] == 0.5
     assert command["data"]["angular"]["z"] == 0.3
@@ -115,6 +117,12 @@ async def test_fast_dds_peer_drives_the_stand_in_robot(ddspeer: PeerFactory) -> 
     assert odom["twist"]["twist"]["linear"]["x"] == 0.5
     assert odom["header"]["frame_id"] == "odom"
     assert odom["child_frame_id"] == "base_link"
+    # a best-effort reader (Nav2's sensor subscribers) is served by the reliable writer
+    scan = await driver.sample("/scan")
+    assert len(scan["ranges"]) == 360
+    assert scan["range_min"] <= min(scan["ranges"]) <= scan["range_max"]
+    readers = (await robot.wait_graph(lambda g: bool(g.readers("rt/scan")))).readers("rt/scan")
+    assert [r.reliability for r in readers] == ["best_effort"]
     await driver.send("cmd_vel 0 0")
     await driver.sample("/odom", lambda d: d["twist"]["twist"]["linear"]["x"] == 0.0)
 
