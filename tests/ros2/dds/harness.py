@@ -37,6 +37,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from collections.abc import AsyncIterator, Awaitable, Callable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -164,9 +165,10 @@ class NetNamespace:
                 stream.close()
 
 
-def namespace_exists(inode: int) -> bool:
-    """Whether any process (or thread) of the machine is in, or holds, the namespace ``inode``."""
+def namespace_holders(inode: int) -> list[str]:
+    """What holds the network namespace ``inode``: ``/proc`` paths of processes, threads, fds."""
     target = f"net:[{inode}]"
+    holders = []
     for proc in Path("/proc").iterdir():
         if not proc.name.isdigit():
             continue
@@ -177,8 +179,13 @@ def namespace_exists(inode: int) -> bool:
         for link in links:
             with contextlib.suppress(OSError):
                 if os.readlink(link) == target:
-                    return True
-    return False
+                    holders.append(str(link))
+    return holders
+
+
+def namespace_exists(inode: int) -> bool:
+    """Whether any process (or thread) of the machine is in, or holds, the namespace ``inode``."""
+    return bool(namespace_holders(inode))
 
 
 class _Forwarder:
@@ -547,7 +554,11 @@ PeerFactory = Callable[..., Awaitable[PeerProcess]]
 
 @pytest.fixture
 def netns() -> Iterator[NetNamespace]:
-    """A fresh private network namespace; everything in it is killed at the end of the test."""
+    """A fresh private network namespace; everything in it is killed at the end of the test.
+
+    The teardown fails if anything still holds the namespace 3 s after (a thread started in
+    ``entered()`` and never stopped, say).
+    """
     try:
         ns = NetNamespace()
     except RuntimeError as exc:
@@ -556,6 +567,11 @@ def netns() -> Iterator[NetNamespace]:
         yield ns
     finally:
         ns.close()
+        # whatever the test did, nothing may be left in the namespace (its threads included)
+        deadline = time.monotonic() + 3 * TIMEOUT_FACTOR
+        while (holders := namespace_holders(ns.inode)) and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert not holders, f"the test's network namespace outlived it, held by {holders}"
 
 
 @pytest.fixture
