@@ -148,21 +148,34 @@ SETTINGS_FRAMEWORK = (
     "simbridge.app.config",
 )
 #: Cores that take plain parameters (STYLE.md: "numpy only, plain parameters").
-PLAIN_CORES = ("simbridge.msgs", "simbridge.sim")
+PLAIN_CORES = ("simbridge.graph", "simbridge.msgs", "simbridge.sim")
+#: Modules of those cores that still import the settings, each with why. The robot's nodes
+#: (graph.bridge and the others) read its parameter records until they leave for
+#: simbridge/robot/; graph.graph's Graph and graph.guard hold the ServerSettings (their budgets,
+#: tokens and timeouts) until the graph is protocol-neutral (issue 24, items 1 and 2).
+SETTINGS_NOT_YET = {
+    "simbridge.graph.assembly",
+    "simbridge.graph.bridge",
+    "simbridge.graph.cmdvel",
+    "simbridge.graph.graph",
+    "simbridge.graph.guard",
+    "simbridge.graph.roles",
+    "simbridge.graph.safety",
+}
 
 
 def test_the_cores_import_no_settings_framework() -> None:
-    """The simulator and the messages take plain parameters: no pydantic, not even lazily."""
+    """graph, msgs and sim take plain parameters: no pydantic, no settings, not even lazily."""
     modules = _modules()
     known = set(modules)
-    wrong = [
-        f"{name} imports {imported}"
+    wrong = {
+        name
         for name, path in modules.items()
         if any(name == c or name.startswith(c + ".") for c in PLAIN_CORES)
         for imported in _imports(name, path, known)
         if any(imported == b or imported.startswith(b + ".") for b in SETTINGS_FRAMEWORK)
-    ]
-    assert wrong == []
+    }
+    assert wrong == SETTINGS_NOT_YET
 
 
 def test_the_server_does_not_import_the_tools() -> None:
