@@ -149,19 +149,10 @@ SETTINGS_FRAMEWORK = (
 )
 #: Cores that take plain parameters (STYLE.md: "numpy only, plain parameters").
 PLAIN_CORES = ("simbridge.graph", "simbridge.msgs", "simbridge.sim")
-#: Modules of those cores that still import the settings, each with why. The robot's nodes
-#: (graph.bridge and the others) read its parameter records until they leave for
-#: simbridge/robot/; graph.graph's Graph and graph.guard hold the ServerSettings (their budgets,
-#: tokens and timeouts) until the graph is protocol-neutral (issue 24, items 1 and 2).
-SETTINGS_NOT_YET = {
-    "simbridge.graph.assembly",
-    "simbridge.graph.bridge",
-    "simbridge.graph.cmdvel",
-    "simbridge.graph.graph",
-    "simbridge.graph.guard",
-    "simbridge.graph.roles",
-    "simbridge.graph.safety",
-}
+#: Modules of those cores that still import the settings, each with why: graph.graph's Graph
+#: holds the ServerSettings (its budgets and timeouts, and what the front ends read of them)
+#: until the graph is protocol-neutral (issue 24, item 1).
+SETTINGS_NOT_YET = {"simbridge.graph.graph"}
 
 
 def test_the_cores_import_no_settings_framework() -> None:
