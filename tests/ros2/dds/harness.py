@@ -29,6 +29,7 @@ import asyncio
 import contextlib
 import ctypes
 import fcntl
+import itertools
 import json
 import os
 import select
@@ -242,10 +243,14 @@ class _Forwarder:
                 sock.close()
 
 
+_allocations = itertools.count()
+
+
 @contextlib.contextmanager
 def allocate_domain() -> Iterator[int]:
     """A DDS domain id no other test on this machine holds meanwhile (lock files in /tmp)."""
-    start = os.getpid() % len(DOMAINS)
+    # each allocation starts further on, so that consecutive tests do not share a domain either
+    start = (os.getpid() + next(_allocations)) % len(DOMAINS)
     for offset in range(len(DOMAINS)):
         domain = DOMAINS[(start + offset) % len(DOMAINS)]
         lock: IO[str] = open(f"/tmp/simbridge-dds-domain-{domain}.lock", "w")  # noqa: SIM115
