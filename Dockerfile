@@ -30,7 +30,8 @@ RUN python3 -m venv /opt/simbridge
 
 # Optional extras, comma-separated: SIMBRIDGE_EXTRAS=zenoh adds ROS 2 over Zenoh (--zenoh, zenohd;
 # docker-compose.classroom.yml builds it so), SIMBRIDGE_EXTRAS=foxglove the Foxglove WebSocket
-# protocol (--foxglove-port).
+# protocol (--foxglove-port), SIMBRIDGE_EXTRAS=dds ROS 2 over DDS (--dds; amd64 only: the
+# cyclonedds binding has no aarch64 wheel, docs/dds.md).
 ARG SIMBRIDGE_EXTRAS=""
 
 # Dependencies first, from pyproject.toml alone: this layer stays cached while the code changes.

@@ -18,6 +18,7 @@ import json
 import time
 from typing import Any
 
+from cyclonedds._clayer import ddspy_write
 from cyclonedds.builtin import BuiltinDataReader, BuiltinTopicDcpsPublication
 from cyclonedds.core import Policy, Qos
 from cyclonedds.domain import DomainParticipant
@@ -58,6 +59,14 @@ def main() -> None:
         default=[],
         metavar=("SERVICE", "TYPE", "JSON"),
         help="call a service as rmw_cyclonedds does (the request header in the payload)",
+    )
+    parser.add_argument(
+        "--raw",
+        nargs=3,
+        action="append",
+        default=[],
+        metavar=("TOPIC", "TYPE", "HEX"),
+        help="also write these bytes, as they are, on TOPIC (bad input for the tests)",
     )
     args = parser.parse_args()
 
@@ -107,6 +116,10 @@ def main() -> None:
     info_writer.write(info_type.deserialize(data))  # rmw's bytes, through Cyclone's types
     publications = BuiltinDataReader(participant, BuiltinTopicDcpsPublication)
 
+    raw = [
+        (DataWriter(participant, topic(name, t), qos=qos(False)), bytes.fromhex(data))
+        for name, t, data in args.raw
+    ]
     calls = [_Client(participant, types, qos(False), *call) for call in args.call]
     seen: dict[str, Any] = {"topics": {}, "nodes": [], "samples": {}, "replies": {}}
     deadline = time.monotonic() + args.seconds
@@ -129,6 +142,8 @@ def main() -> None:
             reply = client.poll()
             if reply is not None:
                 seen["replies"][client.service] = reply
+        for writer, data in raw:
+            ddspy_write(writer._ref, data)
         cmd.write(twist(linear=vector(args.drive, 0.0, 0.0), angular=vector(0.0, 0.0, 0.0)))
         chatter.write(string(data="hello from dds"))
         time.sleep(0.1)

@@ -1,0 +1,60 @@
+"""Bad input from DDS: a call simbridge cannot answer, bytes that are not CDR, a peer that goes.
+
+Cyclone DDS checks each sample against the reader's type and drops what does not fit before
+simbridge sees it (with a line of its own on stderr); what simbridge's own checks refuse is
+counted and said in one rate-limited log line (and on /rosout). The robot, the loop and the
+other peers carry on.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+
+from simbridge.runner import App
+from tests.helpers import wait_for
+from tests.ros2.dds.test_link import _peer, dds_app
+
+
+pytestmark = pytest.mark.e2e
+
+__all__ = ["dds_app"]
+
+
+async def test_bad_input_from_dds_is_logged_and_counted_and_the_robot_runs_on(
+    dds_app: App, ddspeer: Any
+) -> None:
+    app = dds_app
+    link = app.dds
+    assert link is not None
+    # an rmw_fastrtps client's /reset: it carries no rmw_cyclonedds request header
+    client = await ddspeer("--call-reset", "--chatter", node="student", distro="jazzy")
+    await client.wait_for(
+        lambda e: e.get("event") == "matched" and e["topic"] == "rr/resetReply" and e["count"],
+        what="its /reset reply reader matched",
+    )
+    await wait_for(lambda: "/student" in app.graph.nodes, 10)
+    await client.send("call_reset")
+    # Cyclone checks each sample against the reader's type before simbridge sees it: the
+    # request (no header: 5 bytes for a 21-byte type) is dropped there, never answered
+    await client.wait_for(lambda e: e.get("event") == "called", what="the request sent")
+    # bytes on /cmd_vel that are not a Twist: dropped too; the robot runs on, undriven
+    seen = await _peer(
+        link.options.domain,
+        "--seconds",
+        "1.5",
+        "--raw",
+        "/cmd_vel",
+        "geometry_msgs/msg/Twist",
+        "0001000001",
+    )
+    assert seen["samples"]["/odom"]  # the robot still publishes
+    assert not [e for e in client.events if e.get("event") == "reply"]
+    assert link.stats["calls_answered"] == 0
+    # the Fast DDS node leaves: its node and topic leave the graph (rosapi) with it
+    chatter = app.graph.topics.topics["/peer_chatter"]
+    assert chatter.publishers
+    await client.stop()
+    await wait_for(lambda: "/student" not in app.graph.nodes and not chatter.publishers, 15)
+    assert link.state == "running"
