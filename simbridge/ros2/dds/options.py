@@ -79,7 +79,8 @@ class DdsOptions:
 
     def cyclone_config(self) -> str:
         """Return the Cyclone DDS configuration (XML) of these options."""
-        parts = ["<Tracing><Verbosity>severe</Verbosity></Tracing>"]
+        # Cyclone's own problems to stderr, not to a cyclonedds.log in the working directory
+        parts = ["<Tracing><Verbosity>severe</Verbosity><OutputFile>stderr</OutputFile></Tracing>"]
         if self.discovery == "LOCALHOST":
             parts.append(
                 '<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
