@@ -12,7 +12,7 @@ from typing import Any
 
 import pytest
 
-from simbridge.runner import App
+from simbridge.app.runner import App
 from tests.helpers import wait_for
 from tests.ros2.dds.test_link import _peer, dds_app
 
