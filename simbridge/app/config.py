@@ -1,16 +1,16 @@
-r"""Robot and LiDAR parameters and world files: the records, and reading them from YAML.
+"""Robot and LiDAR parameters and world files: the records, and reading them from YAML.
 
-Everything is validated once, at startup, by pydantic models (the :class:`~simbridge.app.
-settings.Record` models of :mod:`simbridge.app.settings`: declared fields with bounds and
-descriptions). A bad file fails fast with a :class:`~simbridge.errors.ConfigError` whose text
-names the file, the key and the fix, e.g. ``params file 'pi.yaml': robot.mass: must be greater
-than 0 (got -1)``; a record made in code (``RobotParams(mass=-1)``) raises
+Everything is validated once, at startup, by pydantic models (records of
+:class:`~simbridge.app.settings.Record`: declared fields with bounds and descriptions). A bad
+file fails fast with a :class:`~simbridge.errors.ConfigError` whose text names the file, the key
+and the fix, e.g. ``params file 'pi.yaml': robot.mass: must be greater than 0 (got -1)``; a
+record made in code (``RobotParams(mass=-1)``) raises
 :class:`~simbridge.app.settings.SettingsError` (a ``ValueError``) naming the field.
 
 Files are read with ``yaml.safe_load`` (YAML 1.1: quote ``"off"``/``"no"`` in shipped files);
 PyYAML is imported only when a file is read: the defaults (:func:`load_params` and
 :func:`load_world` without a path) are built from :data:`DEFAULT_WORLD` and the records' own
-defaults, which tests/test_config.py keeps equal to the bundled files.
+defaults, which tests/app/test_config.py keeps equal to the bundled files.
 """
 
 from __future__ import annotations
@@ -606,7 +606,7 @@ def load_params(path: Path | str | None = None) -> Params:
     """Load and validate a parameter file; ``None``: the Pi 4B platform defaults.
 
     The defaults are :class:`Params`' own, the values of the bundled ``pi4b_params.yaml``
-    (tests/test_config.py keeps them equal), so they need no YAML parser.
+    (tests/app/test_config.py keeps them equal), so they need no YAML parser.
 
     Raises:
         ConfigError: the file is missing, not YAML, or a key or value is invalid.
@@ -624,7 +624,7 @@ def load_params(path: Path | str | None = None) -> Params:
 def load_world(path: Path | str | None = None) -> WorldSpec:
     """Load and validate a world file; ``None``: the default world (:data:`DEFAULT_WORLD`).
 
-    The default world is the bundled ``worlds/default.yaml`` (tests/test_config.py keeps them
+    The default world is the bundled ``worlds/default.yaml`` (tests/app/test_config.py keeps them
     equal), built without a YAML parser.
 
     Raises:

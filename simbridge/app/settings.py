@@ -106,12 +106,22 @@ class SettingsError(ConfigError, ValueError):
     def of(cls, err: pydantic.ValidationError) -> SettingsError:
         """Return pydantic's refusals as simbridge's (paths ``a.b[2]``, reasons in words)."""
         out: list[tuple[str, str]] = []
+        short: dict[str, int] = {}  # a fixed-length list with items missing: path -> its length
         for e in err.errors():
             inner = e.get("ctx", {}).get("error")
+            loc, value = e["loc"], e["input"]
             if isinstance(inner, SettingsError):  # a nested record's own (its __init__ is ours)
-                out += inner.within(_path(e["loc"])).errors
+                out += inner.within(_path(loc)).errors
+            elif e["type"] == "missing" and loc and isinstance(loc[-1], int):
+                path = _path(loc[:-1])
+                if path not in short:
+                    out.append((path, ""))
+                short[path] = max(short.get(path, 0), loc[-1] + 1)
+                got = f"{len(value)}: {value!r}" if isinstance(value, list | tuple) else repr(value)
+                reason = f"must have {short[path]} items (got {got})"
+                out = [(p, reason if p == path else r) for p, r in out]
             else:
-                out.append((_path(e["loc"]), _reason(e)))
+                out.append((_path(loc), _reason(e)))
         return cls(out)
 
     def describe(self, name: Callable[[str], str] = str) -> str:

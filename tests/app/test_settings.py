@@ -116,6 +116,7 @@ def test_out_of_bounds_values_are_refused_naming_the_path_and_the_bound(
         ({"label": 5}, "label: must be a string (got 5)"),
         ({"label": False}, "label: must be a string (got False)"),  # YAML 1.1's `off`
         ({"pose": "abc"}, "pose: must be a list (got 'abc')"),
+        ({"pose": [0]}, "pose: must have 3 items (got 1: [0])"),
         ({"pose": [0, "x", None]}, "pose[1]: must be a number (got 'x'); pose[2]: must be a"),
         ({"names": "ab"}, "names: must be a list (got 'ab')"),
         ({"tokens": {"a": 1}}, "tokens.a: must be a string (got 1)"),
