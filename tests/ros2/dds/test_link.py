@@ -161,3 +161,26 @@ async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_rob
     assert any(w.user_data.startswith("typehash=RIHS01_") for w in graph.writers("rt/odom")), (
         "Jazzy's endpoints carry their type hash"
     )
+
+
+async def test_no_sim_dds_is_a_rosbridge_in_front_of_a_humble_robot_on_fast_dds(
+    netns: NetNamespace, dds_domain: int, ddspeer: Any, run_js: Any
+) -> None:
+    robot = await ddspeer("--robot", node="robot_driver", distro="humble")
+    with netns.entered():
+        settings = ServerSettings(host="127.0.0.1", port=0, http_port=0)
+        app = App(settings, no_sim=True, dds=DdsOptions(domain=dds_domain, distro="humble"))
+        await app.start()
+        try:
+            # the robot's topics join the graph (rosapi) under its node, from 24-byte GIDs
+            await wait_for(lambda: "/cmd_vel" in app.graph.topics.topics, 10)
+            await wait_for(lambda: "/robot_driver" in app.graph.nodes, 10)
+            # a roslibjs client (the page's library) drives the real /cmd_vel, reads /odom
+            driven = await run_js("roslib2", ws_url(app), "drive", {"v": 0.5, "seconds": 1})
+        finally:
+            await app.stop()
+    assert driven["final"]["x"] > driven["start"]["x"] + 0.2
+    command = await robot.wait_for(lambda e: e.get("event") == "cmd_vel", what="/cmd_vel")
+    assert command["data"]["linear"]["x"] == 0.5
+    infos = [e for e in robot.events if e.get("event") == "nodes" and e["gid_size"] == 24]
+    assert any(n["name"] == "rosbridge_websocket" for e in infos for n in e["nodes"])
