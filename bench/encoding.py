@@ -22,6 +22,7 @@ from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
 from simbridge.rosbridge import Outgoing
+from simbridge.rosbridge.frames import publish_frame
 from simbridge.sim import World
 
 
@@ -76,13 +77,13 @@ def main() -> int:
     results: dict[tuple[str, int], tuple[float, float]] = {}
     for topic, msg in msgs.items():
         plain = _plain(msg)
-        size = len(Outgoing(topic, None, msg).frame("none", topic).data)
+        size = len(publish_frame(Outgoing(topic, None, msg), "none", topic).data)
         for n in (1, 10, 100):
 
             def ours(msg: Any = msg, topic: str = topic, n: int = n) -> None:
                 out = Outgoing(topic, None, msg)
                 for _ in range(n):
-                    out.frame("none", topic)
+                    publish_frame(out, "none", topic)
 
             def baseline(plain: Any = plain, topic: str = topic, n: int = n) -> None:
                 for _ in range(n):

@@ -123,7 +123,10 @@ def rosbridge_of(graph: Any, authenticator: Any = None) -> Any:
 
     front = _FRONTS.get(graph)
     if front is None:
-        front = _FRONTS[graph] = Rosbridge(graph, *budgets(graph.settings))
+        settings = graph.settings
+        front = _FRONTS[graph] = Rosbridge(
+            graph, *budgets(settings), default_queue_length=settings.default_queue_length
+        )
     if authenticator is not None:
         front.authenticator = authenticator
     return front

@@ -106,7 +106,7 @@ async def test_without_a_token_a_client_gets_only_refusals(make_app: AppFactory)
         status = await recv_until(ws, lambda m: m.get("op") == "status")
         assert "not authenticated" in status["msg"]
         assert "not authenticated" in (await call(ws, "/rosapi/topics"))["values"]
-    assert not app.graph.topics.topics["/odom"].subscriptions
+    assert not app.graph.topics.topics["/odom"].sinks
 
 
 async def test_student_token_drives_only_its_own_robot(make_app: AppFactory) -> None:

@@ -217,7 +217,12 @@ class App:
         #: Access control: who each peer of every front end is (docs/security.md).
         self.guard = Guard(self.graph, self.settings, robots=lambda: self.world.robots.keys())
         #: The rosbridge clients: their sessions, budgets and ops.
-        self.rosbridge = Rosbridge(self.graph, *budgets(self.settings), authenticator=self.guard)
+        self.rosbridge = Rosbridge(
+            self.graph,
+            *budgets(self.settings),
+            authenticator=self.guard,
+            default_queue_length=self.settings.default_queue_length,
+        )
         #: The WebSocket server.
         self.server = BridgeServer(self.rosbridge, self.settings, self.web)
         #: What each connection may do (/simbridge/access), for pages.

@@ -565,7 +565,7 @@ class FoxgloveFront:
         for topic in graph.topics.listed():
             publishers = sorted({self._node(owner) for owner in topic.publishers})
             subscribers = {node for node, _ in topic.internal}
-            if topic.subscriptions:
+            if topic.sinks:
                 subscribers.add(BRIDGE_NODE)
             if publishers:
                 update.set_published_topic(topic.name, publishers)

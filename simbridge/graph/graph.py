@@ -58,11 +58,7 @@ class Graph:
         #: Validation of client payloads.
         self.converter = Converter(self.registry, self.stamp)
         #: Topics.
-        self.topics = TopicTable(
-            self.registry,
-            self.converter,
-            default_queue_length=self.settings.default_queue_length,
-        )
+        self.topics = TopicTable(self.registry, self.converter)
         self.topics.cdr_factory = self._cdr  # cbor-raw
         self._cdr_writer: CdrWriter | None = None
         #: Services.
@@ -179,7 +175,7 @@ class Graph:
         number = _LOG_LEVELS.get(level, 20)
         logger.log(number if echo else logging.DEBUG, "%s", text)
         topic = self.topics.topics.get(ROSOUT)
-        if topic is None or not (topic.subscriptions or topic.internal):
+        if topic is None or not topic.wanted():
             return
         sec, nanosec = self.stamp()
         msg = {

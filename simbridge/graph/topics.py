@@ -5,31 +5,31 @@ subscribe with another type is refused (rosbridge's TypeConflictException), comp
 canonical ``pkg/msg/Type`` spelling. A subscription to a topic that does not exist yet waits for
 it, with or without a type (rosbridge instead drops an untyped one, #1142).
 
-A message is encoded at most once per encoding (see :class:`~simbridge.rosbridge.Outgoing`) and
-each client receives it once per topic spelling it subscribed with.
+Each front end is one subscriber of a topic its peers subscribe to (a :class:`Sink`: rosbridge's
+:class:`~simbridge.rosbridge.subscribers.TopicSubscribers`), beside the in-process subscribers
+(the robot's nodes). A message is wrapped once (:class:`~simbridge.msgs.message.Outgoing`) and
+handed to each; what a front end encodes of it is made once per encoding, in the message.
 """
 
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable, Hashable
+from collections.abc import Callable, Collection, Hashable, Iterable
 from dataclasses import dataclass, field
-from typing import Any, Protocol, cast
+from typing import TYPE_CHECKING, Any, Protocol
 
 from simbridge.errors import ProtocolError, TypeNotFoundError
 from simbridge.graph.access import Access
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
-from simbridge.rosbridge import (
-    Frame,
-    OpId,
-    Outgoing,
-    Session,
-    Subscription,
-    split_frame,
-)
+from simbridge.msgs.message import Outgoing
 
 
-__all__ = ["BRIDGE_NODE", "InternalCallback", "Peer", "Topic", "TopicTable"]
+if TYPE_CHECKING:
+    from simbridge.rosbridge.encoding import Frame
+    from simbridge.rosbridge.session import Session
+
+
+__all__ = ["BRIDGE_NODE", "InternalCallback", "Peer", "Sink", "Topic", "TopicTable"]
 
 logger = logging.getLogger(__name__)
 
@@ -38,7 +38,10 @@ BRIDGE_NODE = "/rosbridge_websocket"
 
 
 class Peer(Protocol):
-    """A connected client, as the graph sees it."""
+    """A peer of a front end (a client, a ROS 2 node), as the graph sees it.
+
+    ``session`` and ``send`` are rosbridge's, still read by the service and action tables.
+    """
 
     #: The client's protocol state.
     session: Session
@@ -58,6 +61,26 @@ class Peer(Protocol):
 InternalCallback = Callable[[Any, "Peer | None"], None]
 
 
+class Sink(Protocol):
+    """A front end's subscribers of one topic: the graph hands it each message once."""
+
+    def __len__(self) -> int:
+        """Return how many subscriptions it holds (a sink without any is removed)."""
+
+    def peers(self) -> Iterable[Peer]:
+        """Return the peers subscribed through it."""
+
+    def deliver(
+        self,
+        topic: Topic,
+        out: Outgoing,
+        now: float,
+        source: Peer | None,
+        only: Collection[Peer] | None = None,
+    ) -> None:
+        """Send ``out`` to its subscribers (``only``: to those of these peers alone)."""
+
+
 @dataclass(eq=False, slots=True)
 class Topic:
     """One topic of the graph."""
@@ -68,70 +91,46 @@ class Topic:
     #: The type is known to the registry (payloads are validated and defaults filled).
     known: bool = False
     #: Publishers: owner (a node name or a Peer) -> advertise ids.
-    publishers: dict[object, set[OpId | None]] = field(default_factory=dict)
-    #: Client subscriptions by (peer, topic spelling).
-    subscriptions: dict[tuple[Peer, str], Subscription] = field(default_factory=dict)
+    publishers: dict[object, set[Hashable]] = field(default_factory=dict)
+    #: The front ends' subscribers, by front end (a sink without subscribers is removed).
+    sinks: dict[object, Sink] = field(default_factory=dict)
     #: In-process subscribers: (node name, callback).
     internal: list[tuple[str, InternalCallback]] = field(default_factory=list)
     #: Keep the last message for late subscribers (``latch: true``, /tf_static).
     latch: bool = False
     #: The last message, when latched.
     latched: Outgoing | None = None
-    #: How a message reaches the client subscribers (rebuilt when subscriptions change).
-    plan: _Plan | None = None
-    #: The client whose message is latched (charged to its latched-bytes budget), if any.
+    #: The peer whose message is latched, if any, and what gives its cost back when it goes.
     latched_by: Peer | None = None
+    latched_release: Callable[[], None] | None = None
 
     def unused(self) -> bool:
         """Return whether nothing refers to the topic any more."""
-        return not (self.publishers or self.subscriptions or self.internal)
+        return not (self.publishers or self.sinks or self.internal)
 
-
-#: Subscribers that get one shared frame: ``(peer, subscription, queue bound)``.
-SendEntries = list[tuple[Peer, Hashable, int]]
-
-
-@dataclass(eq=False, slots=True)
-class _Plan:
-    """The subscribers of a topic sorted for delivery, valid for one ``version``.
-
-    Most subscribers take the frame as it is: they are grouped by (compression, topic
-    spelling), each group written with one ``send_many``. Throttled and fragmented ones are
-    served one by one.
-    """
-
-    version: tuple[int, int]
-    groups: list[tuple[str, str, SendEntries]]
-    one_by_one: list[tuple[Peer, Subscription]]
+    def wanted(self) -> bool:
+        """Return whether anyone subscribes: a front end's peer or an in-process node."""
+        return bool(self.sinks or self.internal)
 
 
 class TopicTable:
     """Every topic, with the rules for advertising, subscribing and publishing."""
 
-    def __init__(
-        self, registry: TypeRegistry, converter: Converter, *, default_queue_length: int = 100
-    ) -> None:
+    def __init__(self, registry: TypeRegistry, converter: Converter) -> None:
         #: Interface definitions.
         self.registry = registry
         #: JSON payload validation.
         self.converter = converter
-        #: Per-subscription bound of pending frames when a client asked for queue_length 0.
-        self.default_queue_length = default_queue_length
         #: Topics by absolute name.
         self.topics: dict[str, Topic] = {}
-        #: Sends one frame to many subscribers at once, ``(frame, [(peer, key, limit)])`` (set by
-        #: the server: one ``websockets.broadcast`` per frame instead of one call per client).
-        self.send_many: Callable[[Frame, SendEntries], None] | None = None
-        #: Makes the CDR-bytes function of a message for ``cbor-raw`` (set by extensions).
+        #: Makes the CDR-bytes function of a message (set by the graph: made once, on first use).
         self.cdr_factory: Callable[[str, Any], Callable[[], bytes]] | None = None
-        #: Bumped by every subscription change: the delivery plans of topics are rebuilt.
-        self.generation = 0
-        #: Bumped by every change of a topic's type, publishers or subscribers (clients and
-        #: in-process): what mirrors the table elsewhere (the Zenoh link) compares it instead
-        #: of walking every topic.
+        #: Bumped by every change of a topic's type, publishers or subscribers (front ends and
+        #: in-process): what mirrors the table elsewhere (the Zenoh and DDS links) compares it
+        #: instead of walking every topic.
         self.changes = 0
         #: Called with ``(topic, message, sending peer or None)`` before each delivery
-        #: (extensions: the Zenoh link forwards messages to ROS 2 subscribers).
+        #: (the ROS 2 and Foxglove front ends forward messages to their subscribers).
         self.taps: list[Callable[[Topic, Outgoing, Peer | None], None]] = []
         #: Called by :meth:`flush`: what a tap holds back to send together, sent now.
         self.flushers: list[Callable[[], None]] = []
@@ -164,7 +163,7 @@ class TopicTable:
         name: str,
         type_name: str,
         owner: object,
-        op_id: OpId | None = None,
+        op_id: Hashable | None = None,
         *,
         latch: bool = False,
     ) -> Topic:
@@ -181,7 +180,7 @@ class TopicTable:
         topic.latch = topic.latch or latch
         return topic
 
-    def unadvertise(self, name: str, owner: object, op_id: OpId | None = None) -> None:
+    def unadvertise(self, name: str, owner: object, op_id: Hashable | None = None) -> None:
         """Remove one advertise id of ``owner`` (``None``: all of them)."""
         topic = self.topics.get(name)
         if topic is None or owner not in topic.publishers:
@@ -205,36 +204,34 @@ class TopicTable:
             self.changes += 1  # the Zenoh link subscribes to latched topics apart
 
     def unlatch(self, topic: Topic) -> None:
-        """Drop the latched message of ``topic`` (and give its bytes back to its publisher)."""
-        if topic.latched_by is not None:
-            topic.latched_by.session.unlatch(topic.name)
-            topic.latched_by = None
-        topic.latched = None
+        """Drop the latched message of ``topic`` (and give its cost back to its publisher)."""
+        release = topic.latched_release
+        topic.latched = topic.latched_by = topic.latched_release = None
+        if release is not None:
+            release()
 
-    def subscribed(self, peer: Peer, sub: Subscription, type_name: str | None) -> Topic:
-        """Deliver topic ``sub.resolved`` to ``peer`` as its session's subscription ``sub``.
+    def take(self, name: str, type_name: str | None = None) -> Topic:
+        """Return topic ``name``, made if it does not exist; ``type_name`` fixes its type.
 
-        ``type_name`` (canonical, admitted) fixes the topic's type if nothing did yet.
+        Raises:
+            ProtocolError: the type string is malformed or conflicts with the topic's type.
         """
-        topic = self.topics.get(sub.resolved) or Topic(sub.resolved)
+        topic = self.topics.get(name) or Topic(name)
         if type_name:
             self._typed(topic, type_name)
-        self.topics[sub.resolved] = topic
-        topic.subscriptions[(peer, sub.topic)] = sub
-        self.generation += 1  # the options may have changed: plans are rebuilt
-        self.changes += 1
+        self.topics[name] = topic
         return topic
 
-    def unsubscribed(self, peer: Peer, sub: Subscription, gone: bool) -> None:
-        """A subscribe id of ``sub`` went; ``gone``: ``peer`` no longer receives the topic."""
-        self.generation += 1
+    def add_sink(self, topic: Topic, key: object, sink: Sink) -> None:
+        """Make ``sink`` the subscribers of front end ``key`` on ``topic`` (kept or replaced)."""
+        topic.sinks[key] = sink
+        self.topics[topic.name] = topic
         self.changes += 1
-        if not gone:
-            return
-        topic = self.topics.get(sub.resolved)
-        if topic is not None:
-            topic.subscriptions.pop((peer, sub.topic), None)
-            topic.plan = None  # holds the peer: drop it now, not at the next publish
+
+    def remove_sink(self, topic: Topic, key: object) -> None:
+        """Remove front end ``key``'s subscribers from ``topic`` (it has none left)."""
+        if topic.sinks.pop(key, None) is not None:
+            self.changes += 1
             self._forget_if_unused(topic)
 
     def subscribe_internal(
@@ -304,30 +301,34 @@ class TopicTable:
         for flush in self.flushers:
             flush()
 
-    def deliver(self, topic: Topic, out: Outgoing, now: float, source: Peer | None) -> None:
-        """Send ``out`` to every subscriber of ``topic`` and run the in-process callbacks.
+    def deliver(
+        self,
+        topic: Topic,
+        out: Outgoing,
+        now: float,
+        source: Peer | None,
+        *,
+        release: Callable[[], None] | None = None,
+    ) -> None:
+        """Hand ``out`` to every subscriber of ``topic``: taps, front ends, in-process nodes.
+
+        ``release``: what gives the publisher's cost of a latched message back when it goes
+        (another message replaces it, or its publisher leaves).
 
         Raises:
-            ProtocolError: an in-process subscriber refused the message (after every client
-                subscriber got it); the caller reports it to ``source``.
+            ProtocolError: an in-process subscriber refused the message (after every front end
+                got it); the caller reports it to ``source``.
         """
         self.now = now
         for tap in self.taps:
             tap(topic, out, source)
         if topic.latch:
-            if topic.latched_by is not None and topic.latched_by is not source:
-                topic.latched_by.session.unlatch(topic.name)
-            topic.latched = out
-            topic.latched_by = source
-        if topic.subscriptions:
-            default_limit = self.default_queue_length
-            if self.send_many is not None:
-                self._deliver_many(topic, out, now, default_limit, self.send_many)
-            else:
-                for (peer, _written), sub in topic.subscriptions.items():
-                    if sub.throttle_rate and not sub.admit(now):
-                        continue
-                    self.send_to(peer, sub, out, default_limit)
+            old = topic.latched_release
+            if old is not None and topic.latched_by is not source:
+                old()
+            topic.latched, topic.latched_by, topic.latched_release = out, source, release
+        for sink in topic.sinks.values():
+            sink.deliver(topic, out, now, source)
         refusal: ProtocolError | None = None
         for _node, callback in topic.internal:
             try:
@@ -340,73 +341,10 @@ class TopicTable:
             finally:
                 refusal = None  # no cycle through this frame: it holds the message
 
-    def _deliver_many(
-        self,
-        topic: Topic,
-        out: Outgoing,
-        now: float,
-        default_limit: int,
-        send_many: Callable[[Frame, SendEntries], None],
-    ) -> None:
-        """Deliver ``out`` along the topic's plan: one ``send_many`` per shared frame.
-
-        Frames are cached per (compression, topic spelling), so most subscribers share one;
-        throttled and fragmented subscriptions and encoding errors take the one-by-one path.
-        """
-        plan = topic.plan
-        if plan is None or plan.version != (self.generation, Session.epoch):
-            plan = topic.plan = self._plan(topic, default_limit)
-        for peer, sub in plan.one_by_one:
-            if sub.throttle_rate and not sub.admit(now):
-                continue
-            self.send_to(peer, sub, out, default_limit)
-        for compression, spelling, entries in plan.groups:
-            try:
-                frame = out.frame(compression, spelling)
-            except ProtocolError:
-                for peer, key, _limit in entries:
-                    self.send_to(peer, cast(Subscription, key), out, default_limit)
-                continue
-            send_many(frame, entries)
-
-    def _plan(self, topic: Topic, default_limit: int) -> _Plan:
-        groups: dict[tuple[str, str], SendEntries] = {}
-        one_by_one: list[tuple[Peer, Subscription]] = []
-        for (peer, _written), sub in topic.subscriptions.items():
-            fragmented = sub.fragment_size is not None or peer.session.fragment_size is not None
-            if sub.throttle_rate or fragmented:
-                one_by_one.append((peer, sub))
-                continue
-            entries = groups.setdefault((sub.compression, sub.topic), [])
-            entries.append((peer, sub, sub.queue_length or default_limit))
-        return _Plan(
-            (self.generation, Session.epoch),
-            [(c, t, entries) for (c, t), entries in groups.items()],
-            one_by_one,
-        )
-
-    def send_to(self, peer: Peer, sub: Subscription, out: Outgoing, default_limit: int) -> None:
-        """Encode ``out`` as ``sub`` wants it (cached) and queue it for ``peer``."""
-        try:
-            frame = out.frame(sub.compression, sub.topic)
-        except ProtocolError as err:
-            if sub.first_warning():  # once per subscription, not once per message
-                for reply in peer.session.status("error", f"subscribe {sub.topic}: {err}"):
-                    peer.send(reply.frame)
-            return
-        size = sub.fragment_size or peer.session.fragment_size
-        limit = sub.queue_length or default_limit
-        if size is not None and frame.text and len(frame.data) > size:
-            frag_id = f"{sub.topic}:{out.stamp[0]}.{out.stamp[1]:09d}"
-            for piece in split_frame(frame, size, frag_id):
-                peer.send(piece, sub, 0)
-            return
-        peer.send(frame, sub, limit)
-
-    def replay_latched(self, peer: Peer, topic: Topic, sub: Subscription) -> None:
-        """Send the latched message of ``topic`` to a new subscription."""
-        if topic.latched is not None:
-            self.send_to(peer, sub, topic.latched, self.default_queue_length)
+    def deliver_to(self, topic: Topic, out: Outgoing, now: float, peers: Collection[Peer]) -> None:
+        """Hand ``out`` to the subscriptions of ``peers`` on ``topic`` only (nothing latched)."""
+        for sink in topic.sinks.values():
+            sink.deliver(topic, out, now, None, peers)
 
     def listed(self) -> list[Topic]:
         """Return the topics that exist in the graph (typed), sorted by name."""

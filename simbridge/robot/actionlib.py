@@ -212,13 +212,10 @@ class ActionlibServer:
         if not self.private or goal.peer is None:
             self.graph.publish(topic, msg, now)
             return
-        topics = self.graph.topics
-        subs = [(p, s) for (p, _w), s in topic.subscriptions.items() if p is goal.peer]
-        if not subs:
+        if not topic.sinks:
             return
-        out = topics.outgoing(topic, msg, self.graph.stamp())
-        for peer, sub in subs:
-            topics.send_to(peer, sub, out, topics.default_queue_length)
+        topics = self.graph.topics
+        topics.deliver_to(topic, topics.outgoing(topic, msg, self.graph.stamp()), now, [goal.peer])
 
     def tick(self, now: float) -> None:
         """Publish /status when due and forget goals that ended long enough ago."""
@@ -230,7 +227,7 @@ class ActionlibServer:
         ended = [g for g in self.goals if g.done]
         for goal in ended[: max(0, len(ended) - STATUS_HISTORY)]:
             self.goals.remove(goal)
-        if self.status_topic.subscriptions:
+        if self.status_topic.sinks:
             status_list = [self._status(g) for g in self.goals]
             msg = {"header": self._header(), "status_list": status_list}
             self.graph.publish(self.status_topic, msg, now)

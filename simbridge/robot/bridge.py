@@ -292,12 +292,12 @@ class RobotBridge:
         sec, nanosec = g.stamp()
         stamp = _stamp(sec, nanosec)
         tf = self.tf
-        tf_wanted = bool(tf.subscriptions or tf.internal)
+        tf_wanted = tf.wanted()
         transforms = []
         for rt in self.robots.values():
-            odom_wanted = rt.odom.subscriptions or rt.odom.internal
+            odom_wanted = rt.odom.wanted()
             robot = rt.robot
-            if rt.truth.subscriptions or rt.truth.internal:
+            if rt.truth.wanted():
                 truth = _odometry(stamp, robot.frame("odom"), robot.frame("base_link"), robot.state)
                 g.publish(rt.truth, truth, now)
             if not (odom_wanted or tf_wanted):
@@ -367,7 +367,7 @@ class RobotBridge:
                     name=ROBOT_NODE.lstrip("/"),
                 )
             topic = rt.contact
-            if topic is not None and (topic.subscriptions or topic.internal):
+            if topic is not None and topic.wanted():
                 msg = {
                     "header": {"stamp": stamp, "frame_id": rt.robot.frame("odom")},
                     "robot": name,
@@ -382,7 +382,7 @@ class RobotBridge:
         """Raycast and publish the /scan of ``robots``, of those listened to, in one batch."""
         lidar = world_params(self.world).lidar
         increment = 2.0 * math.pi / lidar.rays
-        wanted = [rt for rt in robots if rt.scan.subscriptions or rt.scan.internal]
+        wanted = [rt for rt in robots if rt.scan.wanted()]
         if not wanted:
             return
         all_ranges = self.world.scans([rt.robot.name for rt in wanted])

@@ -90,7 +90,7 @@ class SimClock:
 
     def publish(self, now: float) -> None:
         """Publish ``/clock`` (when anyone listens)."""
-        if self.topic.subscriptions or self.topic.internal:
+        if self.topic.wanted():
             sec, nanosec = divmod(self.time_ns(), 1_000_000_000)
             self.graph.publish(self.topic, {"clock": {"sec": sec, "nanosec": nanosec}}, now)
 

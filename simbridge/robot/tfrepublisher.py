@@ -428,7 +428,7 @@ class TfRepublisher:
             return
         request.next_due = max(request.next_due + request.period, now)
         if request.topic is not None:
-            listening = bool(request.topic.subscriptions)
+            listening = bool(request.topic.sinks)
             if listening and not request.listened:
                 request.sent.clear()  # a (new) subscriber gets every transform once
             request.listened = listening
@@ -447,7 +447,7 @@ class TfRepublisher:
     def _expired(self, request: _Request, now: float) -> bool:
         topic = request.topic
         assert topic is not None
-        if topic.subscriptions or request.last_subscribed == -math.inf:
+        if topic.sinks or request.last_subscribed == -math.inf:
             request.last_subscribed = now
             return False
         if now - request.last_subscribed < request.timeout:

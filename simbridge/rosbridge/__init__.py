@@ -8,7 +8,6 @@ A client's :class:`Session` takes its ops and returns effects (:class:`Reply`,
 
 from __future__ import annotations
 
-from simbridge.rosbridge import cbor, png
 from simbridge.rosbridge.budget import GLOBAL_LIMITS, Limits, Pool, TokenBucket
 from simbridge.rosbridge.cbor import encode_cbor
 from simbridge.rosbridge.encoding import (
@@ -81,6 +80,3 @@ __all__ = [
     "split_frame",
     "status_frame",
 ]
-
-cbor.register()
-png.register()

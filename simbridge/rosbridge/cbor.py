@@ -34,7 +34,7 @@ if TYPE_CHECKING:
 # and module cost an idle server about 0.7 MB resident (issue 16); afterwards the import
 # statement is a dict lookup
 
-__all__ = ["TYPED_ARRAY_TAGS", "encode_cbor", "register"]
+__all__ = ["TYPED_ARRAY_TAGS", "encode_cbor", "encode_cbor_frame", "encode_cbor_raw_frame"]
 
 #: RFC 8746 tags of little-endian typed arrays, by numpy dtype character.
 TYPED_ARRAY_TAGS: dict[str, int] = {
@@ -102,14 +102,16 @@ def _publish(topic: str, body: bytes) -> Frame:
     return Frame(b"\xa3" + _ENVELOPE + encode_cbor(topic) + _MSG_KEY + body, False)
 
 
-def _encode_cbor(out: Outgoing, topic: str) -> Frame:
+def encode_cbor_frame(out: Outgoing, topic: str) -> Frame:
+    """Return the ``cbor`` publish frame of ``out`` (the CBOR body made once per message)."""
     body = out.cache.get("cbor")
     if body is None:
         body = out.cache["cbor"] = encode_cbor(out.msg)
     return _publish(topic, body)
 
 
-def _encode_cbor_raw(out: Outgoing, topic: str) -> Frame:
+def encode_cbor_raw_frame(out: Outgoing, topic: str) -> Frame:
+    """Return the ``cbor-raw`` publish frame of ``out`` (its CDR, made once, in CBOR)."""
     body = out.cache.get("cbor-raw")
     if body is None:
         if out.cdr is None:
@@ -123,9 +125,3 @@ def _encode_cbor_raw(out: Outgoing, topic: str) -> Frame:
             {"secs": secs, "nsecs": nsecs, "bytes": out.cdr()}
         )
     return _publish(topic, body)
-
-
-def register() -> None:
-    """Make ``cbor`` and ``cbor-raw`` available to every :class:`Outgoing`."""
-    Outgoing.encoders["cbor"] = _encode_cbor
-    Outgoing.encoders["cbor-raw"] = _encode_cbor_raw

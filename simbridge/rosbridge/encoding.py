@@ -21,6 +21,7 @@ import numpy as np
 import orjson
 
 from simbridge.errors import ProtocolError
+from simbridge.msgs.message import Outgoing
 
 
 __all__ = [
@@ -29,6 +30,8 @@ __all__ = [
     "Outgoing",
     "decode_frame",
     "encode_json",
+    "encode_none",
+    "json_body",
     "json_frame",
     "status_frame",
 ]
@@ -184,70 +187,18 @@ def _check_unicode(values: list[Any]) -> None:
 
 
 #: Builds the frame of a published message for one compression: ``(outgoing, topic) -> Frame``.
-Encoder = Callable[["Outgoing", str], Frame]
+Encoder = Callable[[Outgoing, str], Frame]
 
 
-def _encode_none(out: Outgoing, topic: str) -> Frame:
-    body = out.json_body()
+def json_body(out: Outgoing) -> bytes:
+    """Return the JSON of the message itself, computed once per message."""
+    body: bytes | None = out.cache.get("json")
+    if body is None:
+        body = out.cache["json"] = encode_json(out.msg)
+    return body
+
+
+def encode_none(out: Outgoing, topic: str) -> Frame:
+    """Return the JSON ``publish`` frame of ``out`` for the topic spelling ``topic``."""
     head = b'{"op":"publish","topic":' + orjson.dumps(topic) + b',"msg":'
-    return Frame(head + body + b"}", True)
-
-
-class Outgoing:
-    """A message published on a topic, encoded lazily and at most once per encoding.
-
-    Attributes:
-        topic: the resolved topic name it was published on.
-        msgtype: its canonical type, or ``None`` when the type is not known (passed through).
-        msg: the canonical message (see :mod:`simbridge.msgs.convert`).
-        stamp: (sec, nanosec) when it was published (cbor-raw's ``secs``/``nsecs``).
-        cdr: a function returning its CDR bytes, or ``None`` if the type is unknown.
-    """
-
-    #: Encoders by compression name; ``none`` is JSON, others are registered by extensions.
-    encoders: dict[str, Encoder] = {"none": _encode_none}
-
-    __slots__ = ("_body", "_frames", "cache", "cdr", "msg", "msgtype", "stamp", "topic")
-
-    def __init__(
-        self,
-        topic: str,
-        msgtype: str | None,
-        msg: Any,
-        stamp: tuple[int, int] = (0, 0),
-        cdr: Callable[[], bytes] | None = None,
-    ) -> None:
-        self.topic = topic
-        self.msgtype = msgtype
-        self.msg = msg
-        self.stamp = stamp
-        self.cdr = cdr
-        self._body: bytes | None = None
-        self._frames: dict[tuple[str, str], Frame] = {}
-        #: Per-encoding caches of encoders (e.g. the CBOR body shared by every topic spelling,
-        #: the PNG rows before the topic).
-        self.cache: dict[str, Any] = {}
-
-    def json_body(self) -> bytes:
-        """Return the JSON of the message itself, computed once."""
-        if self._body is None:
-            self._body = encode_json(self.msg)
-        return self._body
-
-    def frame(self, compression: str, topic: str) -> Frame:
-        """Return the publish frame for one compression and one topic spelling (cached).
-
-        Raises:
-            ProtocolError: the compression cannot encode this message (e.g. ``cbor-raw`` of an
-                unknown type), or is not available.
-        """
-        key = (compression, topic)
-        frame = self._frames.get(key)
-        if frame is None:
-            encoder = self.encoders.get(compression)
-            if encoder is None:
-                msg = f"compression '{compression}' is not available in this server"
-                raise ProtocolError(msg)
-            frame = encoder(self, topic)
-            self._frames[key] = frame
-        return frame
+    return Frame(head + json_body(out) + b"}", True)

@@ -53,6 +53,7 @@ from simbridge.rosbridge.admission import (
     Typed,
 )
 from simbridge.rosbridge.budget import Limits, Pool
+from simbridge.rosbridge.encoding import json_body
 from simbridge.rosbridge.ops import ClientId, Op, Refusal
 from simbridge.rosbridge.session import (
     Advertised,
@@ -66,6 +67,7 @@ from simbridge.rosbridge.session import (
     Unsubscribed,
     Withdrawn,
 )
+from simbridge.rosbridge.subscribers import Subscribers
 
 
 __all__ = ["Authenticator", "Rosbridge"]
@@ -100,9 +102,12 @@ class Rosbridge:
         pool: Pool | None = None,
         *,
         authenticator: Authenticator | None = None,
+        default_queue_length: int = 100,
     ) -> None:
         #: The robot's graph.
         self.graph = graph
+        #: The clients' subscriptions to the graph's topics, and how messages reach them.
+        self.subscribers = Subscribers(graph.topics, default_queue_length=default_queue_length)
         #: What each client may hold and do, and what all of them together may hold.
         self.limits = limits or Limits()
         self.pool = pool or Pool()
@@ -142,7 +147,7 @@ class Rosbridge:
         self.effects: dict[type, EffectHandler] = {
             Reply: lambda peer, e: peer.send(e.frame),
             Subscribed: self._subscribed,
-            Unsubscribed: lambda peer, e: graph.topics.unsubscribed(peer, e.sub, e.gone),
+            Unsubscribed: lambda peer, e: self.subscribers.unsubscribed(peer, e.sub, e.gone),
             Advertised: self._advertised,
             Unadvertised: lambda peer, e: graph.topics.unadvertise(e.name, peer, e.op_id),
             Unlatched: lambda peer, e: graph.topics.unlatched(peer, e.name),
@@ -285,11 +290,15 @@ class Rosbridge:
             topic = self.graph.topics.topics.get(name) or self.graph.topics.advertise(
                 name, admitted.type, peer, None
             )
-        out = self.graph.topics.outgoing(topic, admitted.msg, self.graph.stamp())
+        topics = self.graph.topics
+        out = topics.outgoing(topic, admitted.msg, self.graph.stamp())
         if op.latch or topic.latch:
-            peer.session.latch(name, len(out.json_body()))  # what later subscribers will cost
-            self.graph.topics.latch(topic)
-        self.graph.topics.deliver(topic, out, now, peer)
+            session = peer.session
+            session.latch(name, len(json_body(out)))  # what later subscribers will cost
+            topics.latch(topic)
+            topics.deliver(topic, out, now, peer, release=lambda: session.unlatch(name))
+            return
+        topics.deliver(topic, out, now, peer)
 
     def _subscribe(self, peer: Peer, admitted: Typed, now: float) -> None:
         self.apply(peer, peer.session.subscribe(admitted.op, admitted.type))
@@ -350,9 +359,9 @@ class Rosbridge:
     # -- effects ------------------------------------------------------------------------------
 
     def _subscribed(self, peer: Peer, effect: Subscribed) -> None:
-        topic = self.graph.topics.subscribed(peer, effect.sub, effect.type)
+        topic = self.subscribers.subscribed(peer, effect.sub, effect.type)
         if effect.new:
-            self.graph.topics.replay_latched(peer, topic, effect.sub)
+            self.subscribers.replay_latched(peer, topic, effect.sub)
 
     def _advertised(self, peer: Peer, effect: Advertised) -> None:
         self.graph.topics.advertise(

@@ -17,10 +17,10 @@ import zlib
 
 import orjson
 
-from simbridge.rosbridge.encoding import Frame, Outgoing
+from simbridge.rosbridge.encoding import Frame, Outgoing, encode_none, json_body
 
 
-__all__ = ["png_bytes", "register"]
+__all__ = ["encode_png_frame", "png_bytes"]
 
 _SIGNATURE = b"\x89PNG\r\n\x1a\n"
 
@@ -53,7 +53,8 @@ _TOPIC_ROOM = len(b',"topic":""}') + 256
 _HEAD = b'{"op":"publish","msg":'
 
 
-def _encode_png(out: Outgoing, topic: str) -> Frame:
+def encode_png_frame(out: Outgoing, topic: str) -> Frame:
+    """Return the ``png`` publish frame of ``out`` (the rows before the topic made once)."""
     """Return the ``png`` frame of ``out`` for one topic spelling, compressing the body once.
 
     The message's fields are written with the topic last (``JSON.parse`` does not care about
@@ -66,11 +67,11 @@ def _encode_png(out: Outgoing, topic: str) -> Frame:
     """
     name = orjson.dumps(topic)
     if len(name) > _TOPIC_ROOM - len(b',"topic":}'):  # not a ROS name: no shared layout
-        publish = out.frame("none", topic).data
+        publish = encode_none(out, topic).data
         return _png_frame(png_bytes(publish))
     shared = out.cache.get("png")
     if shared is None:
-        shared = out.cache["png"] = _SharedRows.of(_HEAD + out.json_body())
+        shared = out.cache["png"] = _SharedRows.of(_HEAD + json_body(out))
     return _png_frame(shared.png(b',"topic":' + name + b"}"))
 
 
@@ -119,8 +120,3 @@ class _SharedRows:
         end = deflate.compress(raw) + deflate.flush()
         idat = self.compressed + end + struct.pack(">I", zlib.adler32(raw, self.adler))
         return _SIGNATURE + self.header + _chunk(b"IDAT", idat) + _chunk(b"IEND", b"")
-
-
-def register() -> None:
-    """Make ``png`` available to every :class:`Outgoing`."""
-    Outgoing.encoders["png"] = _encode_png

@@ -100,7 +100,7 @@ def install_rosapi(graph: Graph) -> None:
         if topic is None:
             return []
         nodes = {node for node, _callback in topic.internal}
-        if topic.subscriptions:
+        if topic.sinks:
             nodes.add(BRIDGE_NODE)
         return sorted(nodes)
 

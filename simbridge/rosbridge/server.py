@@ -43,10 +43,10 @@ from websockets.typing import Origin
 from simbridge.app.guard import token_access
 from simbridge.app.settings import ServerSettings
 from simbridge.graph.access import Access
-from simbridge.graph.topics import SendEntries
 from simbridge.msgs.registry import generate_interfaces_soon
 from simbridge.rosbridge import Frame, SendQueue, Session, TokenBucket, status_frame
 from simbridge.rosbridge.front import Rosbridge
+from simbridge.rosbridge.subscribers import SendEntries
 from simbridge.web import HttpRequest, WebApp, parse_target
 
 
@@ -249,7 +249,7 @@ class BridgeServer:
         #: Clients with corked frames, and the callback that writes them.
         self._corked: list[Client] = []
         self._uncork_handle: asyncio.Handle | None = None
-        self.graph.topics.send_many = self._send_many
+        front.subscribers.send_many = self._send_many
 
     def _send_many(self, frame: Frame, entries: SendEntries) -> None:
         """Write ``frame`` to many subscribers that keep up, framed once for all.

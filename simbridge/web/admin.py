@@ -191,8 +191,9 @@ class _Admin:
         params = self.graph.params.node(ROBOT_NODE)
         subscribed: dict[object, set[str]] = {}
         for topic in self.graph.topics.topics.values():
-            for peer, _spelling in topic.subscriptions:
-                subscribed.setdefault(peer, set()).add(topic.name)
+            for sink in topic.sinks.values():
+                for peer in sink.peers():
+                    subscribed.setdefault(peer, set()).add(topic.name)
         clients: list[dict[str, Any]] = []
         drivers: dict[str, list[str]] = {}
         for c in sorted(self.clients(), key=lambda c: c.session.client_id):

@@ -239,7 +239,8 @@ async def test_admin_state_of_a_crowded_class_keeps_the_loop_at_20_hz(
             await ws.send("".join(json.dumps(s) for s in subs))
     topics = app.graph.topics.topics
     await wait_for(
-        lambda: sum(len(t.subscriptions) for t in topics.values()) >= 120 * 120, timeout=10
+        lambda: sum(len(sink) for t in topics.values() for sink in t.sinks.values()) >= 120 * 120,
+        timeout=10,
     )
     admin = f"Authorization: Bearer {ADMIN}\r\n"
     async with odom_watch(app, "/r1/odom", "ta-token") as watch:

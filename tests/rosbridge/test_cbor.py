@@ -6,6 +6,7 @@ import pytest
 
 from simbridge.errors import ProtocolError
 from simbridge.rosbridge import Outgoing, encode_cbor
+from simbridge.rosbridge.frames import publish_frame
 
 
 def test_values_decode_with_cbor2_and_arrays_are_rfc8746_typed_arrays() -> None:
@@ -46,16 +47,16 @@ def test_values_decode_with_cbor2_and_arrays_are_rfc8746_typed_arrays() -> None:
 def test_cbor_frames_are_binary_and_cbor_raw_needs_a_definition() -> None:
     """cbor: binary publish map; cbor-raw without CDR (unknown type): a clear error."""
     out = Outgoing("/x", None, {"data": np.zeros(36)}, (5, 6))
-    frame = out.frame("cbor", "x")
+    frame = publish_frame(out, "cbor", "x")
     assert frame.text is False
     message = cbor2.loads(frame.data)
     assert (message["op"], message["topic"], message["msg"]["data"].tag) == ("publish", "x", 86)
     with pytest.raises(ProtocolError, match="cbor-raw needs the message definition"):
-        out.frame("cbor-raw", "/x")
+        publish_frame(out, "cbor-raw", "/x")
     raw = Outgoing(
         "/x", "std_msgs/msg/String", {"data": "hi"}, (5, 6), lambda: b"\x00\x01\x00\x00cdr"
     )
-    body = cbor2.loads(raw.frame("cbor-raw", "/x").data)["msg"]
+    body = cbor2.loads(publish_frame(raw, "cbor-raw", "/x").data)["msg"]
     assert body == {"secs": 5, "nsecs": 6, "bytes": b"\x00\x01\x00\x00cdr"}
 
 

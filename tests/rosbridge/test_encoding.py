@@ -8,6 +8,7 @@ import pytest
 
 from simbridge.errors import ProtocolError
 from simbridge.rosbridge import Outgoing, decode_frame, encode_json, status_frame
+from simbridge.rosbridge.frames import publish_frame
 
 
 def test_non_finite_floats_are_sent_as_null_even_inside_arrays() -> None:
@@ -32,18 +33,18 @@ def test_float32_arrays_keep_their_shortest_float32_text() -> None:
 def test_publish_frame_is_encoded_once_per_encoding_and_topic_spelling() -> None:
     """Repeated requests for the same frame return the cached bytes object."""
     out = Outgoing("/odom", "nav_msgs/msg/Odometry", {"x": 1.0})
-    first = out.frame("none", "/odom")
-    assert out.frame("none", "/odom") is first
+    first = publish_frame(out, "none", "/odom")
+    assert publish_frame(out, "none", "/odom") is first
     assert json.loads(first.data) == {"op": "publish", "topic": "/odom", "msg": {"x": 1.0}}
     assert first.text
-    other = out.frame("none", "odom")
+    other = publish_frame(out, "none", "odom")
     assert json.loads(other.data)["topic"] == "odom"
 
 
 def test_unavailable_compression_is_a_protocol_error() -> None:
     """An encoder that does not exist is refused, not crashed on."""
     with pytest.raises(ProtocolError, match="not available"):
-        Outgoing("/x", None, {}).frame("lz77", "/x")
+        publish_frame(Outgoing("/x", None, {}), "lz77", "/x")
 
 
 def test_decode_accepts_text_and_utf8_binary_frames() -> None:

@@ -7,6 +7,7 @@ import struct
 import zlib
 
 from simbridge.rosbridge import Outgoing
+from simbridge.rosbridge.frames import publish_frame
 from simbridge.rosbridge.png import png_bytes
 
 
@@ -39,7 +40,7 @@ def test_png_layout_is_rosbridges() -> None:
 
 def test_png_frame_decodes_to_the_publish_message() -> None:
     """{"op": "png", "data": base64 PNG} in a text frame; the pixels are the JSON publish."""
-    frame = Outgoing("/t", None, {"data": "hello"}).frame("png", "t")
+    frame = publish_frame(Outgoing("/t", None, {"data": "hello"}), "png", "t")
     assert frame.text is True
     body = json.loads(frame.data)
     _w, _h, pixels = _pixels(base64.b64decode(body["data"]))
@@ -52,7 +53,7 @@ def test_every_spelling_of_a_topic_shares_one_compression_of_the_message() -> No
     The topic comes last in the message, so the shared rows are the same for every spelling.
     """
     out = Outgoing("/t", None, {"data": "x" * 100_000})
-    frames = {t: out.frame("png", t) for t in ("/t", "t", "/t/", "t/")}
+    frames = {t: publish_frame(out, "png", t) for t in ("/t", "t", "/t/", "t/")}
     shared = out.cache["png"]
     assert len(shared.compressed) > 0 and out.cache["png"] is shared
     for spelling, frame in frames.items():

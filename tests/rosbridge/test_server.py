@@ -117,7 +117,7 @@ async def test_disconnect_cleans_up_the_client(app: App) -> None:
     await wait_for(lambda: not app.server.clients)
     assert "/mine" not in app.graph.topics.topics
     assert "/my_srv" not in app.graph.services.services
-    assert not app.graph.topics.topics["/odom"].subscriptions
+    assert not app.graph.topics.topics["/odom"].sinks
 
 
 async def test_clients_over_max_clients_are_refused_with_503(make_app: AppFactory) -> None:
@@ -329,7 +329,7 @@ async def test_messages_of_one_turn_are_written_together_in_the_order_published(
     async with connect(ws_url(app)) as ws:
         await send_json(ws, {"op": "subscribe", "topic": "/corked_a"})
         await send_json(ws, {"op": "subscribe", "topic": "/corked_b"})
-        await wait_for(lambda: bool(a.subscriptions and b.subscriptions))
+        await wait_for(lambda: bool(a.sinks and b.sinks))
         (client,) = app.server.clients
         now = asyncio.get_running_loop().time()
         graph.publish(a, {"data": "1"}, now)

@@ -640,7 +640,7 @@ class DdsLink:
                     readers[topic.name] = (node, topic.type)
                     break
             else:
-                if topic.subscriptions:
+                if topic.sinks:
                     readers[topic.name] = (BRIDGE_NODE, topic.type)
         return writers, readers
 

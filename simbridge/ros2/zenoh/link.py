@@ -537,7 +537,7 @@ class ZenohLink:
             for node, callback in topic.internal:
                 if id(callback) not in self._marker_ids:
                     want[("MS", node, topic.name)] = ("MS", topic.type, DEFAULT_QOS)
-            if topic.subscriptions:
+            if topic.sinks:
                 want[("MS", BRIDGE_NODE, topic.name)] = ("MS", topic.type, DEFAULT_QOS)
         for service in self.graph.services.services.values():
             if service.provider is not None and isinstance(service.provider, _Provider):
@@ -935,7 +935,7 @@ class ZenohLink:
     def _clients_on(self, names: Iterable[str]) -> bool:
         """Whether a rosbridge client subscribes to one of these topics."""
         table = self.graph.topics.topics
-        return any((t := table.get(n)) is not None and t.subscriptions for n in names)
+        return any((t := table.get(n)) is not None and t.sinks for n in names)
 
     def _token_changed(self, token: str, alive: bool) -> Entity | None:
         """Record a remote token that appeared or went; return its entity if that changed."""
@@ -1186,7 +1186,7 @@ class ZenohLink:
                 continue  # ROS 2 may not publish it here: its samples are not even asked for
             # a rosbridge client's subscription only while ROS 2 publishes the topic
             local = any(id(cb) not in self._marker_ids for _n, cb in topic.internal)
-            if local or (topic.subscriptions and name in remote):
+            if local or (topic.sinks and name in remote):
                 wanted[name] = (topic.type, topic.latch, local)
         published: dict[str, set[str]] = {}
         for name in wanted:
