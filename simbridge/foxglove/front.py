@@ -5,7 +5,7 @@
 
 * **channels**: every typed topic of a type the registry knows, with its ``ros2msg`` schema
   (the full definition text) and CDR messages. The CDR bytes are the ones cached on the
-  delivery (:attr:`Outgoing.cdr <simbridge.rosbridge.Outgoing.cdr>`), shared with ``cbor-raw``
+  delivery (:attr:`Outgoing.cdr <simbridge.msgs.message.Outgoing.cdr>`), shared with ``cbor-raw``
   subscribers and Zenoh: serialized once, whatever the number of users. Topics are advertised
   when they appear (spawned robots, client-advertised topics) and unadvertised when they go
   (:meth:`FoxgloveFront.tick` compares the tables' change counters). A subscribed channel
@@ -13,10 +13,10 @@
   simulation publishes what only Foxglove listens to; a latched topic's message is sent again
   when a client subscribes (the SDK's Python API cannot send to one client, so the channel's
   other subscribers get it again too: latched topics are idempotent).
-* **client publish**: a client channel is a rosbridge ``advertise`` and each message a
-  ``publish`` of the client's own session, through :meth:`Graph.dispatch
-  <simbridge.graph.Graph.dispatch>`: the admission checks type, payload, rate and scope as for
-  any rosbridge client; a refusal becomes an SDK status message.
+* **client publish**: a client channel makes the client a publisher of its topic on the graph,
+  and each message is published there (:meth:`FoxgloveFront.message`) under the graph's rules
+  for every front end's peers: the client's scope (``graph.access``), its publish rate, the
+  topic's type, the payload validated against it; a refusal becomes an SDK status message.
 * **services**: every service of the graph with ``ros2msg`` request and response schemas; a
   call is a rosbridge ``call_service`` of the client's session (admission, pending-call
   budget, the service table: in-process handlers and client providers alike).
@@ -77,7 +77,7 @@ from typing import Any
 
 import orjson
 
-from simbridge.errors import ConfigError, ServiceError, SimbridgeError
+from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
 from simbridge.foxglove.mapping import (
     ADMIN_SCOPE,
     CLIENT_ENCODINGS,
@@ -94,6 +94,7 @@ from simbridge.graph.access import ANY_SCOPE, Access
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.rosbridge import Frame, Outgoing, Session, ops as o
+from simbridge.rosbridge.budget import TokenBucket
 from simbridge.rosbridge.front import Rosbridge
 
 
@@ -289,6 +290,9 @@ class _Client:
         self.channels: dict[int, tuple[str, str, str | None]] = {}
         #: Its calls waiting for the graph's answer: op id -> future.
         self.calls: dict[str, asyncio.Future[dict[str, Any]]] = {}
+        #: Its publish rate (``publish_rate``, ``publish_burst``).
+        settings = front.graph.settings
+        self.publishes = TokenBucket(settings.publish_rate, settings.publish_burst)
 
     @property
     def access(self) -> Access:
@@ -697,7 +701,7 @@ class FoxgloveFront:
     def advertised(
         self, client_id: int, channel_id: int, topic: str, encoding: str, schema: str
     ) -> None:
-        """A client advertised a channel: a rosbridge ``advertise`` of its session."""
+        """A client advertised a channel: it publishes ``topic`` (the graph's rules decide)."""
         client = self._client(client_id)
         limit = self.graph.settings.max_advertisements
         if len(client.channels) >= limit:  # each is an advertisement of the client's budget
@@ -721,44 +725,88 @@ class FoxgloveFront:
             type_name = known.type if known is not None else None
         client.channels[channel_id] = (topic, encoding, type_name)
         if type_name is not None:
-            op = o.Advertise(topic=topic, type=type_name, id=f"foxglove:{channel_id}")
-            self.rosbridge.dispatch(client, op, self._now())
+            self._advertise(client, channel_id, topic, type_name)
+
+    def _advertise(self, client: _Client, channel_id: int, topic: str, type_name: str) -> bool:
+        """Make ``client`` a publisher of ``topic`` on the graph; whether it may."""
+        refusal = self.graph.access.publish_refusal(client.access, topic)
+        try:
+            if refusal is not None:
+                raise ProtocolError(f"advertise {refusal}")
+            self.graph.topics.advertise(topic, type_name, client, f"foxglove:{channel_id}")
+        except ProtocolError as err:
+            self.status(f"{client.label}: {err}", "error")
+            return False
+        return True
 
     def unadvertised(self, client_id: int, channel_id: int) -> None:
-        """A client unadvertised a channel (or left): a rosbridge ``unadvertise``."""
+        """A client unadvertised a channel (or left): it no longer publishes its topic."""
         client = self._clients.get(client_id)
         if client is None:
             return
         entry = client.channels.pop(channel_id, None)
-        if entry is not None and entry[2] is not None:
-            op = o.Unadvertise(topic=entry[0], id=f"foxglove:{channel_id}")
-            self.rosbridge.dispatch(client, op, self._now())
+        if entry is not None:
+            self.graph.topics.unadvertise(entry[0], client, f"foxglove:{channel_id}")
         self._release(client)
 
     def message(self, client_id: int, channel_id: int, data: bytes) -> None:
-        """A client's message: a rosbridge ``publish`` of its session (admission decides)."""
+        """A client's message: published on the graph as the graph's rules allow.
+
+        The same rules as a rosbridge client's ``publish``: the client's scope (the graph's
+        access rules), its publish rate (``publish_rate``, once a guard authenticates the
+        peers), the topic's type, the payload validated and completed against it.
+        """
         client = self._clients.get(client_id)
         entry = client.channels.get(channel_id) if client is not None else None
         if client is None or entry is None:
             return
-        topic, encoding, type_name = entry
+        topic_name, encoding, type_name = entry
         self.stats["received"] += 1
+        now = self._now()
+        graph = self.graph
+        topics = graph.topics
         try:
+            refusal = graph.access.publish_refusal(client.access, topic_name)
+            if refusal is not None:
+                raise ProtocolError(f"publish {refusal}")
+            if graph.access.guarded and not client.publishes.take(now):
+                s = graph.settings
+                msg = (
+                    f"publish {topic_name}: dropped, more than {s.publish_rate:g} publishes per "
+                    f"second (the server's publish_rate, burst {s.publish_burst}); slow down"
+                )
+                raise ProtocolError(msg)
             if type_name is None:
-                known = self.graph.topics.topics.get(topic)
+                known = topics.topics.get(topic_name)
                 type_name = known.type if known is not None else None
+            if type_name is None:
+                msg = (
+                    f"publish: cannot infer the type of topic {topic_name}: it is not "
+                    "advertised; give the channel a schema name"
+                )
+                raise ProtocolError(msg)
             if encoding == MESSAGE_ENCODING:
-                if type_name is None:
-                    msg = f"publish {topic}: CDR needs a schema name (the topic has no type yet)"
-                    raise ServiceError(msg)
                 payload = plain(self.reader.read(type_name, data))
             else:
                 payload = orjson.loads(data)
-        except Exception as err:  # whatever the client sent: told, never raised
-            self.status(f"{client.label}: publish {topic}: cannot decode: {err}", "error")
+        except ProtocolError as err:
+            self.status(f"{client.label}: {err}", "error")
             return
-        op = o.Publish(topic=topic, msg=payload, type=type_name)
-        self.rosbridge.dispatch(client, op, self._now())
+        except Exception as err:  # whatever the client sent: told, never raised
+            self.status(f"{client.label}: publish {topic_name}: cannot decode: {err}", "error")
+            return
+        try:
+            topic = topics.topics.get(topic_name)
+            if topic is None or client not in topic.publishers:
+                if not self._advertise(client, channel_id, topic_name, type_name):
+                    return
+                entry = (topic_name, encoding, type_name)
+                client.channels[channel_id] = entry
+                topic = topics.topics[topic_name]
+            msg = topics.convert(topic, payload)
+            topics.deliver(topic, topics.outgoing(topic, msg, graph.stamp()), now, client)
+        except SimbridgeError as err:  # a payload that does not fit, a command refused
+            self.status(f"{client.label}: publish {topic_name}: {err}", "error")
 
     async def call(self, client_id: int, name: str, encoding: str, payload: bytes) -> bytes:
         """A client's service call: a rosbridge ``call_service`` of its session.
