@@ -339,7 +339,7 @@ class TfRepublisher:
         try:
             request = self._request(goal.args, goal.caller, f"goal of {REPUBLISHER_NODE}")
         except ServiceError as err:
-            goal.finish(ABORTED, str(err), result=False)
+            goal.finish(ABORTED, str(err), ok=False)
             return
         request.goal = goal
         self._add(request)
@@ -411,7 +411,7 @@ class TfRepublisher:
             self.graph.topics.unadvertise(request.topic.name, REPUBLISHER_NODE)
         self._remove(request)
         if request.goal is not None:
-            request.goal.finish(ABORTED, f"TF request failed: {cause}", result=False)
+            request.goal.finish(ABORTED, f"TF request failed: {cause}", ok=False)
         if request.al_goal is not None:
             text = f"TF request failed: {cause}"
             request.al_goal.finish(AL_ABORTED, {}, self.actionlib.now, text)

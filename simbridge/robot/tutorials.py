@@ -179,7 +179,7 @@ class TutorialNodes:
         else:
             refusal = self._refusal(order, goal.caller)
         if refusal is not None:
-            goal.finish(ABORTED, refusal, result=False)
+            goal.finish(ABORTED, refusal, ok=False)
             return
         run = _Run(max(order + 1, 2), self._now, [0, 1], goal=goal, field=field or "sequence")
         self._start(run)

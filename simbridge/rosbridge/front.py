@@ -43,15 +43,8 @@ from simbridge.graph.graph import Graph
 from simbridge.graph.services import service_response, typed_calls
 from simbridge.graph.topics import Peer
 from simbridge.rosbridge import ops as o
-from simbridge.rosbridge.admission import (
-    Admission,
-    Call,
-    GoalRequest,
-    GoalUpdate,
-    Publication,
-    Response,
-    Typed,
-)
+from simbridge.rosbridge.actions import ActionOps
+from simbridge.rosbridge.admission import Admission, Call, Publication, Response, Typed
 from simbridge.rosbridge.budget import Limits, Pool
 from simbridge.rosbridge.encoding import json_body
 from simbridge.rosbridge.ops import ClientId, Op, Refusal
@@ -114,14 +107,16 @@ class Rosbridge:
         #: Checks ``auth`` ops (``None``: the server takes none).
         self.authenticator = authenticator
         prepare, finish = typed_calls(graph.registry, graph.converter)
+        #: The action ops: their checks and handlers (:mod:`simbridge.rosbridge.actions`).
+        self.actions = ActionOps(self)
         #: Decides whether each op of a client is carried out.
         self.admission = Admission(
             graph.topics,
             graph.services,
-            graph.actions,
             graph.access,
             prepare=prepare,
             finish=finish,
+            checks=self.actions.checks(),
         )
         #: Op handlers by op class.
         self.handlers: dict[type, OpHandler] = {
@@ -135,13 +130,8 @@ class Rosbridge:
             o.AdvertiseService: self._advertise_service,
             o.UnadvertiseService: self._unadvertise_service,
             o.ServiceResponse: self._service_response,
-            o.AdvertiseAction: self._advertise_action,
-            o.UnadvertiseAction: self._unadvertise_action,
-            o.SendActionGoal: self._send_action_goal,
-            o.ActionFeedback: self._action_feedback,
-            o.ActionResult: self._action_result,
-            o.CancelActionGoal: self._cancel_action_goal,
             o.SetLevel: self._set_level,
+            **self.actions.handlers(),
         }
         #: How each effect of a session is carried out (see :meth:`apply`).
         self.effects: dict[type, EffectHandler] = {
@@ -248,7 +238,7 @@ class Rosbridge:
             )
             return
         if kind == "send_action_goal":
-            self.graph.actions.fail(peer, target, op_id, text)
+            self.actions.refused(peer, target, op_id, text)
             return
         cause = err.cause if isinstance(err, Refusal) else text[:120]
         if op is not None:
@@ -321,35 +311,6 @@ class Rosbridge:
     def _unadvertise_service(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:
         self.apply(peer, peer.session.withdraw("service", op.name))
 
-    def _advertise_action(self, peer: Peer, admitted: Typed, now: float) -> None:
-        op, type_name = admitted.op, admitted.type
-        assert type_name is not None
-        self.apply(peer, peer.session.provide("action", op.name, type_name, op.action, op.type))
-
-    def _unadvertise_action(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
-        self.apply(peer, peer.session.withdraw("action", op.name))
-
-    def _send_action_goal(self, peer: Peer, goal: GoalRequest, now: float) -> None:
-        op = goal.op
-        assert op is not None
-        self.graph.actions.submit(
-            peer,
-            goal.action,
-            goal.message,
-            op_id=op.id,
-            written=op.action,
-            feedback=op.feedback,
-            sent_type=op.action_type,
-            now=now,
-        )
-
-    def _action_feedback(self, peer: Peer, update: GoalUpdate, now: float) -> None:
-        update.goal.feedback(update.values)
-
-    def _action_result(self, peer: Peer, update: GoalUpdate, now: float) -> None:
-        assert isinstance(update.op, o.ActionResult)
-        self.graph.actions.result(update.goal, update.op, update.values)
-
     def _service_response(self, peer: Peer, response: Response, now: float) -> None:
         self.graph.services.respond(response.call, response.values, ok=response.ok)
 
@@ -372,13 +333,13 @@ class Rosbridge:
         if effect.kind == "service":
             self.graph.services.advertise(peer, effect.name, effect.type, effect.written)
         else:
-            self.graph.actions.provided(peer, effect)
+            self.actions.provided(peer, effect)
 
     def _withdrawn(self, peer: Peer, effect: Withdrawn) -> None:
         if effect.kind == "service":
             self.graph.services.unadvertise(peer, effect.name)
         else:
-            self.graph.actions.remove(peer, effect.name)
+            self.actions.withdrawn(peer, effect.name)
 
     def _auth(self, peer: Peer, op: o.Auth, now: float) -> None:
         if self.authenticator is None:
@@ -390,6 +351,3 @@ class Rosbridge:
             close = getattr(peer, "close_soon", None)
             if callable(close):
                 close(1008, "authentication failed")
-
-    def _cancel_action_goal(self, peer: Peer, op: o.CancelActionGoal, now: float) -> None:
-        self.graph.actions.cancel_own(peer, op.id, op.name)

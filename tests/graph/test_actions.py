@@ -1,222 +1,211 @@
+"""The graph's action table, protocol-neutral: servers, goals, their callers, a rule a test.
+
+The servers and callers here are what a front end or an in-process node gives the table (the
+:class:`ActionServer` and :class:`GoalClient` protocols), recording what they are handed.
+"""
+
 from __future__ import annotations
 
-import base64
-import json
 from typing import Any
 
 import pytest
 
-from simbridge.app.settings import ServerSettings
+from simbridge.errors import ServiceError
 from simbridge.graph import Graph
-from simbridge.rosbridge.rosapi import install_rosapi
-from tests.helpers import RecordingPeer, rosbridge_of
+from simbridge.graph.access import Access
+from simbridge.graph.actions import (
+    ABORTED,
+    CANCELED,
+    CANCELING,
+    EXECUTING,
+    SUCCEEDED,
+    Goal,
+)
+from simbridge.graph.services import caller
+
+
+FIB = "example_interfaces/action/Fibonacci"
+
+
+class Peer:
+    """A peer of some front end: who sent a goal, who provides an action."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.access = Access()
+
+
+class Server:
+    """An action server that records the goals and cancels it is handed."""
+
+    def __init__(self) -> None:
+        self.goals: list[Goal] = []
+        self.cancels: list[Goal] = []
+
+    def goal(self, goal: Goal) -> None:
+        self.goals.append(goal)
+
+    def cancel(self, goal: Goal) -> None:
+        self.cancels.append(goal)
+
+
+class Client:
+    """A goal's caller side that records its feedback and its result."""
+
+    def __init__(self) -> None:
+        self.feedbacks: list[Any] = []
+        self.results: list[tuple[int, Any, bool]] = []
+        self.released = 0
+
+    def feedback(self, values: Any) -> None:
+        self.feedbacks.append(values)
+
+    def result(self, status: int, values: Any, ok: bool) -> None:
+        self.results.append((status, values, ok))
+
+    def release(self) -> None:
+        self.released += 1
 
 
 @pytest.fixture
 def graph() -> Graph:
-    g = Graph()
-    install_rosapi(g)
-    return g
+    return Graph()
 
 
-def op(peer: RecordingPeer, graph: Graph, **body: Any) -> None:
-    rosbridge_of(graph).receive(peer, json.dumps(body), 0.0)
-
-
-def served(graph: Graph) -> tuple[RecordingPeer, RecordingPeer]:
-    server, caller = RecordingPeer(graph, "s"), RecordingPeer(graph, "c")
-    op(server, graph, op="advertise_action", action="fib", type="example_interfaces/Fibonacci")
-    return server, caller
-
-
-def test_goal_feedback_and_result_are_routed_by_id(graph: Graph) -> None:
-    """Goal completed with defaults; feedback and result reach the caller under its id."""
-    server, caller = served(graph)
-    op(
-        caller,
-        graph,
-        op="send_action_goal",
-        action="/fib",
-        action_type="x/Y",
-        args={},
-        id="g",
-        feedback=True,
+def send(graph: Graph, peer: Peer, name: str = "/fib", **kw: Any) -> tuple[Goal, Client]:
+    client = Client()
+    goal = graph.actions.submit(
+        peer,  # type: ignore[arg-type]
+        graph.actions.actions[name],
+        {"order": 3},
+        client,
+        release=client.release,
+        **kw,
     )
-    (goal,) = server.take()
-    assert goal["op"] == "send_action_goal" and goal["args"] == {"order": 0}
-    assert goal["action"] == "fib" and goal["feedback"] is True
-    op(server, graph, op="action_feedback", action="fib", id=goal["id"], values={"sequence": [0]})
-    op(
-        server,
-        graph,
-        op="action_result",
-        action="fib",
-        id=goal["id"],
-        values={},
-        status=4,
-        result=True,
-    )
-    feedback, result = caller.take()
-    assert feedback == {
-        "op": "action_feedback",
-        "action": "/fib",
-        "values": {"sequence": [0]},
-        "id": "g",
-    }
-    assert result == {
-        "op": "action_result",
-        "action": "/fib",
-        "values": {"sequence": []},
-        "status": 4,
-        "result": True,
-        "id": "g",
-    }
+    return goal, client
 
 
-def test_failures_are_answered_with_status(graph: Graph) -> None:
-    """Unknown action and bad goal: status 0; server gone: status 6, result false."""
-    server, caller = served(graph)
-    op(caller, graph, op="send_action_goal", action="/nope", action_type="a/B", id=1)
-    op(
-        caller,
-        graph,
-        op="send_action_goal",
-        action="/fib",
-        action_type="a/B",
-        args={"order": "x"},
-        id=2,
-    )
-    missing, bad = caller.take()
-    assert (missing["status"], missing["result"], missing["id"]) == (0, False, 1)
-    assert "does not exist" in missing["values"] and "order" in bad["values"]
-    op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=3)
-    rosbridge_of(graph).remove_peer(server)
-    (gone,) = caller.take()
-    assert (gone["status"], gone["result"]) == (6, False) and "unadvertised" in gone["values"]
+def cancel_goal(graph: Graph, peer: Peer, request: Any, name: str = "/fib") -> Any:
+    """Call ``<name>/_action/cancel_goal`` as ``peer`` (as a front end's call does)."""
+    handler = graph.services.services[f"{name}/_action/cancel_goal"].handler
+    assert handler is not None
+    token = caller.set(peer)  # type: ignore[arg-type]
+    try:
+        return handler(request)
+    finally:
+        caller.reset(token)
 
 
-def test_cancel_goal_service_cancels_all_or_one(graph: Graph) -> None:
-    """action_msgs CancelGoal: zero goal_info cancels every goal; a UUID just that goal."""
-    server, caller = served(graph)
-    for n in (1, 2):
-        op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=n)
-    server.take()
-    op(caller, graph, op="call_service", service="/fib/_action/cancel_goal", args={})
-    (reply,) = caller.take()
-    assert "id" not in reply and reply["values"]["return_code"] == 0
-    canceling = reply["values"]["goals_canceling"]
-    assert len(canceling) == 2 and len(base64.b64decode(canceling[0]["goal_id"]["uuid"])) == 16
-    assert [m["op"] for m in server.take()] == ["cancel_action_goal"] * 2
-    uuid_text = canceling[1]["goal_id"]["uuid"]
-    wrong = {"goal_info": {"goal_id": {"uuid": [1] * 16}}}
-    op(caller, graph, op="call_service", service="/fib/_action/cancel_goal", args=wrong, id="w")
-    assert caller.take()[0]["values"]["return_code"] == 2
-    one = {"goal_info": {"goal_id": {"uuid": uuid_text}}}
-    op(caller, graph, op="call_service", service="/fib/_action/cancel_goal", args=one, id="o")
-    assert len(caller.take()[0]["values"]["goals_canceling"]) == 1
+def test_a_goal_reaches_its_server_and_its_answers_reach_its_caller_once(graph: Graph) -> None:
+    server = Server()
+    graph.actions.add_server("/fib", FIB, "/tutorial", server)
+    goal, client = send(graph, Peer("c"), sent_type="x/Y")
+    assert server.goals == [goal] and goal.args == {"order": 3} and goal.sent_type == "x/Y"
+    assert goal.status == EXECUTING and len(goal.uuid) == 16 and graph.actions.goals
+    goal.feedback({"sequence": [0]})
+    goal.finish(SUCCEEDED, {"sequence": [0, 1]})
+    goal.finish(ABORTED, "again", ok=False)
+    goal.feedback({"sequence": [9]})
+    assert client.feedbacks == [{"sequence": [0]}]
+    assert client.results == [(SUCCEEDED, {"sequence": [0, 1]}, True)]
+    assert client.released == 1 and goal.done and not graph.actions.goals
 
 
-def test_caller_leaving_cancels_its_goals(graph: Graph) -> None:
-    """A disconnected caller's goals are cancelled at the server."""
-    server, caller = served(graph)
-    op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=1)
-    (goal,) = server.take()
-    rosbridge_of(graph).remove_peer(caller)
-    (cancel,) = server.take()
-    assert cancel == {"op": "cancel_action_goal", "id": goal["id"], "action": "fib"}
-    assert graph.actions.goals == {}
+def test_a_goal_keeps_the_uuid_its_sender_chose(graph: Graph) -> None:
+    graph.actions.add_server("/fib", FIB, "/tutorial", Server())
+    goal, _ = send(graph, Peer("c"), goal_uuid=bytes(range(16)))
+    assert goal.uuid == bytes(range(16))
 
 
-def test_unadvertise_action_fails_goals_and_removes_cancel_goal(graph: Graph) -> None:
-    """unadvertise_action: goals in flight fail (status 6), the hidden service goes away."""
-    server, caller = served(graph)
-    op(caller, graph, op="send_action_goal", action="/fib", action_type="a/B", id=1)
-    op(server, graph, op="unadvertise_action", action="fib")
-    (result,) = caller.take()
-    assert (result["status"], result["result"]) == (6, False)
+def test_a_provider_replaced_by_another_loses_the_name_and_its_goals_fail(graph: Graph) -> None:
+    first, second = Peer("a"), Peer("b")
+    lost: list[str] = []
+    graph.actions.provide(first, "/fib", FIB, "/n", Server(), lost=lambda: lost.append("a"))  # type: ignore[arg-type]
+    graph.actions.provide(first, "/fib", FIB, "/n", Server(), lost=lambda: lost.append("a"))  # type: ignore[arg-type]
+    assert lost == []  # re-provided by the same peer: still its own
+    goal, client = send(graph, Peer("c"))
+    graph.actions.provide(second, "/fib", FIB, "/n", Server())  # type: ignore[arg-type]
+    assert lost == ["a"] and graph.actions.actions["/fib"].provider is second
+    ((status, reason, ok),) = client.results
+    assert (status, ok) == (ABORTED, False) and "re-advertised" in reason and goal.done
+
+
+def test_only_its_provider_withdraws_an_action_and_its_goals_fail(graph: Graph) -> None:
+    provider = Peer("p")
+    graph.actions.provide(provider, "/fib", FIB, "/n", Server())  # type: ignore[arg-type]
+    _, client = send(graph, Peer("c"))
+    assert not graph.actions.withdraw(Peer("other"), "/fib")  # type: ignore[arg-type]
+    assert graph.actions.withdraw(provider, "/fib")  # type: ignore[arg-type]
+    ((status, reason, ok),) = client.results
+    assert (status, ok) == (ABORTED, False) and "unadvertised" in reason
     assert "/fib" not in graph.actions.actions
     assert "/fib/_action/cancel_goal" not in graph.services.services
-    op(server, graph, op="unadvertise_action", action="fib")
-    assert "not advertised" in server.take()[-1]["msg"]
+    assert not graph.actions.withdraw(provider, "/fib")  # type: ignore[arg-type]
 
 
-def test_unknown_action_type_passes_goals_and_results_through(graph: Graph) -> None:
-    """No definition: the goal (even a list) and the result values travel unchanged."""
-    server, caller = RecordingPeer(graph, "s"), RecordingPeer(graph, "c")
-    op(server, graph, op="advertise_action", action="/x", type="my_pkg/action/Thing")
-    op(
-        caller,
-        graph,
-        op="send_action_goal",
-        action="/x",
-        action_type="my_pkg/Thing",
-        args=[1],
-        id=1,
-    )
-    (goal,) = server.take()
-    assert goal["args"] == [1] and goal["action_type"] == "my_pkg/action/Thing"
-    op(
-        server,
-        graph,
-        op="action_result",
-        action="/x",
-        id=goal["id"],
-        values={"any": 1},
-        status=4,
-        result=True,
-    )
-    assert caller.take()[0]["values"] == {"any": 1}
+def test_a_caller_that_leaves_ends_its_goals_unanswered_and_servers_cancel(graph: Graph) -> None:
+    server = Server()
+    graph.actions.add_server("/fib", FIB, "/tutorial", server)
+    leaving, staying = Peer("l"), Peer("s")
+    gone, gone_client = send(graph, leaving)
+    kept, _ = send(graph, staying)
+    graph.actions.drop_peer(leaving)  # type: ignore[arg-type]
+    assert server.cancels == [gone] and gone.done and gone_client.results == []
+    assert gone_client.released == 1 and list(graph.actions.goals.values()) == [kept]
 
 
-def test_goal_list_args_follow_the_same_positional_rule_as_calls(graph: Graph) -> None:
-    """[5] is {order: 5}; [5, 6] has a value for no field: refused to the caller only."""
-    server, caller = served(graph)
-    send = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": "g"}
-    op(caller, graph, **send, args=[5])
-    (goal,) = server.take()
-    assert goal["args"] == {"order": 5}
-    op(caller, graph, **send, args=[5, 6])
-    assert server.take() == []
-    (refused,) = caller.take()
-    assert (
-        refused["result"] is False
-        and "1 fields (order), got 2 positional args" in refused["values"]
-    )
+def test_a_goal_to_a_peers_action_times_out_and_its_server_is_told(graph: Graph) -> None:
+    server = Server()
+    graph.actions.provide(Peer("p"), "/fib", FIB, "/n", server)  # type: ignore[arg-type]
+    goal, client = send(graph, Peer("c"), timeout=30.0, now=10.0)
+    graph.actions.expire(39.0)
+    assert client.results == []
+    graph.actions.expire(40.0)
+    ((status, reason, ok),) = client.results
+    assert (status, ok) == (ABORTED, False) and "within 30 s" in reason
+    assert server.cancels == [goal] and client.released == 1 and not graph.actions.deadlines
 
 
-def test_goals_are_counted_per_client_and_their_arguments_are_not_kept() -> None:
-    """Past max_pending_goals a goal fails by name; results give the budget back."""
-    graph = Graph(settings=ServerSettings(max_pending_goals=2))
-    server, caller = served(graph)
-    for k in range(3):
-        goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": f"g{k}"}
-        rosbridge_of(graph).receive(caller, json.dumps(goal), 0.0)
-    (refused,) = caller.take()
-    assert refused["id"] == "g2" and refused["result"] is False
-    assert "max_pending_goals" in refused["values"]
-    assert caller.session.pending_goals == 2 == rosbridge_of(graph).pool.used["pending_goals"]
-    assert all(g.args is None for g in graph.actions.goals.values())  # sent on, not kept
-    first = server.take()[0]
-    result = {"op": "action_result", "action": "fib", "id": first["id"], "values": {}}
-    rosbridge_of(graph).receive(server, json.dumps(result | {"status": 4, "result": True}), 0.0)
-    assert caller.session.pending_goals == 1
-    rosbridge_of(graph).remove_peer(caller)
-    assert rosbridge_of(graph).pool.used["pending_goals"] == 0 and not graph.actions.goals
+def test_a_goal_to_an_in_process_server_never_times_out(graph: Graph) -> None:
+    graph.actions.add_server("/fib", FIB, "/tutorial", Server())
+    goal, client = send(graph, Peer("c"), timeout=1.0, now=0.0)
+    graph.actions.expire(1e9)
+    assert not goal.done and client.results == [] and not graph.actions.deadlines
 
 
-def test_a_goal_without_result_times_out_and_is_cancelled() -> None:
-    """A client-served goal with no result after max_goal_timeout: aborted, server told."""
-    graph = Graph(settings=ServerSettings(max_goal_timeout=30.0))
-    server, caller = served(graph)
-    goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": "g"}
-    rosbridge_of(graph).receive(caller, json.dumps(goal), 10.0)
-    (sent,) = server.take()
-    graph.tick(39.0)
-    assert not caller.take()
-    graph.tick(40.0)
-    (result,) = caller.take()
-    assert result["id"] == "g" and result["result"] is False and result["status"] == 6
-    assert "max_goal_timeout" in result["values"]
-    (cancel,) = server.take()
-    assert cancel == {"op": "cancel_action_goal", "id": sent["id"], "action": "fib"}
-    assert caller.session.pending_goals == 0 and not graph.actions.deadlines
+def test_cancel_asks_the_server_once_and_the_goal_is_canceling(graph: Graph) -> None:
+    server = Server()
+    graph.actions.add_server("/fib", FIB, "/tutorial", server)
+    goal, client = send(graph, Peer("c"))
+    graph.actions.cancel(goal)
+    graph.actions.cancel(goal)
+    assert goal.status == CANCELING and server.cancels == [goal]
+    goal.finish(CANCELED, {"sequence": []})
+    graph.actions.cancel(goal)
+    assert server.cancels == [goal] and client.results[0][0] == CANCELED
+
+
+def test_cancel_goal_service_cancels_all_by_stamp_or_one_of_the_callers_own(graph: Graph) -> None:
+    server = Server()
+    graph.actions.add_server("/fib", FIB, "/tutorial", server)
+    me, other = Peer("me"), Peer("other")
+    first, _ = send(graph, me)
+    second, _ = send(graph, me)
+    theirs, _ = send(graph, other)
+    zero = {"goal_info": {"goal_id": {"uuid": bytes(16)}, "stamp": {"sec": 0, "nanosec": 0}}}
+    reply = cancel_goal(graph, me, zero)
+    assert reply["return_code"] == 0
+    assert [g["goal_id"]["uuid"] for g in reply["goals_canceling"]] == [first.uuid, second.uuid]
+    assert server.cancels == [first, second] and theirs.status == EXECUTING
+    unknown = {"goal_info": {"goal_id": {"uuid": bytes([1] * 16)}}}
+    assert cancel_goal(graph, me, unknown) == {"return_code": 2, "goals_canceling": []}
+    with pytest.raises(ServiceError, match="another client"):
+        cancel_goal(graph, me, {"goal_info": {"goal_id": {"uuid": list(theirs.uuid)}}})
+    one = {"goal_info": {"goal_id": {"uuid": theirs.uuid}}}
+    assert len(cancel_goal(graph, other, one)["goals_canceling"]) == 1
+    later, _ = send(graph, me)
+    sec, nanosec = first.stamp
+    early = {"goal_info": {"stamp": {"sec": sec - 1, "nanosec": nanosec}}}
+    assert cancel_goal(graph, me, early)["goals_canceling"] == [] and later.status == EXECUTING
+    with pytest.raises(ServiceError, match="GoalInfo"):
+        cancel_goal(graph, me, {"goal_info": {"goal_id": {"uuid": "x"}}})

@@ -12,7 +12,7 @@ from simbridge.errors import ProtocolError
 from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
 from simbridge.rosbridge import Refusal, ops as o
-from simbridge.rosbridge.admission import Call, GoalRequest, GoalUpdate, Publication, Response
+from simbridge.rosbridge.admission import Call, Publication, Response
 from simbridge.sim import World
 from tests.helpers import ROOT, RecordingPeer, rosbridge_of
 
@@ -132,24 +132,8 @@ def test_a_call_with_a_bad_request_or_to_no_service_is_refused_before_any_table(
     assert caller.session.pending_calls == 0
 
 
-def test_a_goal_is_admitted_with_its_action_and_its_message_validated() -> None:
-    graph = Graph()
-    server, client = RecordingPeer(graph), RecordingPeer(graph)
-    fib = {"op": "advertise_action", "action": "fib", "type": "example_interfaces/Fibonacci"}
-    op(server, graph, **fib)
-    send = o.SendActionGoal("fib", "example_interfaces/Fibonacci", args=[5], id="g")
-    goal = rosbridge_of(graph).admission.admit(client, send, 0.0)
-    assert isinstance(goal, GoalRequest) and goal.action is graph.actions.actions["/fib"]
-    assert goal.message == {"order": 5} and goal.op is send
-    bad = {"op": "send_action_goal", "action": "fib", "action_type": "x/Y", "id": "b"}
-    (answer,) = op(client, graph, **bad, args={"order": "many"})
-    assert answer["op"] == "action_result" and answer["status"] == 0
-    assert answer["values"].startswith("invalid goal for example_interfaces/action/Fibonacci")
-    assert server.take() == [] and graph.actions.goals == {}
-
-
-def test_a_providers_answers_are_admitted_validated_for_the_calls_and_goals_it_serves() -> None:
-    """service_response, action_feedback and action_result: read and checked before routing."""
+def test_a_providers_answers_are_admitted_validated_for_the_calls_it_serves() -> None:
+    """service_response: read and checked before routing."""
     graph = Graph()
     provider, caller, other = RecordingPeer(graph), RecordingPeer(graph), RecordingPeer(graph)
     op(
@@ -171,17 +155,3 @@ def test_a_providers_answers_are_admitted_validated_for_the_calls_and_goals_it_s
     assert isinstance(response, Response) and not response.ok
     assert response.values.startswith("service provider sent an invalid response")
     assert caller.take() == [] and len(graph.services.pending) == 1  # nothing routed yet
-
-    fib = {"op": "advertise_action", "action": "fib", "type": "example_interfaces/Fibonacci"}
-    op(provider, graph, **fib)
-    goal = {"op": "send_action_goal", "action": "fib", "action_type": "x/Y", "args": {"order": 2}}
-    op(caller, graph, **goal, id="g")
-    (sent,) = provider.take()
-    feedback = o.ActionFeedback("/fib", values={"sequence": [0]}, id=sent["id"])
-    update = rosbridge_of(graph).admission.admit(provider, feedback, 0.0)
-    assert isinstance(update, GoalUpdate) and update.values == {"sequence": [0]}
-    wrong = o.ActionFeedback("/fib", values={"order": 1}, id=sent["id"])
-    with pytest.raises(ProtocolError, match="action_feedback for /fib"):
-        rosbridge_of(graph).admission.admit(provider, wrong, 0.0)
-    with pytest.raises(ProtocolError, match="unknown or finished goal id"):
-        rosbridge_of(graph).admission.admit(other, feedback, 0.0)

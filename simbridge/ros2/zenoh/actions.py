@@ -12,92 +12,59 @@ any service or topic (``docs/design.md``, "Actions"):
 * ``/NAME/_action/feedback`` (``pkg/action/Foo_FeedbackMessage``: ``goal_id`` and ``feedback``);
 * ``/NAME/_action/status`` (``action_msgs/msg/GoalStatusArray``, transient local, depth 1).
 
+The bridge works on the graph's action table (:mod:`simbridge.graph.actions`) with canonical
+messages, CDR in and out: no rosbridge op, frame or JSON on its path.
+
 **Outward** (:class:`ActionBridge`, owned by :class:`simbridge.ros2.zenoh.link.ZenohLink`): every
 action of simbridge's graph (in-process servers such as ``/fibonacci`` and
-``/tf2_web_republisher``, and actions rosbridge clients advertise) is declared so; a ROS 2
-client's goal becomes a goal of the graph's action table under the client's own goal id, its
-feedback and result go back on the feedback topic and to ``get_result``, and ``cancel_goal`` is
-the graph's own cancel service. Finished results stay available for
+``/tf2_web_republisher``, and actions rosbridge clients advertise) is declared so. A ROS 2
+client's ``send_goal`` becomes a goal of the table (:meth:`ActionTable.submit
+<simbridge.graph.actions.ActionTable.submit>`) under the client's own goal id, sent by the link's
+peer (the ROS 2 side, as the guard's role for ROS 2 peers admits it) with a :class:`_Served` as
+its caller side: its feedback goes out on the feedback topic, its result to ``get_result``, and
+``cancel_goal`` is the graph's own cancel service. ROS 2 clients' goals in flight are counted
+against ``max_pending_goals`` (at most :data:`MAX_GOALS` per action), and a goal to an action a
+client serves is aborted after ``max_goal_timeout``. Finished results stay available for
 :data:`RESULT_KEEP` seconds (rcl_action's default ``result_timeout``), at most
 :data:`RESULT_HISTORY` per action.
 
 **Inward**: an action another rmw_zenoh process serves (its ``send_goal`` token) joins the
-graph's action table, so rosapi lists it and rosbridge clients send goals, get feedback and
-results, and cancel; goals become ``send_goal`` and ``get_result`` queries, cancels
-``cancel_goal`` queries, and the feedback topic is subscribed while the action exists.
+graph's action table as provided by the link's peer, served by a :class:`_RemoteAction`, so
+rosapi lists it and rosbridge clients send goals, get feedback and results, and cancel; goals
+become ``send_goal`` and ``get_result`` queries, cancels ``cancel_goal`` queries, and the feedback
+topic is subscribed while the action exists.
 """
 
 from __future__ import annotations
 
-import itertools
 import logging
 import math
 import time
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from functools import partial
 from typing import TYPE_CHECKING, Any, Protocol
 
-import orjson
-
-from simbridge.errors import ConversionError, ProtocolError, SimbridgeError, TypeNotFoundError
-from simbridge.graph.access import Access
+from simbridge.errors import SimbridgeError, TypeNotFoundError
 from simbridge.graph.actions import ABORTED, CANCELED, SUCCEEDED, UNKNOWN, Action, Goal
-from simbridge.ros2.names import DEFAULT_QOS, LATCHED_QOS, Entity, Qos, dds_type
+from simbridge.ros2.names import DEFAULT_QOS, LATCHED_QOS, Entity, Qos
 from simbridge.ros2.zenoh.attachment import Attachment
-from simbridge.rosbridge import Frame, Session
 
 
 if TYPE_CHECKING:
-    import asyncio
     from collections import Counter
 
-    from simbridge.graph import Graph
+    from simbridge.graph import Graph, Peer
     from simbridge.msgs.cdr import CdrWriter
-    from simbridge.ros2.zenoh.config import ZenohOptions
-
-
-class ZenohLink(Protocol):
-    """What the bridge uses of :class:`simbridge.ros2.zenoh.link.ZenohLink`, which owns the bridge.
-
-    Named here as a protocol so that the two modules do not import each other.
-    """
-
-    graph: Graph
-    options: ZenohOptions
-    cdr: CdrWriter
-    stats: Counter[str]
-    session: Any
-    zenoh: Any
-    zid: str
-    _loop: asyncio.AbstractEventLoop | None
-    _declared: dict[tuple[str, str, str], Any]
-    _caller: Any
-    rosbridge: Any
-
-    def _decode(self, type_name: str, payload: bytes) -> Any: ...
-    def _reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None: ...
-    def _fail_query(self, query: Any, text: str) -> None: ...
-    def _put_bytes(self, entry: Any, payload: bytes, *, count: bool = False) -> bool: ...
-    def _log(self, key: str, text: str) -> None: ...
-    def _note(self, key: str, text: str) -> None: ...
-    def hand_over(self, take: Any, name: str, payload: Any) -> None: ...
-    def client_attachment(self, entity: Entity, sequence: int) -> bytes: ...
-    def _query(
-        self,
-        entity: Entity,
-        payload: bytes,
-        attachment: bytes,
-        timeout: float,
-        done: Callable[[list[tuple[bool, bytes]]], None],
-    ) -> None: ...
 
 
 __all__ = [
     "CANCEL_TYPE",
+    "MAX_GOALS",
     "RESULT_HISTORY",
     "RESULT_KEEP",
     "STATUS_TYPE",
     "ActionBridge",
+    "ActionLink",
     "split_action",
 ]
 
@@ -120,6 +87,64 @@ CALL_TIMEOUT = 10.0
 RESULT_TIMEOUT = 7 * 24 * 3600.0
 
 
+class ActionLink(Protocol):
+    """What the bridge uses of its :class:`~simbridge.ros2.zenoh.link.ZenohLink` (public API).
+
+    Named here as a protocol so that the two modules do not import each other.
+    """
+
+    #: The graph mapped onto ROS 2.
+    graph: Graph
+    #: The link's counters (``bad_payloads``, ``unknown_types``, ...).
+    stats: Counter[str]
+    #: Writes canonical messages as CDR.
+    cdr: CdrWriter
+
+    @property
+    def peer(self) -> Peer:
+        """The ROS 2 side as one peer of the graph (its access is the ROS 2 peers' role)."""
+
+    def now(self) -> float:
+        """Return the event loop's monotonic time (the graph's ``now``)."""
+
+    def decode(self, type_name: str, payload: bytes) -> Any:
+        """Return the canonical message of CDR bytes (raises whatever the reader raises)."""
+
+    def reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None:
+        """Reply to a query from ROS 2 with a canonical response message."""
+
+    def fail(self, query: Any, text: str) -> None:
+        """Reply to a query from ROS 2 with an error."""
+
+    def publish(self, node: str, name: str, payload: bytes) -> bool:
+        """Publish CDR bytes on the publisher of ``name`` declared under ``node``, if any."""
+
+    def subscribe(
+        self, name: str, type_name: str, take: Callable[[bytes], None]
+    ) -> Callable[[], None] | None:
+        """Subscribe to the remote publishers of ``name``; return the undeclare (None: failed).
+
+        Samples reach ``take`` on the event loop, within the link's inbox budgets.
+        """
+
+    def query(
+        self,
+        entity: Entity,
+        request_type: str,
+        request: Any,
+        timeout: float,
+        on_reply: Callable[[bytes], None],
+        on_error: Callable[[str], None],
+    ) -> None:
+        """Send a canonical request to a remote service; call back on the event loop."""
+
+    def log(self, key: str, text: str) -> None:
+        """Log a warning at most once in a while per ``key``."""
+
+    def note(self, key: str, text: str) -> None:
+        """Count a name clash; log it once."""
+
+
 def split_action(name: str) -> tuple[str, str] | None:
     """Split ``/NAME/_action/PART`` into (``/NAME``, ``PART``); None for any other name."""
     head, sep, part = name.rpartition(_INFIX)
@@ -128,61 +153,71 @@ def split_action(name: str) -> tuple[str, str] | None:
     return head, part
 
 
-@dataclass(eq=False, slots=True)
 class _Served:
-    """A goal a ROS 2 client sent to an action of this process."""
+    """A goal a ROS 2 client sent to an action of this process: the goal's caller side."""
 
-    action: str
-    uuid: bytes
-    goal: Goal | None = None
-    status: int = UNKNOWN
-    #: The result message (canonical) once the goal has ended.
-    result: Any = None
-    ended: float = math.inf
-    #: ``get_result`` queries waiting for the end: (query, request attachment).
-    waiters: list[tuple[Any, Attachment]] = field(default_factory=list)
+    __slots__ = ("bridge", "ended", "goal", "message", "name", "status", "uuid", "waiters")
+
+    def __init__(self, bridge: ActionBridge, name: str, goal_uuid: bytes) -> None:
+        self.bridge = bridge
+        self.name = name
+        self.uuid = goal_uuid
+        self.goal: Goal | None = None
+        self.status = UNKNOWN
+        #: The result message (canonical) once the goal has ended (None: the default).
+        self.message: Any = None
+        self.ended = math.inf
+        #: ``get_result`` queries waiting for the end: (query, request attachment).
+        self.waiters: list[tuple[Any, Attachment]] = []
 
     @property
     def done(self) -> bool:
         return self.ended != math.inf
 
+    def feedback(self, values: Any) -> None:
+        """Publish the feedback on ``NAME/_action/feedback``."""
+        self.bridge._feedback(self, values)
 
-class _ActionProvider:
-    """The peer that serves a remote ROS 2 action to the graph (goals become queries)."""
+    def result(self, status: int, values: Any, ok: bool) -> None:
+        """Keep the result for ``get_result`` and answer those waiting."""
+        self.bridge._ended(self, status, values, ok)
 
-    def __init__(self, bridge: ActionBridge, session: Session, name: str, type_name: str) -> None:
+
+class _RemoteAction:
+    """An action another ROS 2 process serves, as the graph's server of it (goals -> queries)."""
+
+    __slots__ = ("bridge", "name", "node", "parts", "type", "unsubscribe")
+
+    def __init__(self, bridge: ActionBridge, name: str, type_name: str, node: str) -> None:
         self.bridge = bridge
-        self.session = session
         self.name = name
         self.type = type_name
+        self.node = node
         #: The remote entities: "send_goal", "get_result", "cancel_goal", "feedback".
         self.parts: dict[str, Entity] = {}
-        self.node = ""
-        self.label = f"ROS 2 action {name} (Zenoh)"
-        self.subscriber: Any = None
+        self.unsubscribe: Callable[[], None] | None = None
 
-    @property
-    def access(self) -> Access:
-        """Who the peer is for the graph's rules (its session's access)."""
-        return self.session.access
+    def goal(self, goal: Goal) -> None:
+        """Send the goal as a ``send_goal`` query, then wait for it with ``get_result``."""
+        self.bridge._send_remote(self, goal)
 
-    def send(self, frame: Frame, key: object = None, limit: int = 0) -> None:
-        self.bridge._provider_frame(self, orjson.loads(frame.data))
+    def cancel(self, goal: Goal) -> None:
+        """Send a ``cancel_goal`` query for the goal."""
+        self.bridge._cancel_remote(self, goal)
 
 
 class ActionBridge:
     """Actions between simbridge's graph and the ROS 2 graph (see the module doc)."""
 
-    def __init__(self, link: ZenohLink) -> None:
+    def __init__(self, link: ActionLink) -> None:
         self.link = link
         self.graph = link.graph
-        #: Outward: goals of ROS 2 clients by the op id the graph answers under.
-        self._served: dict[str, _Served] = {}
-        self._by_uuid: dict[tuple[str, bytes], _Served] = {}
-        self._ids = itertools.count(1)
+        #: Outward: goals of ROS 2 clients, by (action, goal UUID).
+        self._served: dict[tuple[str, bytes], _Served] = {}
+        #: Goals of ROS 2 clients in flight (against ``max_pending_goals``).
+        self.pending = 0
         #: Inward: remote actions in the graph, by name.
-        self.imported: dict[str, _ActionProvider] = {}
-        self._calls = itertools.count(1)
+        self.imported: dict[str, _RemoteAction] = {}
 
     # -- outward: declarations ------------------------------------------------------------
 
@@ -193,9 +228,10 @@ class ActionBridge:
         """
         want: dict[tuple[str, str, str], tuple[str, str, Qos]] = {}
         registry = self.graph.registry
+        ros2 = self.link.peer
         for action in self.graph.actions.actions.values():
-            if isinstance(action.provider, _ActionProvider):
-                continue
+            if action.provider is ros2:
+                continue  # another process's action, in the graph
             try:
                 send_goal, get_result, feedback = registry.action_wire(action.type)
             except TypeNotFoundError:
@@ -225,104 +261,108 @@ class ActionBridge:
         parts = split_action(name)
         assert parts is not None
         action_name, part = parts
+        link = self.link
         action = self.graph.actions.actions.get(action_name)
         if action is None:
-            self.link._fail_query(query, f"action {action_name} does not exist (any more)")
+            link.fail(query, f"action {action_name} does not exist (any more)")
             return
         request_type, response_type = self.graph.registry.service(type_name)
+        if type_name not in self._wire(action.type):
+            link.fail(query, f"action {action_name} is of type {action.type} now")
+            return
         try:
             payload = bytes(query.payload.to_bytes()) if query.payload is not None else b""
-            request = self.link._decode(request_type, payload)
+            request = link.decode(request_type, payload)
             goal_id = bytes(request["goal_id"]["uuid"])
         except Exception as err:  # whatever the network sent: reported, never raised
-            self.link.stats["bad_payloads"] += 1
-            text = f"{name}: request is not CDR of {request_type}: {err}"
-            self.link._fail_query(query, text)
+            link.stats["bad_payloads"] += 1
+            link.fail(query, f"{name}: request is not CDR of {request_type}: {err}")
             return
         if part == "send_goal":
-            self._send_goal(action, request, goal_id, query, response_type, attachment)
+            self._send_goal(action, request["goal"], goal_id, query, response_type, attachment)
         else:
             self._get_result(action, goal_id, query, response_type, attachment)
+
+    def _wire(self, action_type: str) -> tuple[str, ...]:
+        try:
+            return self.graph.registry.action_wire(action_type)
+        except TypeNotFoundError:
+            return ()
 
     def _send_goal(
         self,
         action: Action,
-        request: Any,
+        message: Any,
         goal_id: bytes,
         query: Any,
         response_type: str,
         attachment: Attachment,
     ) -> None:
         name = action.name
+        link = self.link
 
         def answer(accepted: bool, stamp: tuple[int, int] = (0, 0)) -> None:
             msg = {"accepted": accepted, "stamp": {"sec": stamp[0], "nanosec": stamp[1]}}
-            self.link._reply(query, response_type, msg, attachment)
+            link.reply(query, response_type, msg, attachment)
 
-        mine = [s for s in self._served.values() if s.action == name and not s.done]
-        # the scope rule of a rosbridge client's send_action_goal, for the ROS 2 peers' role
-        refusal = self.graph.access.reach_refusal(self.link._caller.access, name)
-        if refusal is None and (name, goal_id) in self._by_uuid:
+        settings = self.graph.settings
+        # the graph's rule for a goal (not another robot's action), for the ROS 2 peers' role
+        refusal = self.graph.access.reach_refusal(link.peer.access, name)
+        if refusal is None and (name, goal_id) in self._served:
             refusal = f"goal id {goal_id.hex()} is in use"
-        elif refusal is None and len(mine) >= MAX_GOALS:
+        elif refusal is None and self.pending >= settings.max_pending_goals:
+            refusal = (
+                f"{settings.max_pending_goals} goals of ROS 2 clients in flight already (the "
+                "server's max_pending_goals)"
+            )
+        elif refusal is None and (
+            sum(1 for s in self._served.values() if s.name == name and not s.done) >= MAX_GOALS
+        ):
             refusal = f"{MAX_GOALS} goals of ROS 2 clients in flight already"
         if refusal is not None:
-            self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {refusal}")
+            link.log(f"goal {name}", f"Zenoh: goal for {name} rejected: {refusal}")
             answer(False)
             return
-        op_id = f"zenoh-goal:{next(self._ids)}"
-        served = _Served(name, goal_id)
-        self._served[op_id] = served
-        self._by_uuid[(name, goal_id)] = served
-        args = orjson.loads(_json(request["goal"]))
-        try:
-            admitted = self.link.rosbridge.admission.goal(name, args)  # the goal validated
-        except ProtocolError as err:
-            self._forget(op_id)
-            self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {err}")
-            answer(False)
-            return
-        loop = self.link._loop
-        try:
-            # counted as a rosbridge client's goal: against the ROS 2 peers' max_pending_goals
-            # and global_pending_goals, and aborted after max_goal_timeout when a client serves
-            # the action (one that never answered held ROS 2's goals for ever)
-            outcome = self.graph.actions.submit(
-                self.link._caller,
-                admitted.action,
-                admitted.message,
-                op_id=op_id,
-                written=name,
-                feedback=True,
-                goal_uuid=goal_id,
-                now=loop.time() if loop is not None else 0.0,
-            )
-        except ProtocolError as err:
-            self._forget(op_id)
-            self.link._log(f"goal {name}", f"Zenoh: goal for {name} rejected: {err}")
-            answer(False)
-            return
-        served.goal = outcome
+        served = _Served(self, name, goal_id)
+        self._served[(name, goal_id)] = served
+        self.pending += 1
+        # the message is canonical and complete: CDR of the goal type; a goal to an action a
+        # client serves is aborted after max_goal_timeout (one that never answered held ROS 2's
+        # goals for ever)
+        goal = self.graph.actions.submit(
+            link.peer,
+            action,
+            message,
+            served,
+            goal_uuid=goal_id,
+            release=self._release,
+            timeout=settings.max_goal_timeout,
+            now=link.now(),
+        )
+        served.goal = goal
         if not served.done:
-            served.status = outcome.status
-        answer(True, outcome.stamp)
+            served.status = goal.status
+        answer(True, goal.stamp)
         self.publish_status(name)
+
+    def _release(self) -> None:
+        self.pending -= 1
 
     def _get_result(
         self, action: Action, goal_id: bytes, query: Any, response_type: str, attachment: Attachment
     ) -> None:
-        served = self._by_uuid.get((action.name, goal_id))
+        served = self._served.get((action.name, goal_id))
         if served is None:  # as rcl_action: an unknown goal's result is status UNKNOWN
             self._answer_result(action.type, UNKNOWN, None, query, response_type, attachment)
             return
         if served.done:
             self._answer_result(
-                action.type, served.status, served.result, query, response_type, attachment
+                action.type, served.status, served.message, query, response_type, attachment
             )
             return
         if len(served.waiters) >= MAX_WAITERS:
             text = f"{MAX_WAITERS} get_result calls wait for this goal already"
-            self.link._fail_query(query, text)
+            self.link.fail(query, text)
             return
         served.waiters.append((query, attachment))
 
@@ -336,73 +376,70 @@ class ActionBridge:
         attachment: Attachment,
     ) -> None:
         if result is None:
-            result = self._default(self.graph.registry.action(action_type)[1])
-        self.link._reply(query, response_type, {"status": status, "result": result}, attachment)
+            result = self.graph.converter.default(self.graph.registry.action(action_type)[1])
+        self.link.reply(query, response_type, {"status": status, "result": result}, attachment)
 
-    def _default(self, type_name: str) -> Any:
-        return self.graph.converter.from_json(type_name, {})
+    def _complete(self, type_name: str, values: Any) -> Any:
+        """Return ``values`` with the fields a server left out at their defaults."""
+        if not isinstance(values, dict):
+            return self.graph.converter.default(type_name)
+        fields = self.graph.registry.spec(type_name).fields
+        if all(f.name in values for f in fields):
+            return values
+        return {**self.graph.converter.default(type_name), **values}
 
     # -- outward: the graph's answers to ROS 2 goals ----------------------------------------
 
-    def goal_event(self, body: dict[str, Any]) -> None:
-        """Handle an ``action_feedback`` or ``action_result`` the graph sent a ROS 2 goal."""
-        served = self._served.get(str(body.get("id")))
-        if served is None:
+    def _feedback(self, served: _Served, values: Any) -> None:
+        goal = served.goal
+        if goal is None or served.done:
             return
-        action = self.graph.actions.actions.get(served.action)
-        if body.get("op") == "action_feedback":
-            if action is not None and not served.done:
-                self._feedback(action, served, body.get("values"))
+        action = goal.action
+        registry = self.graph.registry
+        try:
+            feedback_type = registry.action(action.type)[2]
+            message_type = registry.action_wire(action.type)[2]
+            msg = {
+                "goal_id": {"uuid": served.uuid},
+                "feedback": self._complete(feedback_type, values),
+            }
+            payload = self.link.cdr.serialize(message_type, msg)
+        except Exception as err:  # feedback its CDR type cannot hold: skipped, said once
+            self.link.log(f"feedback {action.name}", f"Zenoh: {action.name} feedback: {err}")
             return
-        ok = body.get("result") is not False
-        status = int(body.get("status") or 0) if ok else ABORTED
-        if status not in (SUCCEEDED, CANCELED, ABORTED):
+        self.link.publish(action.node, action.name + _INFIX + "feedback", payload)
+
+    def _ended(self, served: _Served, status: int, values: Any, ok: bool) -> None:
+        if not ok or status not in (SUCCEEDED, CANCELED, ABORTED):
             status = ABORTED
+        action = served.goal.action if served.goal is not None else None
         result = None
         if ok and action is not None:
             try:
                 result_type = self.graph.registry.action(action.type)[1]
-                result = self.graph.converter.from_json(result_type, body.get("values") or {})
-            except (ConversionError, TypeNotFoundError) as err:
-                self.link._log(f"result {served.action}", f"Zenoh: {served.action}: {err}")
-                status = ABORTED
-        served.status, served.result = status, result
+                result = self._complete(result_type, values)
+                self.link.cdr.serialize(result_type, result)  # checked once, for every waiter
+            except Exception as err:  # a result its CDR type cannot hold: the goal aborted
+                self.link.log(f"result {served.name}", f"Zenoh: {served.name}: {err}")
+                status, result = ABORTED, None
+        served.status, served.message = status, result
         served.ended = time.monotonic()
         if action is not None:
             response_type = self.graph.registry.action_wire(action.type)[1] + "_Response"
             for query, attachment in served.waiters:
                 self._answer_result(action.type, status, result, query, response_type, attachment)
         served.waiters.clear()
-        self._prune(served.action)
-        self.publish_status(served.action)
-
-    def _feedback(self, action: Action, served: _Served, values: Any) -> None:
-        try:
-            feedback_type = self.graph.registry.action(action.type)[2]
-            message_type = self.graph.registry.action_wire(action.type)[2]
-            msg = {
-                "goal_id": {"uuid": served.uuid},
-                "feedback": self.graph.converter.from_json(feedback_type, values or {}),
-            }
-            payload = self.link.cdr.serialize(message_type, msg)
-        except SimbridgeError as err:
-            self.link._log(f"feedback {action.name}", f"Zenoh: {action.name} feedback: {err}")
-            return
-        entry = self.link._declared.get(("MP", action.node, action.name + _INFIX + "feedback"))
-        if entry is not None:
-            self.link._put_bytes(entry, payload, count=True)
+        self._prune(served.name)
+        self.publish_status(served.name)
 
     def publish_status(self, name: str) -> None:
         """Publish ``NAME/_action/status``: every goal in flight and the ROS 2 goals kept."""
         action = self.graph.actions.actions.get(name)
         if action is None:
             return
-        entry = self.link._declared.get(("MP", action.node, name + _INFIX + "status"))
-        if entry is None:
-            return
         listed: dict[bytes, dict[str, Any]] = {}
         for served in self._served.values():
-            if served.action == name and served.goal is not None:
+            if served.name == name and served.goal is not None:
                 status = served.status if served.done else served.goal.status
                 listed[served.uuid] = _status(served.uuid, served.goal.stamp, status)
         for goal in self.graph.actions.goals.values():
@@ -412,9 +449,9 @@ class ActionBridge:
         try:
             payload = self.link.cdr.serialize(STATUS_TYPE, msg)
         except SimbridgeError as err:
-            self.link._log(f"status {name}", f"Zenoh: {name} status: {err}")
+            self.link.log(f"status {name}", f"Zenoh: {name} status: {err}")
             return
-        self.link._put_bytes(entry, payload, count=True)
+        self.link.publish(action.node, name + _INFIX + "status", payload)
 
     def cancelled(self, service: str) -> None:
         """The graph answered a ``cancel_goal`` call from ROS 2: publish the new statuses."""
@@ -424,23 +461,18 @@ class ActionBridge:
 
     def _prune(self, name: str) -> None:
         ended = sorted(
-            (s.ended, op) for op, s in self._served.items() if s.action == name and s.done
+            (s.ended, key) for key, s in self._served.items() if s.name == name and s.done
         )
         now = time.monotonic()
-        for index, (when, op) in enumerate(ended):
+        for index, (when, key) in enumerate(ended):
             if now - when > RESULT_KEEP or index < len(ended) - RESULT_HISTORY:
-                self._forget(op)
-
-    def _forget(self, op_id: str) -> None:
-        served = self._served.pop(op_id, None)
-        if served is not None:
-            self._by_uuid.pop((served.action, served.uuid), None)
+                del self._served[key]
 
     def tick(self) -> None:
         """Forget results kept past :data:`RESULT_KEEP`."""
         now = time.monotonic()
-        for op_id in [k for k, s in self._served.items() if now - s.ended > RESULT_KEEP]:
-            self._forget(op_id)
+        for key in [k for k, s in self._served.items() if now - s.ended > RESULT_KEEP]:
+            del self._served[key]
 
     # -- inward -----------------------------------------------------------------------------
 
@@ -456,6 +488,7 @@ class ActionBridge:
             if part in kind.get(entity.kind, ()):
                 found.setdefault(name, {}).setdefault(part, entity)
         actions = self.graph.actions
+        link = self.link
         for name in [n for n in self.imported if "send_goal" not in found.get(n, {})]:
             self._drop(self.imported.pop(name))
         for name, parts in found.items():
@@ -466,149 +499,142 @@ class ActionBridge:
             if type_name == entity.type or "get_result" not in parts:
                 continue
             if type_name not in self.graph.registry.actions:
-                self.link._log(
+                link.log(
                     f"type {type_name}",
                     f"Zenoh: action {name} of {entity.node_fqn} has type {type_name}, unknown "
                     "here: not bridged",
                 )
-                self.link.stats["unknown_types"] += 1
+                link.stats["unknown_types"] += 1
                 continue
             existing = actions.actions.get(name)
             if existing is not None:
-                self.link._note(
+                link.note(
                     f"clash {name}",
                     f"Zenoh: action {name} of {entity.node_fqn} (session {entity.zid}) not "
                     f"bridged: {existing.node} here serves it already",
                 )
                 continue
-            provider = _ActionProvider(self, self.link.rosbridge.new_session(), name, type_name)
-            provider.parts = parts
-            provider.node = entity.node_fqn
-            actions.add_provider(name, type_name, entity.node_fqn, provider)
-            self._subscribe_feedback(provider)
-            self.imported[name] = provider
-        for name, provider in self.imported.items():
-            provider.parts.update(found.get(name, {}))
+            remote = _RemoteAction(self, name, type_name, entity.node_fqn)
+            remote.parts = parts
+            actions.provide(
+                link.peer,
+                name,
+                type_name,
+                entity.node_fqn,
+                remote,
+                lost=partial(self._lost, name),
+            )
+            self._subscribe_feedback(remote)
+            self.imported[name] = remote
+        for name, remote in self.imported.items():
+            remote.parts.update(found.get(name, {}))
 
-    def _drop(self, provider: _ActionProvider) -> None:
-        if provider.subscriber is not None:
-            _quietly(provider.subscriber.undeclare)
-        # fails the goals in flight, with the reason, to their senders
-        self.graph.actions.remove(provider, provider.name)
+    def _lost(self, name: str) -> None:
+        """A client took the name of a remote action over: it is no longer bridged."""
+        remote = self.imported.pop(name, None)
+        if remote is not None and remote.unsubscribe is not None:
+            _quietly(remote.unsubscribe)
+            remote.unsubscribe = None
+
+    def _drop(self, remote: _RemoteAction) -> None:
+        if remote.unsubscribe is not None:
+            _quietly(remote.unsubscribe)
+            remote.unsubscribe = None
+        action = self.graph.actions.actions.get(remote.name)
+        if action is not None and action.server is remote:
+            # fails the goals in flight, with the reason, to their senders
+            self.graph.actions.withdraw(self.link.peer, remote.name)
 
     def close(self) -> None:
         """Undeclare the feedback subscribers."""
-        for provider in self.imported.values():
-            if provider.subscriber is not None:
-                _quietly(provider.subscriber.undeclare)
-                provider.subscriber = None
+        for remote in self.imported.values():
+            if remote.unsubscribe is not None:
+                _quietly(remote.unsubscribe)
+                remote.unsubscribe = None
 
-    def _subscribe_feedback(self, provider: _ActionProvider) -> None:
-        link = self.link
-        message_type = self.graph.registry.action_wire(provider.type)[2]
-        keyexpr = (
-            f"{link.options.domain}/{(provider.name + _INFIX + 'feedback').strip('/')}/"
-            f"{dds_type(message_type)}/*"
+    def _subscribe_feedback(self, remote: _RemoteAction) -> None:
+        message_type = self.graph.registry.action_wire(remote.type)[2]
+
+        def take(payload: bytes) -> None:
+            self._on_feedback(remote, payload)
+
+        remote.unsubscribe = self.link.subscribe(
+            remote.name + _INFIX + "feedback", message_type, take
         )
 
-        def take(name: str, payload: bytes) -> None:
-            self._on_feedback(provider, payload)
-
-        def on_sample(sample: Any) -> None:  # a Zenoh thread: through the link's budgets
-            link.hand_over(take, provider.name, sample.payload)
-
+    def _on_feedback(self, remote: _RemoteAction, payload: bytes) -> None:
+        message_type = self.graph.registry.action_wire(remote.type)[2]
+        link = self.link
         try:
-            provider.subscriber = link.session.declare_subscriber(
-                keyexpr, on_sample, allowed_origin=link.zenoh.Locality.REMOTE
-            )
-        except Exception as err:
-            link._log(f"sub {keyexpr}", f"Zenoh: cannot subscribe to {keyexpr}: {err}")
-
-    def _on_feedback(self, provider: _ActionProvider, payload: bytes) -> None:
-        message_type = self.graph.registry.action_wire(provider.type)[2]
-        try:
-            msg = self.link._decode(message_type, payload)
+            msg = link.decode(message_type, payload)
             goal_id = bytes(msg["goal_id"]["uuid"])
         except Exception as err:  # whatever the network sent: reported, never raised
-            self.link.stats["bad_payloads"] += 1
-            text = f"Zenoh: {provider.name} feedback is not CDR of {message_type}: {err}"
-            self.link._log(f"bad {provider.name}", text)
+            link.stats["bad_payloads"] += 1
+            text = f"Zenoh: {remote.name} feedback is not CDR of {message_type}: {err}"
+            link.log(f"bad {remote.name}", text)
             return
-        goal = self._remote_goal(provider, goal_id)
-        if goal is not None:
-            goal.feedback(msg["feedback"])
-
-    def _remote_goal(self, provider: _ActionProvider, goal_id: bytes) -> Goal | None:
         for goal in self.graph.actions.goals.values():
-            if goal.action.provider is provider and goal.uuid == goal_id:
-                return goal
-        return None
+            if goal.action.server is remote and goal.uuid == goal_id:
+                goal.feedback(msg["feedback"])
+                return
 
-    def _provider_frame(self, provider: _ActionProvider, body: dict[str, Any]) -> None:
-        """The graph sends a goal or a cancel to a remote action: make it a query."""
-        goal = self.graph.actions.goals.get(str(body.get("id")))
-        if goal is None or goal.action.provider is not provider:
-            return
-        registry = self.graph.registry
-        send_goal, get_result, _ = registry.action_wire(provider.type)
-        if body.get("op") == "send_action_goal":
-            request = {"goal_id": {"uuid": goal.uuid}, "goal": goal.args}
+    def _send_remote(self, remote: _RemoteAction, goal: Goal) -> None:
+        """The graph sends a goal to a remote action: ``send_goal``, then ``get_result``."""
+        send_goal, get_result, _ = self.graph.registry.action_wire(remote.type)
 
-            def accepted(payload: bytes) -> None:
-                reply = self.link._decode(f"{send_goal}_Response", payload)
-                if not reply["accepted"]:
-                    text = f"goal rejected by the action server {provider.node}"
-                    goal.finish(UNKNOWN, text, result=False)
-                    return
-                self._query(
-                    provider,
-                    "get_result",
-                    f"{get_result}_Request",
-                    {"goal_id": {"uuid": goal.uuid}},
-                    lambda data: self._result(provider, goal, f"{get_result}_Response", data),
-                    lambda text: goal.finish(ABORTED, text, result=False),
-                    RESULT_TIMEOUT,
-                )
+        def failed(text: str) -> None:
+            goal.finish(ABORTED, text, ok=False)
 
+        def result(data: bytes) -> None:
+            reply = self.link.decode(f"{get_result}_Response", data)
+            status = int(reply["status"])
+            if status in (SUCCEEDED, CANCELED, ABORTED):
+                goal.finish(status, reply["result"])
+            else:
+                text = f"the action server {remote.node} gave status {status} for the result"
+                goal.finish(ABORTED, text, ok=False)
+
+        def accepted(data: bytes) -> None:
+            reply = self.link.decode(f"{send_goal}_Response", data)
+            if not reply["accepted"]:
+                goal.finish(UNKNOWN, f"goal rejected by the action server {remote.node}", ok=False)
+                return
+            request = {"goal_id": {"uuid": goal.uuid}}
             self._query(
-                provider,
-                "send_goal",
-                f"{send_goal}_Request",
+                remote,
+                "get_result",
+                f"{get_result}_Request",
                 request,
-                accepted,
-                lambda text: goal.finish(ABORTED, text, result=False),
-                CALL_TIMEOUT,
-            )
-        elif body.get("op") == "cancel_action_goal":
-            request = {
-                "goal_info": {"goal_id": {"uuid": goal.uuid}, "stamp": {"sec": 0, "nanosec": 0}}
-            }
-
-            def refused(text: str) -> None:
-                self.link._log(f"cancel {provider.name}", f"Zenoh: cancel {provider.name}: {text}")
-
-            self._query(
-                provider,
-                "cancel_goal",
-                "action_msgs/srv/CancelGoal_Request",
-                request,
-                lambda data: None,
-                refused,
-                CALL_TIMEOUT,
+                result,
+                failed,
+                RESULT_TIMEOUT,
             )
 
-    def _result(self, provider: _ActionProvider, goal: Goal, type_name: str, data: bytes) -> None:
-        reply = self.link._decode(type_name, data)
-        status = int(reply["status"])
-        if status in (SUCCEEDED, CANCELED, ABORTED):
-            goal.finish(status, reply["result"])
-        else:
-            text = f"the action server {provider.node} gave status {status} for the result"
-            goal.finish(ABORTED, text, result=False)
+        request = {"goal_id": {"uuid": goal.uuid}, "goal": goal.args}
+        self._query(
+            remote, "send_goal", f"{send_goal}_Request", request, accepted, failed, CALL_TIMEOUT
+        )
+
+    def _cancel_remote(self, remote: _RemoteAction, goal: Goal) -> None:
+        """The graph cancels a goal of a remote action: a ``cancel_goal`` query."""
+        request = {"goal_info": {"goal_id": {"uuid": goal.uuid}, "stamp": {"sec": 0, "nanosec": 0}}}
+
+        def refused(text: str) -> None:
+            self.link.log(f"cancel {remote.name}", f"Zenoh: cancel {remote.name}: {text}")
+
+        self._query(
+            remote,
+            "cancel_goal",
+            "action_msgs/srv/CancelGoal_Request",
+            request,
+            lambda data: None,
+            refused,
+            CALL_TIMEOUT,
+        )
 
     def _query(
         self,
-        provider: _ActionProvider,
+        remote: _RemoteAction,
         part: str,
         request_type: str,
         request: Any,
@@ -617,36 +643,11 @@ class ActionBridge:
         timeout: float,
     ) -> None:
         """Send one query to a part of a remote action; call back on the event loop."""
-        link = self.link
-        entity = provider.parts.get(part)
-        if entity is None or link.session is None:
-            on_error(f"action {provider.name} has no {part} service (any more)")
+        entity = remote.parts.get(part)
+        if entity is None:
+            on_error(f"action {remote.name} has no {part} service (any more)")
             return
-        try:
-            payload = link.cdr.serialize(request_type, request)
-        except SimbridgeError as err:
-            on_error(str(err))
-            return
-        attachment = link.client_attachment(entity, next(self._calls))
-
-        def done(replies: list[tuple[bool, bytes]]) -> None:  # the event loop
-            if not replies:
-                on_error(f"{entity.name} gave no reply (its node may have gone)")
-                return
-            ok, data = replies[0]
-            if not ok:
-                on_error(data.decode(errors="replace") or f"{entity.name} reported an error")
-                return
-            try:
-                on_reply(data)
-            except Exception as err:  # whatever the network sent: reported, never raised
-                link.stats["bad_payloads"] += 1
-                on_error(f"{entity.name}: reply is not what its type says: {err}")
-
-        try:
-            link._query(entity, payload, attachment, timeout, done)
-        except Exception as err:
-            on_error(f"query failed: {err}")
+        self.link.query(entity, request_type, request, timeout, on_reply, on_error)
 
 
 def _status(goal_id: bytes, stamp: tuple[int, int], status: int) -> dict[str, Any]:
@@ -657,12 +658,6 @@ def _status(goal_id: bytes, stamp: tuple[int, int], status: int) -> dict[str, An
         },
         "status": status,
     }
-
-
-def _json(value: Any) -> bytes:
-    from simbridge.rosbridge.encoding import encode_json
-
-    return encode_json(value)
 
 
 def _quietly(action: Callable[[], Any]) -> None:

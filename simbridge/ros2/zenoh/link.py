@@ -208,11 +208,7 @@ class _Caller:
         return self.session.access
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        body = orjson.loads(frame.data)
-        if body.get("op") in ("action_feedback", "action_result"):
-            self.link.actions.goal_event(body)  # a ROS 2 client's goal
-        else:
-            self.link._service_answer(body)
+        self.link._service_answer(orjson.loads(frame.data))
 
 
 class _Provider:
@@ -1660,6 +1656,111 @@ class ZenohLink:
             self.stats["refused"] += 1
         self._log(f"refused {name}", f"Zenoh: {what} {text} (ROS 2 peers' role; --ros2-role)")
         return True
+
+    # -- what the action bridge uses (ActionLink of simbridge.ros2.zenoh.actions) -------------
+
+    @property
+    def peer(self) -> Peer:
+        """The ROS 2 side as one peer of the graph (its access is the ROS 2 peers' role)."""
+        return self._caller
+
+    def now(self) -> float:
+        """Return the event loop's monotonic time (the graph's ``now``), 0 before the start."""
+        return self._loop.time() if self._loop is not None else 0.0
+
+    def decode(self, type_name: str, payload: bytes) -> Any:
+        """Return the canonical message of CDR bytes (raises whatever the reader raises)."""
+        return self._decode(type_name, payload)
+
+    def reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None:
+        """Reply to a query from ROS 2 with a canonical response message."""
+        self._reply(query, response_type, msg, attachment)
+
+    def fail(self, query: Any, text: str) -> None:
+        """Reply to a query from ROS 2 with an error."""
+        self._fail_query(query, text)
+
+    def publish(self, node: str, name: str, payload: bytes) -> bool:
+        """Publish CDR bytes on the publisher of ``name`` declared under ``node``, if any."""
+        entry = self._declared.get(("MP", node, name))
+        return entry is not None and self._put_bytes(entry, payload, count=True)
+
+    def subscribe(
+        self, name: str, type_name: str, take: Callable[[bytes], None]
+    ) -> Callable[[], None] | None:
+        """Subscribe to the remote publishers of ``name``; return the undeclare (None: failed).
+
+        Samples reach ``take`` on the event loop through :meth:`hand_over` (its budgets).
+        """
+        keyexpr = f"{self.options.domain}/{name.strip('/')}/{dds_type(type_name)}/*"
+
+        def taken(_name: str, payload: bytes) -> None:
+            take(payload)
+
+        def on_sample(sample: Any) -> None:  # a Zenoh thread
+            self.hand_over(taken, name, sample.payload)
+
+        try:
+            subscriber = self.session.declare_subscriber(
+                keyexpr, on_sample, allowed_origin=self.zenoh.Locality.REMOTE
+            )
+        except Exception as err:
+            self._log(f"sub {keyexpr}", f"Zenoh: cannot subscribe to {keyexpr}: {err}")
+            return None
+        undeclare: Callable[[], None] = subscriber.undeclare
+        return undeclare
+
+    def query(
+        self,
+        entity: Entity,
+        request_type: str,
+        request: Any,
+        timeout: float,
+        on_reply: Callable[[bytes], None],
+        on_error: Callable[[str], None],
+    ) -> None:
+        """Send a canonical request to a remote service; call back on the event loop.
+
+        ``on_reply`` gets the first reply's CDR bytes; ``on_error`` why there is none (no
+        session, a request its type cannot hold, an error reply, no reply in time, a reply
+        ``on_reply`` could not read).
+        """
+        if self.session is None:
+            on_error(f"{entity.name}: not connected to ROS 2")
+            return
+        try:
+            payload = self.cdr.serialize(request_type, request)
+        except SimbridgeError as err:
+            on_error(str(err))
+            return
+        attachment = self.client_attachment(entity, next(self._call_ids))
+
+        def done(replies: list[tuple[bool, bytes]]) -> None:  # the event loop
+            if not replies:
+                on_error(f"{entity.name} gave no reply (its node may have gone)")
+                return
+            ok, data = replies[0]
+            if not ok:
+                on_error(data.decode(errors="replace") or f"{entity.name} reported an error")
+                return
+            try:
+                on_reply(data)
+            except Exception as err:  # whatever the network sent: reported, never raised
+                self.stats["bad_payloads"] += 1
+                on_error(f"{entity.name}: reply is not what its type says: {err}")
+
+        try:
+            self._query(entity, payload, attachment, timeout, done)
+        except Exception as err:
+            on_error(f"query failed: {err}")
+
+    def log(self, key: str, text: str) -> None:
+        """Log a warning at most once per :data:`LOG_EVERY` seconds per ``key``."""
+        self._log(key, text)
+
+    def note(self, key: str, text: str) -> None:
+        """Count a name clash; log it once."""
+        self._note(key, text)
 
     # -- logging -----------------------------------------------------------------------------
 

@@ -468,11 +468,12 @@ async def test_a_goal_that_is_not_cdr_gets_an_error_reply_and_the_action_goes_on
 async def test_a_ros2_goal_to_an_action_a_client_serves_is_counted_and_times_out(
     router: Router, ros2: Any
 ) -> None:
-    """Issue 29's goal budget for ROS 2 peers: their goals count as a rosbridge client's.
+    """Issue 29's goal budget for ROS 2 peers: their goals are counted and time out.
 
     A goal of a ROS 2 client to an action a rosbridge client serves and never answers counts
-    against the ROS 2 peers' ``max_pending_goals`` and is aborted after ``max_goal_timeout``
-    (its server told ``cancel_action_goal``); it used to be held for ever, uncounted.
+    against the ROS 2 peers' ``max_pending_goals`` (the bridge's own count) and is aborted after
+    ``max_goal_timeout`` (its server told ``cancel_action_goal``); it used to be held for ever,
+    uncounted.
     """
     from zenoh_ros2_sdk import get_message_class, get_service_names_and_types
 
@@ -500,11 +501,11 @@ async def test_a_ros2_goal_to_an_action_a_client_serves_is_counted_and_times_out
                 )
                 assert accepted is not None and accepted.accepted
                 await recv_until(server, lambda m: m.get("op") == "send_action_goal")
-                assert link._caller.session.pending_goals == 1
+                assert link.actions.pending == 1
                 result = await asyncio.to_thread(get_result.call, goal_id=_uuid(goal_id))
                 assert result is not None and result.status == 6  # ABORTED
                 await recv_until(server, lambda m: m.get("op") == "cancel_action_goal")
-                assert link._caller.session.pending_goals == 0
+                assert link.actions.pending == 0
             finally:
                 send_goal.close()
                 get_result.close()
