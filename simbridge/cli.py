@@ -313,7 +313,20 @@ async def _serve(
 
     from simbridge.app.runner import App  # imported late: `simbridge --help` stays fast
 
-    app = App(settings, world=world, params=params, zenoh=zenoh, no_sim=no_sim, dds=dds)
+    try:
+        app = App(
+            settings,
+            world=world,
+            params=params,
+            zenoh=zenoh,
+            no_sim=no_sim,
+            dds=dds,
+            record=record,
+            run_bags=True,
+        )
+    except SimbridgeError as err:  # the --record bag exists, a results file cannot be read...
+        print(f"simbridge: {err}", file=sys.stderr)
+        return 2
     try:
         await app.start()
     except OSError as err:
@@ -327,23 +340,6 @@ async def _serve(
         else:
             print(f"simbridge: cannot listen: {err}", file=sys.stderr)
         return 2
-    if app.grader.bags is not None:  # the runs' bags, beside the results file
-        from simbridge.tools.bag import BagWriter
-
-        app.grader.recorder = lambda path: BagWriter(path, app.graph.registry)
-    recorder = None
-    if record is not None:
-        from pathlib import Path
-
-        from simbridge.tools.record import GraphRecorder
-
-        try:
-            recorder = GraphRecorder(app.graph, Path(record[0]), record[1])
-        except SimbridgeError as err:
-            await app.stop()
-            print(f"simbridge: {err}", file=sys.stderr)
-            return 2
-        app.tick_hooks.append(recorder.tick)
     settle()  # the heap start-up freed given back, what it built frozen, the GC's thresholds
     stop = asyncio.Event()
     loop = asyncio.get_running_loop()
@@ -361,9 +357,8 @@ async def _serve(
     await stop.wait()
     print("simbridge: stopping", flush=True)
     await app.stop()
-    if recorder is not None:
-        recorder.close()
-        print(f"simbridge: recorded {recorder.writer.count} messages to {record and record[0]}/")
+    if app.recorder is not None:
+        print(f"simbridge: recorded {app.recorder.count} messages to {record and record[0]}/")
     return 0
 
 

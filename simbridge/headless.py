@@ -24,13 +24,10 @@ from collections import deque
 from pathlib import Path
 from typing import Any
 
-from simbridge.app.config import Params, WorldSpec, load_params, load_world
+from simbridge.app.build import build_headless
+from simbridge.app.config import Params, WorldSpec
 from simbridge.errors import ServiceError, SimbridgeError
-from simbridge.grading.grader import Grader
-from simbridge.grading.results import ResultsLog
 from simbridge.graph.topics import Topic
-from simbridge.robot.assembly import build_robot_graph
-from simbridge.sim import World
 
 
 __all__ = ["Inbox", "Simulation"]
@@ -81,23 +78,25 @@ class Simulation:
         seed: int = 0,
         use_sim_time: bool = True,
     ) -> None:
-        spec = world if isinstance(world, WorldSpec) else load_world(world)
-        prm = params if isinstance(params, Params) else load_params(params)
+        core = build_headless(world, params, seed=seed, use_sim_time=use_sim_time)
         #: The simulated world (robots, walls, time).
-        self.world = World(spec, prm, seed=seed)
+        self.world = core.world
         #: The robot world's ROS graph, built as the server builds it.
-        self.robot = build_robot_graph(self.world, self._advance, use_sim_time=use_sim_time)
+        self.robot = core.robot
         #: The ROS graph.
-        self.graph = self.robot.graph
+        self.graph = core.graph
         #: The robot's topics and services.
         self.bridge = self.robot.bridge
         #: /clock and the sim-time services.
         self.clock = self.robot.simclock
         #: The grader (``/simbridge/grade/*``), as the server has it: no tasks and no results
         #: file of its own (``simbridge grade --headless`` hands it the task to run).
-        self.grader = Grader(self.graph, self.world, ResultsLog(None), {})
-        self.robot.tick_hooks.append(self.grader.tick)
-        self.robot.publish_static(0.0)
+        self.grader = core.grader
+        #: The tick, the server's: step, publish, timeouts, then the hooks in order.
+        self.steps = core.steps
+        #: The hooks run after each step's publishing, with sim time, in order (an extension
+        #: may add its own).
+        self.tick_hooks = self.steps.hooks
 
     # -- time ---------------------------------------------------------------------------------
 
@@ -113,19 +112,13 @@ class Simulation:
 
     def step(self, n: int = 1) -> None:
         """Advance ``n`` steps, publishing each as the server would (ignores ``/sim/pause``)."""
+        tick = self.steps.tick
         for _ in range(n):
-            self._advance()
+            tick()
 
     def run(self, seconds: float) -> None:
         """Advance by ``seconds`` of sim time (rounded to whole steps)."""
         self.step(max(0, round(seconds / self.dt)))
-
-    def _advance(self) -> None:
-        # the server's tick on sim time: step, publish, then timeouts, the watchdog and TF
-        self.world.step()
-        now = self.world.time
-        self.robot.publish(now)
-        self.robot.tick(now)
 
     # -- the robot ------------------------------------------------------------------------------
 

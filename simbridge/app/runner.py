@@ -14,45 +14,26 @@ import ipaddress
 import logging
 import time
 from collections import deque
-from collections.abc import Callable
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from simbridge import __version__
-from simbridge.app.config import (
-    Params,
-    WorldSpec,
-    load_params,
-    load_world,
-    resource_dir,
-    world_spec,
-)
-from simbridge.app.guard import Guard
-from simbridge.app.settings import ServerSettings, budgets
-from simbridge.grading import install_grader
-from simbridge.graph.graph import Graph
-from simbridge.robot.assembly import build_robot_graph
-from simbridge.robot.bridge import ROBOT_NODE
-from simbridge.robot.simclock import SIM_NODE
-from simbridge.rosbridge.front import Rosbridge
-from simbridge.rosbridge.server import BridgeServer, tls_context
-from simbridge.sim import World
-from simbridge.web import WebApp, serve_http
-from simbridge.web.admin import install_admin
-from simbridge.web.grading import install_grading_admin
+from simbridge.app.build import build, offload
+from simbridge.app.config import Params, WorldSpec, world_spec
+from simbridge.app.settings import ServerSettings
+from simbridge.rosbridge.server import tls_context
+from simbridge.web import serve_http
 from simbridge.web.pool import Pool
 
 
 if TYPE_CHECKING:
-    from simbridge.foxglove.front import FoxgloveFront
-    from simbridge.ros2.dds.link import DdsLink
     from simbridge.ros2.dds.options import DdsOptions
     from simbridge.ros2.zenoh.config import ZenohOptions
-    from simbridge.ros2.zenoh.link import ZenohLink
 
 
-__all__ = ["MAX_CATCH_UP", "App", "LoopStats"]
+__all__ = ["MAX_CATCH_UP", "App", "LoopStats", "offload"]
 
 logger = logging.getLogger(__name__)
 
@@ -67,22 +48,6 @@ def _loopback(host: str) -> bool:
         return ipaddress.ip_address(host).is_loopback
     except ValueError:
         return False
-
-
-def _strip_simulation(graph: Graph, nodes: set[str]) -> None:
-    """Remove what the simulated nodes declared from ``graph`` (``--no-sim``)."""
-    topics = graph.topics
-    for name, topic in list(topics.topics.items()):
-        for owner in [o for o in topic.publishers if isinstance(o, str) and o in nodes]:
-            topics.unadvertise(name, owner, None)
-        for callback in [c for n, c in topic.internal if n in nodes]:
-            topics.unsubscribe_internal(name, callback)
-    services = graph.services.services
-    for name in [n for n, s in services.items() if s.node in nodes]:
-        del services[name]
-    for node in nodes:
-        graph.nodes.pop(node, None)
-        graph.params.nodes.pop(node, None)
 
 
 #: The part of a period a simulator's tick moves by at most per tick towards its turn.
@@ -143,26 +108,12 @@ class LoopStats:
         }
 
 
-def offload(work: Callable[[], None], done: Callable[[BaseException | None], None]) -> bool:
-    """Run ``work`` on a worker thread of the running loop, then ``done(error)`` on the loop.
-
-    Returns False, having run nothing, with no running loop or with its executor shut down (the
-    grading journal then flushes in the call: :data:`simbridge.grading.results.Offload`).
-    """
-    try:
-        future = asyncio.get_running_loop().run_in_executor(None, work)
-    except RuntimeError:
-        return False
-
-    def finished(f: asyncio.Future[None]) -> None:
-        done(None if f.cancelled() else f.exception())
-
-    future.add_done_callback(finished)
-    return True
-
-
 class App:
-    """One simbridge process: world, graph, servers and the loop."""
+    """One simbridge process: world, graph, servers and the loop.
+
+    The parts are made by :func:`simbridge.app.build.build` (the order and what is wired to
+    what are there); the App starts and stops them and runs the loop.
+    """
 
     def __init__(
         self,
@@ -175,27 +126,34 @@ class App:
         zenoh: ZenohOptions | None = None,
         no_sim: bool = False,
         dds: DdsOptions | None = None,
+        record: tuple[Path | str, Sequence[str] | None] | None = None,
+        run_bags: bool = False,
     ) -> None:
         #: Network settings.
         self.settings = settings or ServerSettings()
-        spec = world if isinstance(world, WorldSpec) else load_world(world)
         #: ``--no-sim``: the bridge alone (no robot, no /clock, /reset...; with ``--zenoh``, a
         #: rosbridge in front of the ROS 2 graph).
         self.no_sim = no_sim
-        if no_sim:
-            spec = spec.without_robots()
-        prm = params if isinstance(params, Params) else load_params(params)
-        #: The simulation.
-        self.world = World(spec, prm, seed=seed)
-        #: The robot world's ROS graph (the same as the headless API's).
-        self.robot = build_robot_graph(
-            self.world,
-            lambda: self.advance(time.monotonic()),
-            settings=self.settings,
-            use_sim_time=self.settings.use_sim_time,
+        parts = build(
+            self.settings,
+            health=lambda: self.health(),
+            world=world,
+            params=params,
+            static_dir=static_dir,
+            seed=seed,
+            no_sim=no_sim,
+            zenoh=zenoh,
+            dds=dds,
+            record=record,
+            run_bags=run_bags,
         )
+        core = parts.core
+        #: The simulation.
+        self.world = core.world
+        #: The robot world's ROS graph (the same as the headless API's).
+        self.robot = core.robot
         #: The ROS graph.
-        self.graph = self.robot.graph
+        self.graph = core.graph
         #: The virtual robot's ROS interface.
         self.bridge = self.robot.bridge
         #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
@@ -210,36 +168,31 @@ class App:
         self.safety = self.robot.safety
         #: The ROS tutorial nodes (``--demo-nodes`` or ``demo_nodes: true``), else None.
         self.tutorials = self.robot.tutorials
-        #: Hooks run after each tick's publishing, with ``now`` (extensions).
-        self.tick_hooks = self.robot.tick_hooks
-        #: HTTP answers (page, /healthz).
-        self.web = WebApp(static_dir or resource_dir("static"), self.health)
-        #: Access control: who each peer of every front end is (docs/security.md).
-        self.guard = Guard(self.graph, self.settings, robots=lambda: self.world.robots.keys())
-        #: The rosbridge clients: their sessions, budgets and ops.
-        self.rosbridge = Rosbridge(
-            self.graph,
-            *budgets(self.settings),
-            authenticator=self.guard,
-            default_queue_length=self.settings.default_queue_length,
-        )
-        #: The WebSocket server.
-        self.server = BridgeServer(self.rosbridge, self.settings, self.web)
         #: What each connection may do (/simbridge/access), for pages.
         self.roles = self.robot.roles
-        install_admin(
-            self.web,
-            graph=self.graph,
-            world=self.world,
-            clients=lambda: self.server.clients,
-            settings=self.settings,
-            estop=self.estop,
-            roles=self.roles,
-        )
+        #: The tick: step, publish, timeouts, then the hooks in order.
+        self.steps = core.steps
+        #: The hooks run after each tick's publishing, with ``now``, in order (the one list of
+        #: :attr:`steps`; an extension may add its own).
+        self.tick_hooks = self.steps.hooks
+        #: HTTP answers (page, /healthz).
+        self.web = parts.web
+        #: Access control: who each peer of every front end is (docs/security.md).
+        self.guard = parts.guard
+        #: The rosbridge clients: their sessions, budgets and ops.
+        self.rosbridge = parts.rosbridge
+        #: The WebSocket server.
+        self.server = parts.server
         #: The grader: task runs scored on the true pose, the class's results (/admin).
-        self.grader = install_grader(self.graph, self.world, self.settings, offload=offload)
-        self.tick_hooks.append(self.grader.tick)
-        install_grading_admin(self.web, self.grader, self.settings)
+        self.grader = core.grader
+        #: ``--record DIR``: the graph's topics into a bag, or None.
+        self.recorder = parts.recorder
+        #: The ROS 2 graph through Zenoh (``--zenoh``), or None.
+        self.zenoh = parts.zenoh
+        #: The ROS 2 graph through DDS (``--dds``), or None.
+        self.dds = parts.dds
+        #: The Foxglove WebSocket protocol (``--foxglove-port``), or None.
+        self.foxglove = parts.foxglove
         #: Loop timing.
         self.stats = LoopStats()
         self._http: asyncio.Server | None = None
@@ -257,38 +210,6 @@ class App:
                 "parameters (set --admin-token or SIMBRIDGE_ADMIN_TOKEN)",
                 self.settings.host,
             )
-        if no_sim:
-            _strip_simulation(self.graph, {ROBOT_NODE, SIM_NODE})
-        #: The ROS 2 graph through Zenoh (``--zenoh``), or None.
-        self.zenoh: ZenohLink | None = None
-        if zenoh is not None:
-            from simbridge.ros2.zenoh.link import ZenohLink  # the [zenoh] extra, only when asked
-
-            self.zenoh = ZenohLink(
-                self.graph, zenoh, simulator=not no_sim, rosbridge=self.rosbridge
-            )
-            self.tick_hooks.append(self.zenoh.tick)
-        #: The ROS 2 graph through DDS (``--dds``), or None.
-        self.dds: DdsLink | None = None
-        if dds is not None:
-            from simbridge.ros2.dds.link import DdsLink  # the [dds] extra, only when asked
-
-            self.dds = DdsLink(self.graph, dds, simulator=not no_sim, rosbridge=self.rosbridge)
-            self.tick_hooks.append(self.dds.tick)
-        #: The Foxglove WebSocket protocol (``--foxglove-port``), or None.
-        self.foxglove: FoxgloveFront | None = None
-        s = self.settings
-        if s.foxglove_port is not None:
-            from simbridge.foxglove.front import FoxgloveFront  # the [foxglove] extra, if asked
-
-            self.foxglove = FoxgloveFront(
-                self.graph,
-                port=s.foxglove_port,
-                host=s.host,
-                scope=s.foxglove_scope,
-                rosbridge=self.rosbridge,
-            )
-            self.tick_hooks.append(self.foxglove.tick)
 
     # -- facts ----------------------------------------------------------------------------
 
@@ -314,7 +235,7 @@ class App:
             "sim_time_s": round(self.world.time, 3),
             "loop_rate_hz": self.world.params.sim.rate,
             **self.server.stats(),
-            "loop": {**self.stats.summary(), "failures": self.robot.failures},
+            "loop": {**self.stats.summary(), "failures": self.steps.failures},
             **({"http": self.http_pool.stats()} if self._http is not None else {}),
             **({"zenoh": self.zenoh.health()} if self.zenoh is not None else {}),
             **({"dds": self.dds.health()} if self.dds is not None else {}),
@@ -332,6 +253,8 @@ class App:
             self._http = await serve_http(
                 self.web, s.host, s.http_port, ssl=tls, pool=self.http_pool
             )
+        if self.recorder is not None:  # the bag, once the ports listen
+            self.recorder.start()
         loop = asyncio.get_running_loop()
         if not self.no_sim:
             self.robot.publish_static(loop.time())
@@ -364,6 +287,8 @@ class App:
             self._http.close()
             await self._http.wait_closed()
         await self.server.close()
+        if self.recorder is not None:
+            self.recorder.close()
 
     async def _run_loop(self) -> None:
         loop = asyncio.get_running_loop()
@@ -409,15 +334,9 @@ class App:
                 await asyncio.sleep(0)  # let clients run even when the loop is behind
 
     def tick(self, now: float) -> None:
-        """Run one tick: step and publish (unless paused), expire timeouts, run hooks.
-
-        Each part runs whatever failed before it (see :meth:`RobotGraph.tick
-        <simbridge.robot.assembly.RobotGraph.tick>`): a failing step never skips the watchdog.
-        """
-        if not self.simclock.paused and not self.no_sim:
-            self.robot.isolated("simulation step", self.advance, now)
-        self.robot.tick(now)
+        """Run one tick of :attr:`steps`: step and publish (unless paused), timeouts, hooks."""
+        self.steps.tick(now)
 
     def advance(self, now: float) -> None:
         """Step the simulation once and publish the step (/odom, /tf, /scan, /clock)."""
-        self.robot.advance(now)
+        self.steps.advance(now)

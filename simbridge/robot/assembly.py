@@ -4,9 +4,10 @@
 the parameter services, the robots' topics and services (``/cmd_vel``, ``/odom``, ``/scan``,
 ``/tf``, ``/spawn``...), the safety watchdog, the e-stop, ``/walls``, ``/clock`` and the sim-time
 services, tf2_web_republisher, and the ROS tutorial nodes when the settings (``--demo-nodes``)
-or the world file (``demo_nodes: true``) ask for them. :class:`~simbridge.app.runner.App` drives it
-in real time and :class:`~simbridge.headless.Simulation` step by step, so the two cannot offer
-different graphs.
+or the world file (``demo_nodes: true``) ask for them. The application's builder
+(:func:`simbridge.app.build.build`) calls it for the server and for
+:class:`~simbridge.headless.Simulation` alike, so the two cannot offer different graphs; the
+step sequence that drives it is :class:`simbridge.app.steps.Steps`.
 
 Client access control (:class:`~simbridge.app.guard.Guard`) is not part of it: it sits between
 the sockets and the graph, and the headless API has no clients.
@@ -14,10 +15,8 @@ the sockets and the graph, and the headless API has no clients.
 
 from __future__ import annotations
 
-import logging
-import traceback
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 from simbridge.app.config import world_spec
@@ -40,15 +39,10 @@ if TYPE_CHECKING:
 
 __all__ = ["RobotGraph", "build_robot_graph"]
 
-logger = logging.getLogger(__name__)
-
-#: Distinct failure causes logged with a traceback; later new causes are only counted.
-MAX_LOGGED_CAUSES = 100
-
 
 @dataclass(eq=False)
 class RobotGraph:
-    """The parts of a robot world's graph, and what a loop does with them."""
+    """The parts of a robot world's graph."""
 
     #: The simulation.
     world: World
@@ -69,11 +63,9 @@ class RobotGraph:
     tf_republisher: TfRepublisher
     #: The /cmd_vel watchdog and stop-on-disconnect.
     safety: Safety
-    #: Run after each tick's publishing, with ``now``; extensions may add theirs.
-    tick_hooks: list[Callable[[float], None]] = field(default_factory=list)
-    #: Parts of ticks that raised (each part is isolated: the others still ran).
-    failures: int = 0
-    _failed: set[tuple[str, str, str, int | None]] = field(default_factory=set)
+    #: Its nodes' parts of a tick, in order, run after each step's publishing (TF, the
+    #: watchdog, the tutorial nodes).
+    hooks: tuple[Callable[[float], None], ...] = ()
     #: The tutorial nodes (talker, listener, /add_two_ints, /fibonacci), when asked for.
     tutorials: TutorialNodes | None = None
 
@@ -82,46 +74,10 @@ class RobotGraph:
         self.bridge.publish_static(now)
         self.walls.publish(now)
 
-    def advance(self, now: float) -> None:
-        """Step the simulation once and publish the step."""
-        self.world.step()
-        self.publish(now)
-
     def publish(self, now: float) -> None:
         """Publish the last step: /odom, /tf, /scan (when due), /clock."""
         self.bridge.publish(now)
         self.simclock.publish(now)
-
-    def tick(self, now: float) -> None:
-        """Expire what timed out (service calls...), then run the tick hooks (watchdog, TF).
-
-        Each part runs whatever failed before it: a hook that raises (a TF request with a bad
-        frame, a recorder's full disk) never skips the safety watchdog or another hook. A
-        failure is logged once per cause (the part, the exception type and where it was
-        raised), not once per tick, and counted in :attr:`failures` (``/healthz``).
-        """
-        self.isolated("graph timeouts", self.graph.tick, now)
-        for hook in self.tick_hooks:
-            self.isolated(None, hook, now)
-
-    def isolated(self, part: str | None, run: Callable[[float], None], now: float) -> None:
-        """Run one part of a tick; a failure is counted and logged once per cause.
-
-        ``part`` names it in the log (``None``: the callable's qualified name, found only when
-        it fails: a repr of every hook on every tick cost 1-2 us a tick, a few percent of a
-        headless step).
-        """
-        try:
-            run(now)
-        except Exception as err:
-            part = part or getattr(run, "__qualname__", None) or repr(run)
-            self.failures += 1
-            where = traceback.extract_tb(err.__traceback__)[-1]
-            cause = (part, type(err).__name__, where.filename, where.lineno)
-            if cause in self._failed or len(self._failed) >= MAX_LOGGED_CAUSES:
-                return
-            self._failed.add(cause)
-            logger.exception("tick: %s failed (logged once per cause; the other parts ran)", part)
 
 
 def build_robot_graph(
@@ -170,6 +126,6 @@ def build_robot_graph(
         walls=walls,
         tf_republisher=tf_republisher,
         safety=safety,
-        tick_hooks=hooks,
+        hooks=tuple(hooks),
         tutorials=tutorials,
     )

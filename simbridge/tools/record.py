@@ -28,7 +28,6 @@ from typing import Any
 
 from simbridge.app.config import Params, WorldSpec
 from simbridge.errors import SimbridgeError
-from simbridge.graph import Graph
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.robot.cmdvel import command_type, convert_twist
 from simbridge.tools.bag import BagError, BagWriter, read_messages
@@ -36,7 +35,7 @@ from simbridge.tools.client import ClientError, RosbridgeClient
 from simbridge.tools.rostool import DEFAULT_URL
 
 
-__all__ = ["GraphRecorder", "record", "record_main", "replay_headless", "replay_main"]
+__all__ = ["record", "record_main", "replay_headless", "replay_main"]
 
 
 def _wall_stamp() -> tuple[int, int]:
@@ -117,56 +116,6 @@ async def record(
             await asyncio.gather(*tasks.values(), return_exceptions=True)
             writer.close()
     return writer
-
-
-class GraphRecorder:
-    """Records topics of an in-process graph (``simbridge --record DIR``): no socket involved.
-
-    Args:
-        graph: the server's graph.
-        out: the bag directory to create.
-        topics: topics to record; None for every topic, including those that appear later
-            (looked for once a second by :meth:`tick`).
-    """
-
-    def __init__(self, graph: Graph, out: Path, topics: Sequence[str] | None = None) -> None:
-        self.graph = graph
-        self.topics = None if topics is None else list(topics)
-        self.writer = BagWriter(out, graph.registry)
-        self._following: set[str] = set()
-        self._last_scan = 0.0
-        self._follow_known()
-
-    def _follow_known(self) -> None:
-        table = self.graph.topics.topics
-        for name in self.topics if self.topics is not None else list(table):
-            topic = table.get(name)
-            if name in self._following or topic is None or topic.type is None:
-                continue
-            if not topic.known:
-                continue  # a type rosbags cannot serialise
-            self._following.add(name)
-            type_name = topic.type
-
-            def on_msg(
-                msg: Any, source: object, name: str = name, type_name: str = type_name
-            ) -> None:
-                self.writer.write(name, type_name, msg, time.time_ns())
-
-            self.graph.subscribe(name, type_name, "/simbridge_recorder", on_msg)
-            if topic.latched is not None:
-                on_msg(topic.latched.msg, None)
-
-    def tick(self, now: float) -> None:
-        """Close a segment when due; pick up new topics once a second."""
-        self.writer.tick()
-        if now - self._last_scan >= 1.0:
-            self._last_scan = now
-            self._follow_known()
-
-    def close(self) -> None:
-        """Finish the bag (one ``NAME.mcap``)."""
-        self.writer.close()
 
 
 def _default_name() -> str:

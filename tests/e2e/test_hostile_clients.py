@@ -195,7 +195,7 @@ async def test_a_tf_goal_with_a_lone_surrogate_or_a_negative_rate_is_refused(
             assert not app.tf_republisher.requests
             await _watchdog_stops(app, ws)
         await watch.steady_since(start)
-    assert app.robot.failures == 0
+    assert app.steps.failures == 0
 
 
 def _watchdog_params() -> Any:
@@ -228,7 +228,7 @@ async def test_a_failing_tick_hook_never_skips_the_watchdog_and_is_logged_once(
     app.tick_hooks.insert(0, broken)
     async with connect(f"{ws_url(app)}/?token=student-r1") as ws:
         await _watchdog_stops(app, ws)
-    assert app.robot.failures >= 5  # every tick failed, each logged once below
+    assert app.steps.failures >= 5  # every tick failed, each logged once below
     logged = [r for r in caplog.records if r.exc_info and "broken hook" in str(r.exc_info[1])]
     assert len(logged) == 1
 
@@ -452,7 +452,7 @@ async def test_spawn_over_a_name_held_with_another_type_fails_cleanly(make_app: 
         await send_json(admin, call)
         assert (await recv_until(admin, is_op("service_response")))["result"] is True
         await wait_for(lambda: app.stats.ticks > 3)
-        assert app.robot.failures == 0
+        assert app.steps.failures == 0
 
 
 # -- row 19: the world's bounds -------------------------------------------------------

@@ -67,7 +67,7 @@ def test_a_sensible_controller_passes_and_a_wild_one_fails_on_overshoot(tmp_path
 def test_a_run_ends_at_its_time_limit_with_the_robot_stopped_and_its_params_back() -> None:
     sim = Simulation()
     grader = Grader(sim.graph, sim.world, ResultsLog(None), {})
-    sim.robot.tick_hooks.append(grader.tick)
+    sim.tick_hooks.append(grader.tick)
     task = parse_task(
         "goal: {position: [3, 0]}\ntime_limit: 1\n"
         "robot_params: {robot.mass: 4.0, realism.enabled: true}\n"
@@ -96,7 +96,7 @@ def test_a_run_ends_at_its_time_limit_with_the_robot_stopped_and_its_params_back
 def test_a_controller_that_never_comes_is_recorded_as_no_controller() -> None:
     sim = Simulation()
     grader = Grader(sim.graph, sim.world, ResultsLog(None), {}, max_attempts=1)
-    sim.robot.tick_hooks.append(grader.tick)
+    sim.tick_hooks.append(grader.tick)
     task = parse_task(
         "goal: {heading: 1}\ntime_limit: 1\nwait_for_controller: 0.5\n"
         "rubric: {overshoot_pct: {max: 5}}\n",

@@ -1,0 +1,310 @@
+"""The composition root: the whole application made from the settings, in one place and order.
+
+:func:`build` makes a server's parts, :func:`build_headless` the parts without sockets that
+:class:`~simbridge.headless.Simulation` steps; both go through the same world part, so the server
+and the headless API offer the same graph, grader and step sequence. The order is the one a
+reader follows:
+
+1. the world (``--no-sim``: the walls without robots) and its ROS graph
+   (:func:`~simbridge.robot.assembly.build_robot_graph`: rosapi, the robots, safety, e-stop,
+   /walls, /clock, tf2_web_republisher, the tutorial nodes); under ``--no-sim`` what the robot
+   and the clock declared is taken off again;
+2. the grader (a server's tasks and results journal; headless: none of either);
+3. a server's front ends: the guard (who each peer is), the rosbridge front end, its WebSocket
+   server, the page's HTTP answers with ``/admin`` and its grading pages, the recorder
+   (``--record``), then Zenoh, DDS and Foxglove when asked for;
+4. the step sequence (:class:`~simbridge.app.steps.Steps`): the hooks of every part above in
+   that order, made once.
+
+No part adds itself to another from elsewhere: what is wired to what is written here.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from simbridge.app.config import Params, WorldSpec, load_params, load_world, resource_dir
+from simbridge.app.guard import Guard
+from simbridge.app.settings import ServerSettings, budgets
+from simbridge.app.steps import Hook, Steps
+from simbridge.grading import install_grader
+from simbridge.grading.grader import Grader
+from simbridge.grading.results import ResultsLog
+from simbridge.graph.graph import Graph
+from simbridge.robot.assembly import RobotGraph, build_robot_graph
+from simbridge.robot.bridge import ROBOT_NODE
+from simbridge.robot.simclock import SIM_NODE
+from simbridge.rosbridge.front import Rosbridge
+from simbridge.rosbridge.server import BridgeServer
+from simbridge.sim import World
+from simbridge.web import WebApp
+from simbridge.web.admin import install_admin
+from simbridge.web.grading import install_grading_admin
+
+
+if TYPE_CHECKING:
+    from simbridge.foxglove.front import FoxgloveFront
+    from simbridge.ros2.dds.link import DdsLink
+    from simbridge.ros2.dds.options import DdsOptions
+    from simbridge.ros2.zenoh.config import ZenohOptions
+    from simbridge.ros2.zenoh.link import ZenohLink
+    from simbridge.tools.recorder import GraphRecorder
+
+
+__all__ = ["Core", "Parts", "build", "build_headless", "offload"]
+
+
+@dataclass(eq=False)
+class Core:
+    """The parts of a world without sockets: what a server and the headless API share."""
+
+    #: The simulation.
+    world: World
+    #: The robot world's ROS graph.
+    robot: RobotGraph
+    #: The grader (``/simbridge/grade/*``).
+    grader: Grader
+    #: The tick: step, publish, timeouts, the hooks in order.
+    steps: Steps
+
+    @property
+    def graph(self) -> Graph:
+        """The ROS graph."""
+        return self.robot.graph
+
+
+@dataclass(eq=False)
+class Parts:
+    """A server's parts: the core and its front ends."""
+
+    core: Core
+    #: Who each peer of every front end is (docs/security.md).
+    guard: Guard
+    #: The rosbridge clients: their sessions, budgets and ops.
+    rosbridge: Rosbridge
+    #: The WebSocket server.
+    server: BridgeServer
+    #: HTTP answers (page, /healthz, /admin).
+    web: WebApp
+    #: ``--record DIR``: the graph's topics into a bag, or None.
+    recorder: GraphRecorder | None = None
+    #: The ROS 2 graph through Zenoh (``--zenoh``), or None.
+    zenoh: ZenohLink | None = None
+    #: The ROS 2 graph through DDS (``--dds``), or None.
+    dds: DdsLink | None = None
+    #: The Foxglove WebSocket protocol (``--foxglove-port``), or None.
+    foxglove: FoxgloveFront | None = None
+
+
+def offload(work: Callable[[], None], done: Callable[[BaseException | None], None]) -> bool:
+    """Run ``work`` on a worker thread of the running loop, then ``done(error)`` on the loop.
+
+    Returns False, having run nothing, with no running loop or with its executor shut down (the
+    grading journal then flushes in the call: :data:`simbridge.grading.results.Offload`).
+    """
+    try:
+        future = asyncio.get_running_loop().run_in_executor(None, work)
+    except RuntimeError:
+        return False
+
+    def finished(f: asyncio.Future[None]) -> None:
+        done(None if f.cancelled() else f.exception())
+
+    future.add_done_callback(finished)
+    return True
+
+
+def _strip_simulation(graph: Graph, nodes: set[str]) -> None:
+    """Remove what the simulated nodes declared from ``graph`` (``--no-sim``)."""
+    topics = graph.topics
+    for name, topic in list(topics.topics.items()):
+        for owner in [o for o in topic.publishers if isinstance(o, str) and o in nodes]:
+            topics.unadvertise(name, owner, None)
+        for callback in [c for n, c in topic.internal if n in nodes]:
+            topics.unsubscribe_internal(name, callback)
+    services = graph.services.services
+    for name in [n for n, s in services.items() if s.node in nodes]:
+        del services[name]
+    for node in nodes:
+        graph.nodes.pop(node, None)
+        graph.params.nodes.pop(node, None)
+
+
+def _world(
+    settings: ServerSettings | None,
+    world: WorldSpec | Path | str | None,
+    params: Params | Path | str | None,
+    *,
+    seed: int,
+    no_sim: bool,
+    use_sim_time: bool,
+    sim_step: Callable[[], None],
+) -> tuple[World, RobotGraph]:
+    spec = world if isinstance(world, WorldSpec) else load_world(world)
+    if no_sim:
+        spec = spec.without_robots()
+    prm = params if isinstance(params, Params) else load_params(params)
+    sim = World(spec, prm, seed=seed)
+    robot = build_robot_graph(sim, sim_step, settings=settings, use_sim_time=use_sim_time)
+    if no_sim:
+        # the robot and the clock are made and taken off again: the e-stop, the roles and the
+        # admin pages are made on them (the robot's node serves /simbridge/access)
+        _strip_simulation(robot.graph, {ROBOT_NODE, SIM_NODE})
+    return sim, robot
+
+
+def build_headless(
+    world: WorldSpec | Path | str | None = None,
+    params: Params | Path | str | None = None,
+    *,
+    seed: int = 0,
+    use_sim_time: bool = True,
+) -> Core:
+    """Make the parts without sockets, stepped by the caller on sim time.
+
+    ``/sim/step`` runs a whole tick (as :meth:`Steps.tick` from the caller does). The grader
+    has no tasks and no results file of its own (``simbridge grade --headless`` hands it the
+    task to run).
+    """
+    core: Core | None = None
+
+    def sim_step() -> None:  # /sim/step: the step sequence made below
+        if core is not None:
+            core.steps.tick()
+
+    sim, robot = _world(
+        None, world, params, seed=seed, no_sim=False, use_sim_time=use_sim_time, sim_step=sim_step
+    )
+    grader = Grader(robot.graph, sim, ResultsLog(None), {})
+    steps = Steps(robot, [*robot.hooks, grader.tick], realtime=False)
+    core = Core(sim, robot, grader, steps)
+    robot.publish_static(0.0)
+    return core
+
+
+def build(
+    settings: ServerSettings,
+    *,
+    health: Callable[[], dict[str, Any]],
+    world: WorldSpec | Path | str | None = None,
+    params: Params | Path | str | None = None,
+    static_dir: Path | None = None,
+    seed: int = 0,
+    no_sim: bool = False,
+    zenoh: ZenohOptions | None = None,
+    dds: DdsOptions | None = None,
+    record: tuple[Path | str, Sequence[str] | None] | None = None,
+    run_bags: bool = False,
+) -> Parts:
+    """Make a server's parts from its settings and options, in the module docstring's order.
+
+    Args:
+        settings: the server's settings.
+        health: produces the ``/healthz`` document (the process's figures).
+        world: the world spec or file (default: the bundled world).
+        params: the parameters or their file (default: the bundled platform parameters).
+        seed: the noise seed.
+        static_dir: the page's directory (default: the bundled page).
+        no_sim: ``--no-sim``: the bridge alone (no robot, no /clock, /reset...; with Zenoh or
+            DDS, a rosbridge in front of the ROS 2 graph).
+        zenoh: the Zenoh front end's options, or None (it needs the [zenoh] extra).
+        dds: the DDS front end's options, or None (it needs the [dds] extra).
+        record: ``--record DIR`` and ``--record-topics`` (None: every topic), or None.
+        run_bags: the grader records each run into a bag beside its results file.
+
+    Raises:
+        ConfigError: the tasks directory or the results file (named by its setting).
+        BagError: the ``--record`` directory exists.
+    """
+    parts: Parts | None = None
+
+    def sim_step() -> None:  # /sim/step: step and publish on the loop's clock
+        if parts is not None:
+            parts.core.steps.advance(time.monotonic())
+
+    sim, robot = _world(
+        settings,
+        world,
+        params,
+        seed=seed,
+        no_sim=no_sim,
+        use_sim_time=settings.use_sim_time,
+        sim_step=sim_step,
+    )
+    graph = robot.graph
+    grader = install_grader(graph, sim, settings, offload=offload)
+    if run_bags and grader.bags is not None:  # the runs' bags, beside the results file
+        from simbridge.tools.bag import BagWriter
+
+        grader.recorder = lambda path: BagWriter(path, graph.registry)
+    hooks: list[Hook] = [*robot.hooks, grader.tick]
+
+    guard = Guard(graph, settings, robots=lambda: sim.robots.keys())
+    rosbridge = Rosbridge(
+        graph,
+        *budgets(settings),
+        authenticator=guard,
+        default_queue_length=settings.default_queue_length,
+    )
+    web = WebApp(static_dir or resource_dir("static"), health)
+    server = BridgeServer(rosbridge, settings, web)
+    install_admin(
+        web,
+        graph=graph,
+        world=sim,
+        clients=lambda: server.clients,
+        settings=settings,
+        estop=robot.estop,
+        roles=robot.roles,
+    )
+    install_grading_admin(web, grader, settings)
+    recorder = None
+    if record is not None:
+        from simbridge.tools.recorder import GraphRecorder
+
+        recorder = GraphRecorder(graph, Path(record[0]), record[1])
+    zenoh_link = None
+    if zenoh is not None:
+        from simbridge.ros2.zenoh.link import ZenohLink  # the [zenoh] extra, only when asked
+
+        zenoh_link = ZenohLink(graph, zenoh, simulator=not no_sim, rosbridge=rosbridge)
+        hooks.append(zenoh_link.tick)
+    dds_link = None
+    if dds is not None:
+        from simbridge.ros2.dds.link import DdsLink  # the [dds] extra, only when asked
+
+        dds_link = DdsLink(graph, dds, simulator=not no_sim, rosbridge=rosbridge)
+        hooks.append(dds_link.tick)
+    foxglove = None
+    if settings.foxglove_port is not None:
+        from simbridge.foxglove.front import FoxgloveFront  # the [foxglove] extra, if asked
+
+        foxglove = FoxgloveFront(
+            graph,
+            port=settings.foxglove_port,
+            host=settings.host,
+            scope=settings.foxglove_scope,
+            rosbridge=rosbridge,
+        )
+        hooks.append(foxglove.tick)
+    if recorder is not None:  # after the front ends, as when the command added it at start
+        hooks.append(recorder.tick)
+
+    steps = Steps(robot, hooks, realtime=True, simulate=not no_sim)
+    parts = Parts(
+        Core(sim, robot, grader, steps),
+        guard=guard,
+        rosbridge=rosbridge,
+        server=server,
+        web=web,
+        recorder=recorder,
+        zenoh=zenoh_link,
+        dds=dds_link,
+        foxglove=foxglove,
+    )
+    return parts

@@ -1,0 +1,52 @@
+"""The composition root: what a server and the headless API are made of, and in what order."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+
+from simbridge.app.build import build, build_headless
+from simbridge.app.settings import ServerSettings
+from simbridge.tools.bag import BagError
+
+
+def _settings() -> ServerSettings:
+    return ServerSettings(host="127.0.0.1", port=0, http_port=None)
+
+
+def _health() -> dict[str, object]:
+    return {"status": "ok"}
+
+
+def test_server_and_headless_offer_the_same_graph() -> None:
+    server = build(_settings(), health=_health).core.graph
+    headless = build_headless().graph
+    assert sorted(server.topics.topics) == sorted(headless.topics.topics)
+    assert sorted(server.services.services) == sorted(headless.services.services)
+    assert sorted(server.nodes) == sorted(headless.nodes)
+
+
+def test_the_hooks_run_in_one_list_made_once_in_the_builders_order() -> None:
+    parts = build(_settings(), health=_health)
+    core = parts.core
+    robot = core.robot
+    assert core.steps.hooks == [robot.tf_republisher.tick, robot.safety.tick, core.grader.tick]
+
+
+def test_no_sim_leaves_no_robot_and_no_clock() -> None:
+    graph = build(_settings(), health=_health, no_sim=True).core.graph
+    assert "/virtual_robot" not in graph.nodes and "/sim" not in graph.nodes
+    assert not {"/reset", "/sim/step", "/spawn"} & set(graph.services.services)
+    assert "/clock" not in graph.topics.topics or not graph.topics.topics["/clock"].publishers
+
+
+def test_an_existing_record_directory_is_refused_before_any_port(tmp_path: Path) -> None:
+    with pytest.raises(BagError, match="exists already"):
+        build(_settings(), health=_health, record=(tmp_path, None))
+
+
+def test_the_record_bag_is_made_at_start_not_when_built(tmp_path: Path) -> None:
+    parts = build(_settings(), health=_health, record=(tmp_path / "bag", None))
+    assert parts.recorder is not None and not (tmp_path / "bag").exists()
+    assert parts.core.steps.hooks[-1] == parts.recorder.tick
