@@ -12,6 +12,12 @@ benchmark runs inside a network namespace of its own (it re-runs itself under ``
   seconds) while one rosbridge client subscribes to every robot's /odom and /scan and /tf, then
   while one DDS subscriber (another process, one raw Cyclone reader per topic, counting) does;
   ``ROUNDS`` (default 3) alternating rounds, the median of the ratios. Target: DDS <= 1.0x.
+* ``relay``: ``simbridge --dds --no-sim`` in front of a Fast DDS stand-in robot (the test peer
+  ``build/ddspeer/ddspeer --robot``: /odom 20 Hz, /scan 10 Hz) relaying to 10 pages
+  (``bench.loadgen`` clients on /odom and /scan): the server's CPU and RSS, and the CPU in Pi 4B
+  cores (``bench pi``'s budget: one Pi core is 0.194 of a core here, docs/deploy.md), against
+  rosbridge_suite's published Pi 4B figures (57 % CPU and 59 MB for one Foxglove client,
+  v-kiniv/rws README).
 * ``latency``: one robot; /odom latency (arrival minus the header stamp, the wall clock when
   the server published it) of a rosbridge client and of a DDS subscriber of the same server,
   side by side. Target: DDS p99 <= 1.0x rosbridge's.
@@ -33,8 +39,8 @@ from typing import Any
 
 from websockets.asyncio.client import connect
 
-from bench.procs import ROOT, cpu_seconds, load_average, percentile
-from bench.zenoh import _simbridge, _world
+from bench.procs import ROOT, collect, cpu_seconds, load_average, percentile, start_loadgens
+from bench.zenoh import _simbridge, _wait_topic, _world
 
 
 DOMAIN = 77
@@ -301,6 +307,51 @@ def latency(seconds: float) -> bool:
     return ok
 
 
+#: One Raspberry Pi 4B core in cores of this machine (bench pi's fixed budget).
+PI_CORE = 0.194
+
+
+def relay(seconds: float) -> bool:
+    peer_bin = ROOT / "build" / "ddspeer" / "ddspeer"
+    if not peer_bin.exists():
+        print("dds relay: build/ddspeer/ddspeer is not built (make deps): skipped")
+        return True
+    os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
+    robot = subprocess.Popen(
+        [str(peer_bin), "--domain", str(DOMAIN), "--robot", "--node", "robot"],
+        stdin=subprocess.PIPE,
+        stdout=subprocess.DEVNULL,
+    )
+    try:
+        with _simbridge("", "--dds", "--no-sim", zenoh=False) as (proc, port):
+            _wait_topic(port, "/scan")
+            time.sleep(2)
+            t0, c0 = time.monotonic(), cpu_seconds(proc)
+            time.sleep(seconds)
+            idle = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
+            idle_rss = proc.memory_info().rss / 1e6
+            clients = [{"subscribe": ["/odom", "/scan"], "drive": None} for _ in range(10)]
+            start = time.time() + 3
+            gens = start_loadgens(f"ws://127.0.0.1:{port}", clients, 1, start, start + seconds)
+            time.sleep(max(0.0, start - time.time()))
+            t0, c0 = time.monotonic(), cpu_seconds(proc)
+            time.sleep(seconds)
+            busy = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
+            rss = proc.memory_info().rss / 1e6
+            results = collect(gens, seconds + 90)
+    finally:
+        robot.kill()
+        robot.wait()
+    odom = [len(r["stamps"].get("/odom", [])) / seconds for r in results]
+    print(f"dds relay: --dds --no-sim in front of a Fast DDS robot, 10 pages, {seconds:g} s")
+    print(f"{'':28}{'CPU % of a core':>16}{'Pi 4B cores':>13}{'RSS MB':>9}")
+    print(f"{'idle (robot, no page)':28}{100 * idle:>16.1f}{idle / PI_CORE:>13.2f}{idle_rss:>9.1f}")
+    print(f"{'10 pages on /odom + /scan':28}{100 * busy:>16.1f}{busy / PI_CORE:>13.2f}{rss:>9.1f}")
+    print(f"/odom per page: {min(odom):.1f}-{max(odom):.1f} Hz")
+    print("rosbridge_suite on a Pi 4B (v-kiniv/rws README): 57 % CPU and 59 MB for one client")
+    return busy / PI_CORE <= 1.0
+
+
 def _in_netns(argv: list[str]) -> int:
     """Run this benchmark again inside a new network namespace (lo only, multicast on)."""
     script = textwrap.dedent(
@@ -317,10 +368,12 @@ def main(argv: list[str] | None = None) -> int:
     if not os.environ.get("BENCH_DDS_NETNS"):
         return _in_netns(argv)
     seconds = next((float(a) for a in argv if a.replace(".", "", 1).isdigit()), 10.0)
-    names = [a for a in argv if a in ("lib", "outward", "latency")] or ["lib", "outward", "latency"]
+    every = ("lib", "outward", "latency", "relay")
+    names = [a for a in argv if a in every] or list(every)
     ok = True
     for name in names:
-        ok = {"lib": lambda _s: lib(), "outward": outward, "latency": latency}[name](seconds) and ok
+        run = {"lib": lambda _s: lib(), "outward": outward, "latency": latency, "relay": relay}
+        ok = run[name](seconds) and ok
         print()
     return 0 if ok else 1
 
