@@ -471,13 +471,15 @@ async def test_a_ros2_goal_to_an_action_a_client_serves_is_counted_and_times_out
     """Issue 29's goal budget for ROS 2 peers: their goals are counted and time out.
 
     A goal of a ROS 2 client to an action a rosbridge client serves and never answers counts
-    against the ROS 2 peers' ``max_pending_goals`` (the bridge's own count) and is aborted after
-    ``max_goal_timeout`` (its server told ``cancel_action_goal``); it used to be held for ever,
-    uncounted.
+    against the ROS 2 peers' ``max_pending_goals`` (the bridge's own count: past it a goal is
+    not accepted) and is aborted after ``max_goal_timeout`` (its server told
+    ``cancel_action_goal``); it used to be held for ever, uncounted.
     """
     from zenoh_ros2_sdk import get_message_class, get_service_names_and_types
 
-    settings = ServerSettings(host="127.0.0.1", port=0, http_port=0, max_goal_timeout=1.0)
+    settings = ServerSettings(
+        host="127.0.0.1", port=0, http_port=0, max_goal_timeout=2.0, max_pending_goals=1
+    )
     app = App(settings, zenoh=zenoh_options(router))
     await app.start()
     link = app.zenoh
@@ -502,6 +504,10 @@ async def test_a_ros2_goal_to_an_action_a_client_serves_is_counted_and_times_out
                 assert accepted is not None and accepted.accepted
                 await recv_until(server, lambda m: m.get("op") == "send_action_goal")
                 assert link.actions.pending == 1
+                second = await asyncio.to_thread(
+                    send_goal.call, goal_id=_uuid(uuid.uuid4().bytes), goal=goal_class(order=3)
+                )
+                assert second is not None and not second.accepted  # max_pending_goals
                 result = await asyncio.to_thread(get_result.call, goal_id=_uuid(goal_id))
                 assert result is not None and result.status == 6  # ABORTED
                 await recv_until(server, lambda m: m.get("op") == "cancel_action_goal")
