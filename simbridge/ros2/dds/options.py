@@ -82,9 +82,11 @@ class DdsOptions:
         # Cyclone's own problems to stderr, not to a cyclonedds.log in the working directory
         parts = ["<Tracing><Verbosity>severe</Verbosity><OutputFile>stderr</OutputFile></Tracing>"]
         if self.discovery == "LOCALHOST":
+            # the loopback interface only; multicast on it where lo has it (a Fast DDS node's
+            # default discovery), and the local participant indices as unicast peers
             parts.append(
-                '<General><Interfaces><NetworkInterface address="127.0.0.1"/></Interfaces>'
-                "<AllowMulticast>false</AllowMulticast></General>"
+                '<General><Interfaces><NetworkInterface address="127.0.0.1" multicast="true"/>'
+                "</Interfaces></General>"
                 "<Discovery><ParticipantIndex>auto</ParticipantIndex>"
                 "<MaxAutoParticipantIndex>32</MaxAutoParticipantIndex>"
                 '<Peers><Peer address="localhost"/></Peers></Discovery>'
