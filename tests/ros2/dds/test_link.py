@@ -140,7 +140,7 @@ async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_rob
     # a roslibpy client reads the Fast DDS node's topic, listed in rosapi with its type
     assert echoed["messages"][0]["data"].startswith("hello ")
     assert echoed["topics"]["/peer_chatter"] == "std_msgs/msg/String"
-    assert "/student" in app.graph.nodes
+    await wait_for(lambda: "/student" in app.graph.nodes, 10)  # from its ros_discovery_info
     # what `ros2 topic list -t`, `ros2 node list` and `ros2 topic echo` show on rmw_fastrtps
     odom = await peer.sample("/odom")
     assert (odom["header"]["frame_id"], odom["child_frame_id"]) == ("odom", "base_link")
@@ -179,7 +179,7 @@ async def test_no_sim_dds_is_a_rosbridge_in_front_of_a_humble_robot_on_fast_dds(
             driven = await run_js("roslib2", ws_url(app), "drive", {"v": 0.5, "seconds": 1})
         finally:
             await app.stop()
-    assert driven["final"]["x"] > driven["start"]["x"] + 0.2
+    assert driven["final"]["x"] > driven["start"]["x"] + 0.1
     command = await robot.wait_for(lambda e: e.get("event") == "cmd_vel", what="/cmd_vel")
     assert command["data"]["linear"]["x"] == 0.5
     infos = [e for e in robot.events if e.get("event") == "nodes" and e["gid_size"] == 24]
