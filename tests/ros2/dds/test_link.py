@@ -126,7 +126,16 @@ async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_rob
     dds_app: App, ddspeer: Any, run_js: Any, run_roslibpy: Any
 ) -> None:
     app = dds_app
-    echo = ["--echo", "/odom", "--echo", "/scan", "--echo", "/tf", "--echo", "/tf_static@latched"]
+    echo = [
+        "--echo",
+        "/odom",
+        "--echo",
+        "/scan@sensor",
+        "--echo",
+        "/tf",
+        "--echo",
+        "/tf_static@latched",
+    ]
     peer = await ddspeer(*echo, "--cmd-vel", "0.4,0", "--chatter", node="student", distro="jazzy")
     url = ws_url(app)
     await wait_for(lambda: "/peer_chatter" in app.graph.topics.topics, 10)
@@ -144,6 +153,7 @@ async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_rob
     # what `ros2 topic list -t`, `ros2 node list` and `ros2 topic echo` show on rmw_fastrtps
     odom = await peer.sample("/odom")
     assert (odom["header"]["frame_id"], odom["child_frame_id"]) == ("odom", "base_link")
+    # /scan through a best-effort reader (Nav2's sensor QoS) from simbridge's reliable writer
     assert len((await peer.sample("/scan"))["ranges"]) == 360
     tf = await peer.sample("/tf")
     assert tf["transforms"][0]["child_frame_id"] == "base_link"
