@@ -74,6 +74,14 @@ ZENOH = {
 }
 
 
+#: ROS 2 over DDS (issue 25), run by name (``python -m bench dds [lib|outward|latency|relay]``;
+#: root: it runs itself in a network namespace of its own).
+DDS = {
+    "dds": "DDS libraries' costs; 30 robots to one DDS subscriber vs one rosbridge client (CPU); "
+    "/odom p99 DDS vs rosbridge; --dds --no-sim relaying a Fast DDS robot to 10 pages",
+}
+
+
 #: The Foxglove port (issue 30), run by name (``python -m bench foxglove [SECONDS [N [ROUNDS]]]``).
 FOXGLOVE = {
     "foxglove": "100 Foxglove vs 100 rosbridge clients on /odom + /scan: server CPU, p99, bytes/s; "
