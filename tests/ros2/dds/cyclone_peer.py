@@ -68,6 +68,11 @@ def main() -> None:
         metavar=("TOPIC", "TYPE", "HEX"),
         help="also write these bytes, as they are, on TOPIC (bad input for the tests)",
     )
+    parser.add_argument(
+        "--unknown-type",
+        action="store_true",
+        help="also publish /mystery, of a type no registry knows (foo_msgs/msg/Mystery)",
+    )
     args = parser.parse_args()
 
     types = IdlTypes(TypeRegistry())
@@ -120,6 +125,12 @@ def main() -> None:
         (DataWriter(participant, topic(name, t), qos=qos(False)), bytes.fromhex(data))
         for name, t, data in args.raw
     ]
+    if args.unknown_type:
+        mystery = types.named("foo_msgs::msg::dds_::Mystery_", {"x": _t().int32})
+        mystery_topic = Topic(participant, "rt/mystery", mystery)
+        raw.append(
+            (DataWriter(participant, mystery_topic, qos=qos(False)), b"\x00\x01\0\0\x07\0\0\0")
+        )
     calls = [_Client(participant, types, qos(False), *call) for call in args.call]
     seen: dict[str, Any] = {"topics": {}, "nodes": [], "samples": {}, "replies": {}}
     deadline = time.monotonic() + args.seconds

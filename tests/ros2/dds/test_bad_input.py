@@ -8,6 +8,7 @@ other peers carry on.
 
 from __future__ import annotations
 
+import asyncio
 from typing import Any
 
 import pytest
@@ -40,15 +41,24 @@ async def test_bad_input_from_dds_is_logged_and_counted_and_the_robot_runs_on(
     # request (no header: 5 bytes for a 21-byte type) is dropped there, never answered
     await client.wait_for(lambda e: e.get("event") == "called", what="the request sent")
     # bytes on /cmd_vel that are not a Twist: dropped too; the robot runs on, undriven
-    seen = await _peer(
-        link.options.domain,
-        "--seconds",
-        "1.5",
-        "--raw",
-        "/cmd_vel",
-        "geometry_msgs/msg/Twist",
-        "0001000001",
+    peer = asyncio.create_task(
+        _peer(
+            link.options.domain,
+            "--seconds",
+            "2",
+            "--unknown-type",
+            "--raw",
+            "/cmd_vel",
+            "geometry_msgs/msg/Twist",
+            "0001000001",
+        )
     )
+    # a type the registry does not know: listed with its type (rosapi), counted, not bridged
+    topics = app.graph.topics.topics
+    await wait_for(lambda: "/mystery" in topics, 10)
+    assert topics["/mystery"].type == "foo_msgs/msg/Mystery" and not topics["/mystery"].known
+    assert link.stats["unknown_types"] >= 1
+    seen = await peer
     assert seen["samples"]["/odom"]  # the robot still publishes
     assert not [e for e in client.events if e.get("event") == "reply"]
     assert link.stats["calls_answered"] == 0
