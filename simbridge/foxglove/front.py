@@ -18,8 +18,11 @@
   for every front end's peers: the client's scope (``graph.access``), its publish rate, the
   topic's type, the payload validated against it; a refusal becomes an SDK status message.
 * **services**: every service of the graph with ``ros2msg`` request and response schemas; a
-  call is a rosbridge ``call_service`` of the client's session (admission, pending-call
-  budget, the service table: in-process handlers and client providers alike).
+  call goes to the graph's service table (:meth:`ServiceTable.call
+  <simbridge.graph.services.ServiceTable.call>`: in-process handlers and providers alike)
+  with the canonical request (decoded from CDR, or JSON checked and completed as a rosbridge
+  client's ``args``), after the graph's access rules for the client; the client's calls
+  waiting for a provider outside the process are budgeted (``max_pending_calls``).
 * **parameters**: the in-process nodes' parameters (``/virtual_robot.robot.mass``), read from
   a snapshot, set through ``/rosapi/set_param`` as a rosbridge client sets them (an
   administrative service: admin rights needed); a change made elsewhere (``/admin``,
@@ -91,9 +94,10 @@ from simbridge.foxglove.mapping import (
 )
 from simbridge.graph import Graph, Topic
 from simbridge.graph.access import ANY_SCOPE, Access
+from simbridge.graph.services import typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.rosbridge import Frame, Outgoing, Session, ops as o
+from simbridge.rosbridge import Frame, Outgoing, Session
 from simbridge.rosbridge.budget import TokenBucket
 from simbridge.rosbridge.front import Rosbridge
 
@@ -288,8 +292,10 @@ class _Client:
         self.label = f"Foxglove client {client_id}"
         #: Its client channels: channel id -> (topic, encoding, type or None).
         self.channels: dict[int, tuple[str, str, str | None]] = {}
-        #: Its calls waiting for the graph's answer: op id -> future.
-        self.calls: dict[str, asyncio.Future[dict[str, Any]]] = {}
+        #: Its calls waiting for the graph's answer: call number -> future of ``(ok, values)``.
+        self.calls: dict[int, asyncio.Future[tuple[bool, Any]]] = {}
+        #: How many of them wait for a provider outside this process (``max_pending_calls``).
+        self.waiting = 0
         #: Its publish rate (``publish_rate``, ``publish_burst``).
         settings = front.graph.settings
         self.publishes = TokenBucket(settings.publish_rate, settings.publish_burst)
@@ -300,18 +306,16 @@ class _Client:
         return self.session.access
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        """Take what the graph tells this client: a refusal or a call's answer."""
+        """Take what rosbridge tells this client: a refusal of its publish or advertise."""
         if not frame.text:
             return
         status = status_of(frame.data)
         if status is not None:
             self.front.status(f"{self.label}: {status[1]}", status[0])
-            return
-        body = orjson.loads(frame.data)
-        if isinstance(body, dict) and body.get("op") == "service_response":
-            future = self.calls.pop(str(body.get("id")), None)
-            if future is not None and not future.done():
-                future.set_result(body)
+
+    def call_ended(self) -> None:
+        """A call of this client to a provider outside the process ended."""
+        self.waiting -= 1
 
 
 @dataclass(eq=False, slots=True)
@@ -349,6 +353,7 @@ class FoxgloveFront:
         self.context = self.fox.Context()
         self.cdr = CdrWriter(graph.registry)
         self.reader = CdrReader(graph.registry)
+        self._prepare, _ = typed_calls(graph.registry, graph.converter)
         self.server: Any = None
         self._loop: asyncio.AbstractEventLoop | None = None
         self._channels: dict[str, _Channel] = {}
@@ -823,33 +828,71 @@ class FoxgloveFront:
         request_type, response_type = self.graph.registry.service(type_name)
         try:
             if encoding == MESSAGE_ENCODING:
-                args = plain(self.reader.read(request_type, payload))
+                request = self.reader.read(request_type, payload)  # canonical, complete
             else:
-                args = orjson.loads(payload) if payload else {}
+                request = orjson.loads(payload) if payload else {}
         except Exception as err:
             text = f"service {name}: request is not {encoding} of {request_type}: {err}"
             raise ServiceError(text) from None
-        body = await self._dispatch_call(client_id, name, args)
-        if not body.get("result"):
-            raise ServiceError(str(body.get("values")))
-        response = self.graph.converter.from_json(response_type, body.get("values") or {})
+        ok, values = await self._call(client_id, name, request, typed=encoding == MESSAGE_ENCODING)
+        if not ok:
+            raise ServiceError(str(values))
+        # complete and checked: an in-process handler may leave fields to their defaults
+        response = self.graph.converter.from_json(response_type, values)
         if encoding == MESSAGE_ENCODING:
             return self.cdr.serialize(response_type, response)
         return orjson.dumps(plain(response))
 
-    async def _dispatch_call(self, client_id: int, name: str, args: Any) -> dict[str, Any]:
+    async def _call(
+        self, client_id: int, name: str, request: Any, *, typed: bool
+    ) -> tuple[bool, Any]:
+        """Call the graph's service ``name`` for a client; return ``(ok, values)``.
+
+        ``request`` is the canonical request (``typed``: decoded from CDR) or JSON values,
+        checked and completed here as a rosbridge client's ``args`` are. Refused (``ok``
+        false, the reason as ``values``) by the graph's access rules for the client, when the
+        service does not exist, when the request does not fit, or when ``max_pending_calls``
+        of the client's calls wait for providers outside this process.
+        """
         client = self._client(client_id)
-        op_id = f"foxglove:{next(self._call_ids)}"
-        loop = asyncio.get_running_loop()
-        future: asyncio.Future[dict[str, Any]] = loop.create_future()
-        client.calls[op_id] = future
-        timeout = self.graph.settings.service_timeout
+        number = next(self._call_ids)
         try:
-            op = o.CallService(service=name, args=args, id=op_id, timeout=timeout)
-            self.rosbridge.dispatch(client, op, loop.time())
+            service = self.graph.services.lookup(name)
+            refusal = self.graph.access.reach_refusal(client.access, name)
+            if refusal is not None:
+                return False, f"service {refusal}"
+            if not typed:
+                prepared = self._prepare(service.type, request)
+                if prepared is not None:
+                    request = prepared
+            waits = service.handler is None
+            if waits and client.waiting >= self.graph.settings.max_pending_calls:
+                limit = self.graph.settings.max_pending_calls
+                return False, (
+                    f"call_service {name}: refused, this client already waits for {limit} "
+                    "answers (the server's max_pending_calls); wait for them first"
+                )
+            loop = asyncio.get_running_loop()
+            future: asyncio.Future[tuple[bool, Any]] = loop.create_future()
+            client.calls[number] = future
+
+            def done(ok: bool, values: Any) -> None:
+                if not future.done():
+                    future.set_result((ok, values))
+
+            settings = self.graph.settings
+            timeout = min(settings.service_timeout, settings.max_call_timeout)
+            if waits:
+                client.waiting += 1
+            release = client.call_ended if waits else None
+            self.graph.services.call(
+                client, service, request, loop.time() + timeout, done, release=release
+            )
             return await asyncio.wait_for(future, timeout + CALL_MARGIN / 2)
+        except ServiceError as err:
+            return False, str(err)
         finally:
-            client.calls.pop(op_id, None)
+            client.calls.pop(number, None)
             self._release(client)
 
     def _reconcile_services(self) -> None:
@@ -971,14 +1014,14 @@ class FoxgloveFront:
                 self.status(f"Foxglove client {client_id}: no parameter {full}", "warning")
                 continue
             args = {"name": f"{split[0]}:{split[1]}", "value": json.dumps(value)}
-            self._setting += 1  # the in-process service applies the change in the dispatch
+            self._setting += 1  # the in-process service applies the change in the call
             try:
-                body = await self._dispatch_call(client_id, "/rosapi/set_param", args)
+                ok, values = await self._call(client_id, "/rosapi/set_param", args, typed=False)
             finally:
                 self._setting -= 1
-            if not body.get("result"):
+            if not ok:
                 self.status(
-                    f"Foxglove client {client_id}: parameter {full} not set: {body.get('values')}",
+                    f"Foxglove client {client_id}: parameter {full} not set: {values}",
                     "warning",
                 )
 

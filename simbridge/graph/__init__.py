@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from simbridge.graph.graph import ROSOUT, Graph
 from simbridge.graph.params import ParameterStore, ParamNode
-from simbridge.graph.services import Service, ServiceTable, service_response
+from simbridge.graph.services import PendingCall, Service, ServiceTable, caller, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, Peer, Topic, TopicTable
 
 
@@ -19,9 +19,11 @@ __all__ = [
     "ParamNode",
     "ParameterStore",
     "Peer",
+    "PendingCall",
     "Service",
     "ServiceTable",
     "Topic",
     "TopicTable",
-    "service_response",
+    "caller",
+    "typed_calls",
 ]

@@ -1,23 +1,26 @@
-"""Services of the ROS graph: in-process handlers and services provided by clients.
+"""Services of the ROS graph: in-process handlers and services provided by peers of front ends.
 
-Every ``call_service`` is answered with a ``service_response``, whatever happens: an unknown
-service, a handler error, a timeout, a provider that unadvertised or disconnected all give
-``result: false`` with the reason as ``values`` (rosbridge instead leaves some of these hanging:
-#905, #1027). Calls never block the caller's other ops.
+A front end calls a service with :meth:`ServiceTable.call`, handing in ``done(ok, values)``: the
+table calls it exactly once, whatever happens (answered, failed, timed out, provider gone), with
+``ok`` true and the response message or ``ok`` false and the reason as text. A front end that
+counts its peer's waiting calls hands in ``release`` too, called once when a call to a provider
+ends (before ``done``). The table never blocks the caller and never sends anything itself.
 
-Replies from client providers (``service_response``) are routed back by the server-chosen id
-``service_request:<service>:<n>``. Clients disagree on the reply shape (protocol reference
-section 8, item 14), so simbridge reads it as follows (:meth:`Admission.response
-<simbridge.rosbridge.admission.Admission.response>`, then :meth:`ServiceTable.respond`):
+* **in-process** (:meth:`ServiceTable.add`): the handler runs at once with :data:`caller` set to
+  the calling peer (handlers whose answer depends on who asks read ``caller.get().access``); a
+  :class:`ServiceError` is a failed answer with its text, any other exception one naming the
+  service (a handler bug never breaks the caller's connection).
+* **provided by a peer** (:meth:`ServiceTable.provide`): the peer's front end gives a
+  ``forward(call, request)`` that puts the call on its wire, and answers it later with
+  :meth:`ServiceTable.respond`; a call not answered by its ``deadline`` fails when the graph's
+  tick passes it (:meth:`ServiceTable.expire`); a provider that withdraws, leaves or loses the
+  name to another provider fails the calls waiting for it, and one that loses the name is told
+  through the ``lost`` callback its front end gave.
 
-* ``values`` an object: success, whatever ``result`` says. This is rosbridge's behaviour (its
-  ``service_response`` capability builds the ROS response from ``values`` and never reads
-  ``result``), and what roslibpy's own test expects of a callback that fills the response and
-  returns ``False``; the caller gets ``result: true`` and the values as JSON;
-* ``result: true`` without ``values`` (or ``null``): success with ``{}``;
-* otherwise failure: ``values`` as the reason when it is a string (roslibjs 2.1
-  ``advertiseAsync`` sends the error text), else a sentence saying what came, with the values as
-  JSON. rosbridge leaves the caller waiting in these cases.
+Requests and responses are canonical messages (:mod:`simbridge.msgs`) when the service type is
+known: :func:`typed_calls` gives the checks a front end runs on requests and responses written as
+JSON values (rosbridge's ``args`` and ``values``, Foxglove's JSON encoding); a front end that
+decodes a typed wire (CDR) has them complete already.
 """
 
 from __future__ import annotations
@@ -30,53 +33,48 @@ from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Any
 
-from simbridge.errors import ConversionError, ProtocolError, ServiceError, TypeNotFoundError
+from simbridge.errors import ConversionError, ServiceError, TypeNotFoundError
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs import Converter, TypeRegistry, positional_args, short_type
-from simbridge.rosbridge import Frame, OpId, json_frame, split_frame
-from simbridge.rosbridge.ops import CallService, ServiceResponse
 
 
 __all__ = [
+    "Done",
     "Finish",
+    "Forward",
     "Handler",
+    "Lost",
     "PendingCall",
     "Prepare",
     "Service",
     "ServiceTable",
     "caller",
-    "service_response",
     "typed_calls",
 ]
 
 logger = logging.getLogger(__name__)
 
 #: An in-process service: request -> response object. The request is the complete, validated
-#: request message when the service type is known (admission validated it, see
-#: :func:`typed_calls`), else ``args`` as sent (object, list or None). Raise
-#: :class:`ServiceError` to answer ``result: false`` with the error text.
+#: request message when the service type is known (the caller's front end validated it, see
+#: :func:`typed_calls`), else the request as the caller wrote it. Raise :class:`ServiceError`
+#: to answer with failure and the error text.
 Handler = Callable[[Any], dict[str, Any]]
-#: The client whose call an in-process handler is answering (None outside a call): handlers
-#: whose answer depends on who asks (the e-stop's scope, ``/simbridge/access``) read it.
+#: The peer whose call an in-process handler is answering (None outside a call): handlers
+#: whose answer depends on who asks (the e-stop's scope, ``/simbridge/access``) read its access.
 caller: ContextVar[Peer | None] = ContextVar("caller", default=None)
-#: Turns ``(service type, args as sent)`` into the request to hand on, or raises
-#: :class:`ServiceError`; ``None`` from it means "type unknown: pass args through unchanged".
+#: Turns ``(service type, request as written in JSON values)`` into the request to hand on, or
+#: raises :class:`ServiceError`; ``None`` from it means "type unknown: pass it on unchanged".
 Prepare = Callable[[str, Any], Any]
-#: Checks and completes a client provider's response values: ``(service type, values)``.
+#: Checks and completes a provider's response values: ``(service type, values)``.
 Finish = Callable[[str, Any], Any]
-
-
-def service_response(service: str, values: Any, *, result: bool, op_id: OpId | None) -> Frame:
-    """Return a ``service_response`` frame (``id`` only when the request had one)."""
-    body: dict[str, Any] = {
-        "op": "service_response",
-        "service": service,
-        "values": values,
-        "result": result,
-    }
-    if op_id is not None:
-        body["id"] = op_id
-    return json_frame(body)
+#: The caller's front end told the answer of one call: ``(ok, values)``: the response when
+#: ``ok``, else why the call failed (text).
+Done = Callable[[bool, Any], None]
+#: The provider's front end puts one call on its wire: ``(call, request)``; it answers with
+#: :meth:`ServiceTable.respond` (or leaves the call to time out).
+Forward = Callable[["PendingCall", Any], None]
+#: The provider's front end told that its peer no longer provides a name (another took it).
+Lost = Callable[[str], None]
 
 
 def typed_calls(registry: TypeRegistry, converter: Converter) -> tuple[Prepare, Finish]:
@@ -129,41 +127,47 @@ def typed_calls(registry: TypeRegistry, converter: Converter) -> tuple[Prepare, 
 
 @dataclass(eq=False, slots=True)
 class Service:
-    """One service: answered in process (``handler``) or by a client (``provider``)."""
+    """One service: answered in process (``handler``) or by a front end's peer (``provider``)."""
 
     name: str
     type: str
     node: str
     handler: Handler | None = None
     provider: Peer | None = None
-    #: The name as the provider wrote it in ``advertise_service`` (roslibjs routes by it).
+    #: How a provider's front end puts a call on its wire.
+    forward: Forward | None = None
+    #: How a provider's front end hears that another provider took the name.
+    lost: Lost | None = None
+    #: The name as the provider wrote it (rosbridge clients route by it).
     written: str = ""
 
 
 @dataclass(eq=False, slots=True)
 class PendingCall:
-    """A call forwarded to a client provider, waiting for its ``service_response``."""
+    """A call forwarded to a provider, waiting for :meth:`ServiceTable.respond`."""
 
-    server_id: str
+    #: The graph's id of the call (``service_request:<service>:<n>``), unique in the process.
+    id: str
     service: Service
     caller: Peer
-    caller_id: OpId | None
-    #: The service name as the caller wrote it (echoed in the reply).
-    written: str
+    done: Done
+    #: When it times out (the graph's monotonic clock).
     deadline: float
+    #: The caller's front end's budget hook (called once when the call ends), if any.
+    release: Callable[[], None] | None = None
 
 
 class ServiceTable:
-    """Every service, and the calls waiting for client providers."""
+    """Every service, and the calls waiting for providers."""
 
     def __init__(self, *, default_timeout: float = 5.0) -> None:
-        #: Seconds to wait for a client provider when the call gives no ``timeout``.
+        #: Seconds a call to a provider waits when its caller gives no timeout.
         self.default_timeout = default_timeout
         #: Services by absolute name.
         self.services: dict[str, Service] = {}
         #: Bumped by every service added, replaced or removed (see ``TopicTable.changes``).
         self.changes = 0
-        #: Calls forwarded to providers, by server id.
+        #: Calls forwarded to providers, by id.
         self.pending: dict[str, PendingCall] = {}
         # the same calls by caller and by service, and their deadlines in a heap: answering,
         # expiring or dropping one never scans the others
@@ -171,32 +175,58 @@ class ServiceTable:
         self._by_service: dict[Service, dict[str, PendingCall]] = {}
         self._deadlines: list[tuple[float, int, str]] = []
         self._counter = itertools.count(1)
-        self._fragments = itertools.count(1)
 
     def add(self, name: str, type_name: str, node: str, handler: Handler) -> Service:
         """Register an in-process service (replacing any previous one of that name)."""
         service = Service(name, type_name, node, handler=handler)
-        self.services[name] = service
-        self.changes += 1
+        self._replace(name, service)
         return service
 
-    def advertise(self, peer: Peer, name: str, type_name: str, written: str = "") -> Service:
-        """Make ``peer`` the provider of ``name``; a previous provider's pending calls fail.
+    def lookup(self, name: str) -> Service:
+        """Return the service ``name`` (absolute).
 
-        A client provider that loses the name to ``peer`` is told (its session disowns it).
+        Raises:
+            ServiceError: there is none (the text is what the caller is told).
         """
-        old = self.services.get(name)
-        if old is not None:
-            self._fail_pending(old, f"service {name} was re-advertised by another provider")
-            if old.provider is not None and old.provider is not peer:
-                old.provider.session.disown("service", name)
-        service = Service(name, type_name, BRIDGE_NODE, provider=peer, written=written or name)
-        self.services[name] = service
-        self.changes += 1
+        service = self.services.get(name)
+        if service is None:
+            msg = f"Service {name} does not exist"
+            raise ServiceError(msg)
         return service
 
-    def unadvertise(self, peer: Peer, name: str) -> bool:
-        """Remove ``peer``'s service ``name``; return whether it was its provider."""
+    def provide(
+        self,
+        peer: Peer,
+        name: str,
+        type_name: str,
+        forward: Forward,
+        *,
+        lost: Lost | None = None,
+        node: str = BRIDGE_NODE,
+        written: str = "",
+    ) -> Service:
+        """Make ``peer`` the provider of ``name``: calls reach it through ``forward``.
+
+        A previous service of that name is replaced: its waiting calls fail, and a previous
+        provider other than ``peer`` is told through its ``lost`` callback.
+        """
+        service = Service(
+            name,
+            type_name,
+            node,
+            provider=peer,
+            forward=forward,
+            lost=lost,
+            written=written or name,
+        )
+        self._replace(name, service)
+        return service
+
+    def withdraw(self, peer: Peer, name: str) -> bool:
+        """Remove ``peer``'s service ``name``; return whether it was its provider.
+
+        Its waiting calls fail.
+        """
         service = self.services.get(name)
         if service is None or service.provider is not peer:
             return False
@@ -206,118 +236,117 @@ class ServiceTable:
         return True
 
     def call(
-        self, peer: Peer, op: CallService, service: Service, request: Any, deadline: float | None
-    ) -> None:
-        """Answer an admitted ``call_service``: at once, or when the provider replies or times out.
+        self,
+        peer: Peer,
+        service: Service,
+        request: Any,
+        deadline: float,
+        done: Done,
+        *,
+        release: Callable[[], None] | None = None,
+    ) -> PendingCall | None:
+        """Call ``service`` for ``peer``; ``done(ok, values)`` gets the answer, exactly once.
 
-        ``request`` is validated (admission); ``deadline`` is when a call to a client provider
-        times out (the caller's session counted it as pending).
+        ``request`` is what the caller's front end validated (complete when the type is
+        known). An in-process handler answers at once (``release`` is not called: nothing
+        waited); a provider gets the call through its ``forward`` and has until ``deadline``.
+        Returns the waiting call, or None when it was answered already.
         """
-        name = service.name
         if service.handler is not None:
-            token = caller.set(peer)
-            try:
-                values: Any = service.handler(request)
-                ok = True
-            except ServiceError as err:
-                values, ok = str(err), False
-            except Exception as err:  # a handler bug must not break the connection
-                logger.exception("service %s failed", name)
-                values, ok = f"service {name} failed: {err}", False
-            finally:
-                caller.reset(token)
-            self.reply(peer, service_response(op.service, values, result=ok, op_id=op.id))
-            return
-        provider = service.provider
-        assert provider is not None and deadline is not None
+            ok, values = self._run(peer, service, request)
+            done(ok, values)
+            return None
+        forward = service.forward
+        assert forward is not None  # a provided service has its front end's forwarder
         seq = next(self._counter)
-        server_id = f"service_request:{name}:{seq}"
-        call = PendingCall(server_id, service, peer, op.id, op.service, deadline)
-        self.pending[server_id] = call
-        self._by_caller.setdefault(peer, {})[server_id] = call
-        self._by_service.setdefault(service, {})[server_id] = call
-        heapq.heappush(self._deadlines, (deadline, seq, server_id))
-        args = request if request is not None else {}
-        provider.send(
-            json_frame(
-                {"op": "call_service", "id": server_id, "service": service.written, "args": args}
-            )
-        )
-
-    def reply(self, peer: Peer, frame: Frame) -> None:
-        """Send a response, in ``fragment`` pieces when the client asked for a fragment size."""
-        size = peer.session.fragment_size
-        if size is None or len(frame.data) <= size:
-            peer.send(frame)
-            return
-        for piece in split_frame(frame, size, f"service_response:{next(self._fragments)}"):
-            peer.send(piece)
-
-    def answering(self, peer: Peer, op: ServiceResponse) -> PendingCall:
-        """Return the call a provider's ``service_response`` answers.
-
-        Raises:
-            ProtocolError: no call waits under that id, or ``peer`` does not provide it.
-        """
-        call = self.pending.get(op.id) if isinstance(op.id, str) else None
-        if call is None:
-            msg = f"service_response for unknown or expired id {op.id!r} on {op.service}"
-            raise ProtocolError(msg)
-        if call.service.provider is not peer:
-            msg = f"service_response for {op.id!r} from a client that does not provide it"
-            raise ProtocolError(msg)
+        call_id = f"service_request:{service.name}:{seq}"
+        call = PendingCall(call_id, service, peer, done, deadline, release)
+        self.pending[call_id] = call
+        self._by_caller.setdefault(peer, {})[call_id] = call
+        self._by_service.setdefault(service, {})[call_id] = call
+        heapq.heappush(self._deadlines, (deadline, seq, call_id))
+        try:
+            forward(call, request)
+        except Exception as err:  # a front end's fault fails this call, never the caller's
+            logger.exception("service %s: forwarding a call failed", service.name)
+            self.respond(call, f"service {service.name} failed: {err}", ok=False)
         return call
 
-    def respond(self, call: PendingCall, values: Any, *, ok: bool) -> None:
-        """Answer ``call``'s caller with a provider's response (admitted: read and validated)."""
-        self._forget(call)
-        self.reply(
-            call.caller, service_response(call.written, values, result=ok, op_id=call.caller_id)
-        )
+    def respond(self, call: PendingCall, values: Any, *, ok: bool) -> bool:
+        """Answer ``call``'s caller with its provider's response; False if it ended already.
+
+        ``values`` is the response (validated by the provider's front end) when ``ok``, else
+        why the call failed.
+        """
+        if self.pending.get(call.id) is not call:
+            return False  # answered, timed out or dropped before
+        self._end(call, values, ok=ok)
+        return True
 
     def expire(self, now: float) -> None:
-        """Answer every call whose deadline has passed with a timeout failure."""
+        """Fail every call whose deadline has passed (timed out waiting for its provider)."""
         heap = self._deadlines
         while heap and heap[0][0] <= now:
-            _deadline, _seq, server_id = heapq.heappop(heap)
-            call = self.pending.get(server_id)
+            _deadline, _seq, call_id = heapq.heappop(heap)
+            call = self.pending.get(call_id)
             if call is None:
                 continue  # answered or dropped before its deadline
-            self._forget(call)
-            self.reply(
-                call.caller,
-                service_response(
-                    call.written,
-                    f"service {call.service.name} timed out waiting for its provider",
-                    result=False,
-                    op_id=call.caller_id,
-                ),
-            )
+            text = f"service {call.service.name} timed out waiting for its provider"
+            self._end(call, text, ok=False)
         if not self.pending:
             heap.clear()
 
     def drop_peer(self, peer: Peer) -> None:
-        """Forget the calls of a client that left (its services go with its session's effects)."""
+        """Forget a peer that left: its calls (unanswered) and the services it still provides."""
         for call in list(self._by_caller.get(peer, {}).values()):
             self._forget(call)
+        for name in [n for n, s in self.services.items() if s.provider is peer]:
+            self.withdraw(peer, name)
+
+    # -- internals ----------------------------------------------------------------------------
+
+    def _run(self, peer: Peer, service: Service, request: Any) -> tuple[bool, Any]:
+        handler = service.handler
+        assert handler is not None
+        token = caller.set(peer)
+        try:
+            return True, handler(request)
+        except ServiceError as err:
+            return False, str(err)
+        except Exception as err:  # a handler bug must not break the connection
+            logger.exception("service %s failed", service.name)
+            return False, f"service {service.name} failed: {err}"
+        finally:
+            caller.reset(token)
+
+    def _replace(self, name: str, service: Service) -> None:
+        old = self.services.get(name)
+        self.services[name] = service
+        self.changes += 1
+        if old is None:
+            return
+        self._fail_pending(old, f"service {name} was re-advertised by another provider")
+        if old.provider is not None and old.provider is not service.provider and old.lost:
+            old.lost(name)
+
+    def _end(self, call: PendingCall, values: Any, *, ok: bool) -> None:
+        self._forget(call)
+        call.done(ok, values)
 
     def _forget(self, call: PendingCall) -> None:
-        """Remove a pending call from every index and end it in its caller's budget."""
-        del self.pending[call.server_id]
+        """Remove a waiting call from every index and end it in its caller's budget."""
+        del self.pending[call.id]
         mine = self._by_caller.get(call.caller, {})
-        mine.pop(call.server_id, None)
+        mine.pop(call.id, None)
         if not mine:
             self._by_caller.pop(call.caller, None)
         theirs = self._by_service.get(call.service, {})
-        theirs.pop(call.server_id, None)
+        theirs.pop(call.id, None)
         if not theirs:
             self._by_service.pop(call.service, None)
-        call.caller.session.end_call()
+        if call.release is not None:
+            call.release()
 
     def _fail_pending(self, service: Service, reason: str) -> None:
         for call in list(self._by_service.get(service, {}).values()):
-            self._forget(call)
-            self.reply(
-                call.caller,
-                service_response(call.written, reason, result=False, op_id=call.caller_id),
-            )
+            self._end(call, reason, ok=False)

@@ -153,6 +153,8 @@ class Converter:
     def from_json(self, typename: str, value: object) -> dict[str, Any]:
         """Return the canonical message of type ``typename`` built from a JSON value.
 
+        A canonical message (numpy arrays, bytes) is taken too: a partial one is completed.
+
         Raises:
             ConversionError: the value does not fit the type; the text names the field path.
             TypeNotFoundError: the type is unknown.
@@ -228,6 +230,8 @@ class Converter:
             data = self._bytes(value, root, path)
             self._check_len(field, len(data), root, path)
             return data
+        if isinstance(value, np.ndarray):  # a canonical message's array, completed again
+            value = value.tolist()
         if not isinstance(value, list):
             msg = f"{root} message requires an array for field {path}, got a {_jtype(value)}"
             raise ConversionError(msg)

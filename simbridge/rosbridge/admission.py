@@ -8,27 +8,21 @@ handler on the graph, which then only carries it out. The checks, in this order:
 2. **fragment size**: a ``fragment_size`` below :data:`MIN_FRAGMENT_SIZE` bytes is refused;
 3. **rate**: ``publish`` ops above the client's ``publish_rate`` are dropped, told at most once
    a second (the session's token bucket);
-4. **scope and rights**: a client scoped to robot ``r1`` may publish and advertise (topics,
-   services, actions) only under ``/r1/`` and may not call services or send goals under
-   another robot's namespace, nor fix the type of a topic outside its namespace with a typed
-   subscribe; administrative services (:attr:`Admission.admin_services`) need admin rights; a
-   service the server provides cannot be advertised by a client;
+4. **scope and rights**: a client scoped to robot ``r1`` may publish and advertise topics
+   only under ``/r1/``, nor fix the type of a topic outside its namespace with a typed
+   subscribe;
 5. **type**: the type of a ``publish``, ``advertise`` or typed ``subscribe`` is well formed and
    is the topic's type (rosbridge's TypeConflictException); a ``publish`` without a type takes
-   the topic's; a service or action type is well formed; the op carries on with the canonical
-   spelling;
-6. **payload**: a ``publish`` message and the request of a ``call_service`` are validated
-   against their types and completed with defaults
-   (:class:`~simbridge.msgs.Converter`; ``args`` given as a list are zipped onto the fields in
-   declaration order; a type simbridge does not know passes as it is, a message of it must be a
-   JSON object); a call to a service that does not exist is refused here. The answers of a
-   client provider are checked the same way: the ``values`` of a ``service_response`` (read as
-   :mod:`~simbridge.graph.services` says; values that do not fit the response type become a
-   failed answer to the caller), for a call that this client serves.
+   the topic's; the op carries on with the canonical spelling;
+6. **payload**: a ``publish`` message is validated against its type and completed with
+   defaults (:class:`~simbridge.msgs.Converter`; a type simbridge does not know passes as it
+   is, a message of it must be a JSON object).
 
-The action ops' checks (scope, goal payloads, a provider's feedback and results) are in
-:mod:`simbridge.rosbridge.actions`, beside their handlers; the front end hands them to
-:class:`Admission` (``checks``), which runs them in the same place of this order.
+The service ops' checks (rights and scope, requests, a provider's responses) are in
+:mod:`simbridge.rosbridge.services`, and the action ops' (scope, goal payloads, a provider's
+feedback and results) in :mod:`simbridge.rosbridge.actions`, each beside its handlers; the front
+end hands them to :class:`Admission` (``checks``), which runs them in the same place of this
+order.
 
 Checks 1-4 are access rules. They apply once a :class:`~simbridge.app.guard.Guard` is
 installed (it authenticates clients and gives each session its scope and rights, and sets
@@ -38,9 +32,8 @@ session's budgets, when the handler takes it; names it may own are counted here 
 scope refusal comes before a budget one.
 
 What :meth:`Admission.admit` returns is what the op's handler carries out: a
-:class:`Publication`, a :class:`Typed` op, a :class:`Call` or a :class:`Response` (the
-tables receive payloads already validated), what an action op's check returns, or the op
-itself. A refused op raises
+:class:`Publication` or a :class:`Typed` op (the tables receive payloads already
+validated), what a service or action op's check returns, or the op itself. A refused op raises
 :class:`~simbridge.rosbridge.Refusal` or :class:`ProtocolError`, answered to its sender only by
 the graph (a refused call or goal gets its failed answer, its caller waits for one).
 Admission reads the client's session (its access, what it holds) and changes nothing in it but
@@ -49,15 +42,14 @@ the charge of its publish rate.
 
 from __future__ import annotations
 
-import json
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any, Literal
 
-from simbridge.errors import ProtocolError, ServiceError, TypeNotFoundError
+from simbridge.errors import ProtocolError, TypeNotFoundError
 from simbridge.graph.access import ANY_SCOPE, AccessRules, in_namespace
-from simbridge.graph.services import Finish, PendingCall, Prepare, Service, ServiceTable
+from simbridge.graph.services import ServiceTable
 from simbridge.graph.topics import Peer, Topic, TopicTable
 from simbridge.msgs import normalize_type
 from simbridge.rosbridge import ops as o
@@ -68,11 +60,10 @@ from simbridge.rosbridge.session import NOT_AUTHENTICATED, Session
 __all__ = [
     "MIN_FRAGMENT_SIZE",
     "Admission",
-    "Call",
     "Check",
     "Publication",
-    "Response",
     "Typed",
+    "interface_type",
 ]
 
 logger = logging.getLogger(__name__)
@@ -104,27 +95,6 @@ class Typed:
     type: str | None
 
 
-@dataclass(frozen=True, slots=True)
-class Call:
-    """An admitted ``call_service``: the service called and the request, validated."""
-
-    op: o.CallService
-    service: Service
-    #: The complete request message when the service type is known, else ``args`` as sent.
-    request: Any
-
-
-@dataclass(frozen=True, slots=True)
-class Response:
-    """An admitted ``service_response``: the call it answers and the answer for its caller."""
-
-    call: PendingCall
-    ok: bool
-    #: The response, validated and completed when the service type is known (``ok``), or why
-    #: the call failed.
-    values: Any
-
-
 #: An op's check: ``(peer, its session, op, now) -> what the op's handler carries out``.
 Check = Callable[[Peer, Session, Any, float], Any]
 
@@ -138,21 +108,16 @@ class Admission:
         services: ServiceTable,
         rules: AccessRules | None = None,
         *,
-        prepare: Prepare | None = None,
-        finish: Finish | None = None,
         checks: dict[type, Check] | None = None,
     ) -> None:
         #: The graph's topics (types of existing topics; payload validation).
         self.topics = topics
-        #: Validates and completes the requests of known service types
-        #: (:func:`~simbridge.graph.services.typed_calls`), and their responses.
-        self.prepare = prepare
-        self.finish = finish
         #: The graph's services (a client may not advertise what the server provides).
         self.services = services
         #: The graph's access rules (checks 1-4 apply once a guard turned them on).
         self.rules = rules or AccessRules()
-        #: The checks of the other kinds of op (the action ops', given by the front end).
+        #: The checks of the other kinds of op (the service and action ops', given by the
+        #: front end).
         self.checks: dict[type, Check] = dict(checks or {})
 
     @property
@@ -163,8 +128,8 @@ class Admission:
     def admit(self, peer: Peer, op: Op, now: float) -> Any:
         """Return what the op's handler carries out, or ``None`` if the op is dropped.
 
-        That is a :class:`Publication`, :class:`Typed`, :class:`Call`, :class:`Response`, what
-        an action op's check returns (see the module doc), or the op itself.
+        That is a :class:`Publication`, :class:`Typed`, what a service or action op's check
+        returns (see the module doc), or the op itself.
 
         Raises:
             ProtocolError: the op is refused (a :class:`Refusal` says how to answer it).
@@ -238,95 +203,6 @@ class Admission:
                 raise Refusal(msg, cause="typed subscribe outside scope")
         return Typed(op, self.topics.check_type(op.name, op.type))
 
-    def _advertise_service(
-        self, peer: Peer, session: Session, op: o.AdvertiseService, now: float
-    ) -> Any:
-        if self.guarded:
-            existing = self.services.services.get(op.name)
-            if existing is not None and existing.handler is not None:
-                msg = (
-                    f"advertise_service {op.name}: refused, the server provides this service "
-                    "itself; choose another name"
-                )
-                raise Refusal(msg, cause="server service")
-            new = not session.provides("service", op.name)
-            self.may_own(session, "advertise_service", op.name, new)
-        return Typed(op, _interface_type(op.type, "srv", "advertise_service"))
-
-    def _call_service(self, peer: Peer, session: Session, op: o.CallService, now: float) -> Any:
-        if not self.guarded:
-            return self.call(op)
-        name = op.name
-        if self.rules.admin_only(name) and not session.admin:
-            reason = (
-                f"service {name} is administrative: connect with the admin token "
-                "(?token=ADMIN_TOKEN) to call it"
-            )
-        elif not self.rules.may_reach(session.access, name):
-            reason = f"service {name} belongs to another robot; this connection may not call it"
-        else:
-            return self.call(op)
-        logger.info("%s: %s", peer.label, reason)
-        raise Refusal(reason, op="call_service", target=op.service, op_id=op.id)
-
-    def _service_response(
-        self, peer: Peer, session: Session, op: o.ServiceResponse, now: float
-    ) -> Any:
-        return self.response(peer, op)
-
-    # -- payloads of calls (also for callers outside the protocol: Zenoh) --------------------
-
-    def call(self, op: o.CallService) -> Call:
-        """Return the call with its service and validated request.
-
-        Raises:
-            Refusal: no such service, or ``args`` do not fit its request type (answered as a
-                failed ``service_response``).
-        """
-        name = op.name
-        service = self.services.services.get(name)
-        if service is None:
-            text = f"Service {name} does not exist"
-            raise Refusal(text, op="call_service", target=op.service, op_id=op.id)
-        request: Any = op.args
-        if self.prepare is not None:
-            try:
-                prepared = self.prepare(service.type, op.args)
-            except ServiceError as err:
-                text = str(err)
-                raise Refusal(text, op="call_service", target=op.service, op_id=op.id) from None
-            if prepared is not None:
-                request = prepared
-        return Call(op, service, request)
-
-    def response(self, peer: Peer, op: o.ServiceResponse) -> Response:
-        """Return the answer a provider's ``service_response`` gives its call's caller.
-
-        Read as :mod:`~simbridge.graph.services` says; values of a known response type are
-        validated and completed (values that do not fit are a failed answer, naming why).
-
-        Raises:
-            ProtocolError: no call waits under that id, or ``peer`` does not provide it.
-        """
-        call = self.services.answering(peer, op)
-        values = op.values
-        if isinstance(values, dict) or (op.result is True and values is None):
-            ok, values = True, values if isinstance(values, dict) else {}
-        elif isinstance(values, str) and op.result is False:
-            ok = False
-        elif op.result is False and values is None:
-            ok, values = False, "service provider reported failure"
-        else:
-            ok = False
-            shown = json.dumps(values, default=repr)
-            values = f"service provider sent no result object (values: {shown})"
-        if ok and self.finish is not None:
-            try:
-                values = self.finish(call.service.type, values)
-            except ServiceError as err:
-                ok, values = False, f"service provider sent an invalid response: {err}"
-        return Response(call, ok, values)
-
     # -- scope -----------------------------------------------------------------------------
 
     def may_own(self, session: Session, what: str, name: str, new: bool) -> None:
@@ -344,7 +220,7 @@ class Admission:
         session.may_own(what, name, new)
 
 
-def _interface_type(type_name: str, kind: Literal["srv", "action"], op: str) -> str:
+def interface_type(type_name: str, kind: Literal["srv", "action"], op: str) -> str:
     """Return the canonical spelling of a service or action type, or refuse the op."""
     try:
         return normalize_type(type_name, kind)
@@ -356,7 +232,4 @@ _CHECKS: dict[type, Callable[[Admission, Peer, Session, Any, float], Any]] = {
     o.Publish: Admission._publish,
     o.Advertise: Admission._advertise,
     o.Subscribe: Admission._subscribe,
-    o.AdvertiseService: Admission._advertise_service,
-    o.CallService: Admission._call_service,
-    o.ServiceResponse: Admission._service_response,
 }

@@ -40,14 +40,14 @@ from typing import Any, Protocol
 
 from simbridge.errors import ProtocolError, SimbridgeError
 from simbridge.graph.graph import Graph
-from simbridge.graph.services import service_response, typed_calls
 from simbridge.graph.topics import Peer
 from simbridge.rosbridge import ops as o
 from simbridge.rosbridge.actions import ActionOps
-from simbridge.rosbridge.admission import Admission, Call, Publication, Response, Typed
+from simbridge.rosbridge.admission import Admission, Publication, Typed
 from simbridge.rosbridge.budget import Limits, Pool
 from simbridge.rosbridge.encoding import json_body
 from simbridge.rosbridge.ops import ClientId, Op, Refusal
+from simbridge.rosbridge.services import ServiceOps
 from simbridge.rosbridge.session import (
     Advertised,
     Effect,
@@ -106,7 +106,8 @@ class Rosbridge:
         self.pool = pool or Pool()
         #: Checks ``auth`` ops (``None``: the server takes none).
         self.authenticator = authenticator
-        prepare, finish = typed_calls(graph.registry, graph.converter)
+        #: The service ops: their checks and handlers (:mod:`simbridge.rosbridge.services`).
+        self.services = ServiceOps(self)
         #: The action ops: their checks and handlers (:mod:`simbridge.rosbridge.actions`).
         self.actions = ActionOps(self)
         #: Decides whether each op of a client is carried out.
@@ -114,9 +115,7 @@ class Rosbridge:
             graph.topics,
             graph.services,
             graph.access,
-            prepare=prepare,
-            finish=finish,
-            checks=self.actions.checks(),
+            checks={**self.services.checks(), **self.actions.checks()},
         )
         #: Op handlers by op class.
         self.handlers: dict[type, OpHandler] = {
@@ -126,11 +125,8 @@ class Rosbridge:
             o.Publish: self._publish,
             o.Subscribe: self._subscribe,
             o.Unsubscribe: self._unsubscribe,
-            o.CallService: self._call_service,
-            o.AdvertiseService: self._advertise_service,
-            o.UnadvertiseService: self._unadvertise_service,
-            o.ServiceResponse: self._service_response,
             o.SetLevel: self._set_level,
+            **self.services.handlers(),
             **self.actions.handlers(),
         }
         #: How each effect of a session is carried out (see :meth:`apply`).
@@ -197,8 +193,8 @@ class Rosbridge:
 
         The handler receives what :meth:`Admission.admit
         <simbridge.rosbridge.admission.Admission.admit>` returns (the op, or what was decided for
-        it: a ``Publication``, a ``Typed`` op, a ``Call``, a ``GoalRequest``), hands it to the
-        client's session and carries out the effects.
+        it: a ``Publication``, a ``Typed`` op, a service op's ``Call`` or ``Response``, an action
+        op's ``GoalRequest``...), hands it to the client's session and carries out the effects.
         """
         handler = self.handlers.get(type(op))
         try:
@@ -233,9 +229,7 @@ class Rosbridge:
         text = str(err)
         logger.debug("%s: %s", peer.label, text)
         if kind == "call_service":
-            self.graph.services.reply(
-                peer, service_response(target, text, result=False, op_id=op_id)
-            )
+            self.services.fail(peer, target, text, op_id)
             return
         if kind == "send_action_goal":
             self.actions.refused(peer, target, op_id, text)
@@ -296,24 +290,6 @@ class Rosbridge:
     def _unsubscribe(self, peer: Peer, op: o.Unsubscribe, now: float) -> None:
         self.apply(peer, peer.session.unsubscribe(op))
 
-    def _call_service(self, peer: Peer, call: Call, now: float) -> None:
-        service = call.service
-        deadline = peer.session.call_service(
-            call.op, now, waits=service.handler is None, default=self.graph.services.default_timeout
-        )
-        self.graph.services.call(peer, call.op, service, call.request, deadline)
-
-    def _advertise_service(self, peer: Peer, admitted: Typed, now: float) -> None:
-        op, type_name = admitted.op, admitted.type
-        assert type_name is not None
-        self.apply(peer, peer.session.provide("service", op.name, type_name, op.service))
-
-    def _unadvertise_service(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:
-        self.apply(peer, peer.session.withdraw("service", op.name))
-
-    def _service_response(self, peer: Peer, response: Response, now: float) -> None:
-        self.graph.services.respond(response.call, response.values, ok=response.ok)
-
     def _set_level(self, peer: Peer, op: o.SetLevel, now: float) -> None:
         self.apply(peer, peer.session.set_level(op))
 
@@ -331,13 +307,13 @@ class Rosbridge:
 
     def _provided(self, peer: Peer, effect: Provided) -> None:
         if effect.kind == "service":
-            self.graph.services.advertise(peer, effect.name, effect.type, effect.written)
+            self.services.provided(peer, effect)
         else:
             self.actions.provided(peer, effect)
 
     def _withdrawn(self, peer: Peer, effect: Withdrawn) -> None:
         if effect.kind == "service":
-            self.graph.services.unadvertise(peer, effect.name)
+            self.services.withdrawn(peer, effect)
         else:
             self.actions.withdrawn(peer, effect.name)
 

@@ -1,256 +1,187 @@
+"""The graph's service table, protocol-neutral: calls answered through ``done``, exactly once."""
+
 from __future__ import annotations
 
-import json
 from typing import Any
 
 import pytest
 
-from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph import Graph
-from tests.helpers import RecordingPeer, rosbridge_of
+from simbridge.graph.access import Access
+from simbridge.graph.services import PendingCall, ServiceTable, caller, typed_calls
+from simbridge.msgs import Converter, TypeRegistry
+
+
+class Peer:
+    """A front end's peer as the graph sees it: a label and an access."""
+
+    def __init__(self, label: str) -> None:
+        self.label = label
+        self.access = Access(scope=label)
+
+
+class Answers:
+    """A caller's ``done``: every answer it got, and how often its budget was released."""
+
+    def __init__(self) -> None:
+        self.got: list[tuple[bool, Any]] = []
+        self.released = 0
+
+    def done(self, ok: bool, values: Any) -> None:
+        self.got.append((ok, values))
+
+    def release(self) -> None:
+        self.released += 1
+
+
+class Provider:
+    """A provider's front end: the calls it was forwarded, and the names it lost."""
+
+    def __init__(self, table: ServiceTable, label: str = "provider") -> None:
+        self.peer = Peer(label)
+        self.table = table
+        self.calls: list[tuple[PendingCall, Any]] = []
+        self.lost: list[str] = []
+
+    def provide(self, name: str, type_name: str = "example_interfaces/srv/AddTwoInts") -> Any:
+        return self.table.provide(self.peer, name, type_name, self.forward, lost=self.lost.append)
+
+    def forward(self, call: PendingCall, request: Any) -> None:
+        self.calls.append((call, request))
 
 
 @pytest.fixture
-def graph() -> Graph:
-    return Graph()
+def table() -> ServiceTable:
+    return ServiceTable()
 
 
-def op(peer: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> None:
-    rosbridge_of(graph).receive(peer, json.dumps(fields), now)
+def test_a_handler_answers_at_once_and_reads_who_calls(table: ServiceTable) -> None:
+    """done(True, the handler's values), once; the caller context var holds the peer."""
+    seen: list[Any] = []
+
+    def add(request: Any) -> dict[str, Any]:
+        peer = caller.get()
+        seen.append(peer.access.scope if peer is not None else None)
+        return {"sum": request["a"] + request["b"]}
+
+    service = table.add("/add", "example_interfaces/srv/AddTwoInts", "/n", add)
+    answers = Answers()
+    pending = table.call(Peer("r1"), service, {"a": 1, "b": 2}, 0.0, answers.done)
+    assert pending is None and answers.got == [(True, {"sum": 3})] and seen == ["r1"]
+    assert caller.get() is None and table.pending == {}
 
 
-def test_in_process_service_answers_with_values_and_the_request_id(graph: Graph) -> None:
-    """Result true, values the handler's object, id and service echoed as sent."""
-    graph.add_service("/add", "example_interfaces/srv/AddTwoInts", "/n", lambda a: {"sum": 3})
-    c = RecordingPeer(graph)
-    op(c, graph, op="call_service", service="add", id="call:1", args={"a": 1, "b": 2})
-    assert c.take() == [
-        {
-            "op": "service_response",
-            "service": "add",
-            "values": {"sum": 3},
-            "result": True,
-            "id": "call:1",
-        }
-    ]
+def test_a_handlers_service_error_or_bug_is_a_failed_answer(table: ServiceTable) -> None:
+    """ServiceError: its text; any other exception: a sentence naming the service."""
 
-
-def test_service_error_becomes_result_false_with_the_reason(graph: Graph) -> None:
-    """A handler raising ServiceError answers result false with its text."""
-
-    def fail(args: Any) -> dict[str, Any]:
+    def refuse(request: Any) -> dict[str, Any]:
         raise ServiceError("no can do")
 
-    graph.add_service("/fail", "std_srvs/srv/Trigger", "/n", fail)
-    c = RecordingPeer(graph)
-    op(c, graph, op="call_service", service="/fail")
-    (reply,) = c.take()
-    assert (reply["result"], reply["values"]) == (False, "no can do")
-    assert "id" not in reply
+    def bug(request: Any) -> dict[str, Any]:
+        return {"x": 1 / 0}
+
+    answers = Answers()
+    for name, handler in (("/refuse", refuse), ("/bug", bug)):
+        service = table.add(name, "std_srvs/srv/Trigger", "/n", handler)
+        table.call(Peer("c"), service, {}, 0.0, answers.done)
+    assert answers.got[0] == (False, "no can do")
+    assert answers.got[1][0] is False and answers.got[1][1].startswith("service /bug failed:")
 
 
-def test_handler_bug_is_answered_not_crashed(graph: Graph) -> None:
-    """An unexpected exception in a handler still answers the call."""
-    graph.add_service("/bug", "std_srvs/srv/Empty", "/n", lambda a: 1 / 0)  # type: ignore[arg-type,return-value]
-    c = RecordingPeer(graph)
-    op(c, graph, op="call_service", service="/bug", id=7)
-    (reply,) = c.take()
-    assert reply["result"] is False and reply["id"] == 7
+def test_a_provided_service_is_forwarded_and_answered_once(table: ServiceTable) -> None:
+    """forward(call, request); respond answers done once and releases the caller's budget."""
+    provider = Provider(table)
+    service = provider.provide("/sum")
+    answers = Answers()
+    peer = Peer("c")
+    pending = table.call(peer, service, {"a": 1}, 5.0, answers.done, release=answers.release)
+    ((call, request),) = provider.calls
+    assert call is pending and request == {"a": 1} and call.caller is peer
+    assert call.id.startswith("service_request:/sum:") and table.pending == {call.id: call}
+    assert answers.got == []
+    assert table.respond(call, {"sum": 1}, ok=True)
+    assert answers.got == [(True, {"sum": 1})] and answers.released == 1
+    assert not table.respond(call, {"sum": 2}, ok=True)  # a second answer goes nowhere
+    assert answers.got == [(True, {"sum": 1})] and answers.released == 1
 
 
-def test_client_provided_service_round_trip(graph: Graph) -> None:
-    """Calls are forwarded to the provider and its reply routed back by id."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(
-        provider,
-        graph,
-        op="advertise_service",
-        service="/sum",
-        type="example_interfaces/AddTwoInts",
-    )
-    op(caller, graph, op="call_service", service="/sum", id="x", args={"a": 1, "b": 2})
-    (request,) = provider.take()
-    assert request["op"] == "call_service" and request["args"] == {"a": 1, "b": 2}
-    op(
-        provider,
-        graph,
-        op="service_response",
-        service="/sum",
-        id=request["id"],
-        values={"sum": 3},
-        result=True,
-    )
-    assert caller.take() == [
-        {
-            "op": "service_response",
-            "service": "/sum",
-            "values": {"sum": 3},
-            "result": True,
-            "id": "x",
-        }
-    ]
-
-
-@pytest.mark.parametrize(
-    ("reply", "ok", "values"),
-    [
-        ({"values": {"sum": 3}}, True, {"sum": 3}),  # roslibjs: callback returned nothing
-        ({"values": {"sum": 3}, "result": None}, True, {"sum": 3}),  # roslibpy: returned None
-        ({"result": True}, True, {}),
-        ({"result": False}, False, "service provider reported failure"),  # roslibjs 2.1 throw
-        ({"result": False, "values": "boom"}, False, "boom"),  # roslibjs 2.1 advertiseAsync
-        ({}, False, "service provider sent no result object (values: null)"),
-        # rosbridge reads values whatever result says (roslibpy's own test returns False)
-        ({"values": {"sum": 42}, "result": False}, True, {"sum": 42}),
-        (
-            {"values": [1, 2], "result": True},
-            False,
-            "service provider sent no result object (values: [1, 2])",
-        ),
-    ],
-)
-def test_every_client_reply_shape_is_answered(
-    graph: Graph, reply: dict[str, Any], ok: bool, values: Any
-) -> None:
-    """Replies without result, with result null or without object values never hang."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(provider, graph, op="advertise_service", service="/s", type="my_pkg/srv/Sum")
-    op(caller, graph, op="call_service", service="/s", id="x")
-    (request,) = provider.take()
-    op(provider, graph, op="service_response", service="/s", id=request["id"], **reply)
-    (answer,) = caller.take()
-    assert (answer["result"], answer["values"]) == (ok, values)
-
-
-def test_call_times_out_when_the_provider_never_answers(graph: Graph) -> None:
-    """Timeout 0.5 s: tick past the deadline answers result false."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(provider, graph, op="advertise_service", service="/slow", type="std_srvs/Trigger")
-    op(caller, graph, 10.0, op="call_service", service="/slow", id="x", timeout=0.5)
+def test_a_call_not_answered_by_its_deadline_times_out_on_the_tick() -> None:
+    """Graph.tick past the deadline: done(False, timed out); before it, nothing."""
+    graph = Graph()
+    provider = Provider(graph.services)
+    service = provider.provide("/slow")
+    answers = Answers()
+    graph.services.call(Peer("c"), service, {}, 10.5, answers.done, release=answers.release)
     graph.tick(10.4)
-    assert caller.take() == []
+    assert answers.got == [] and answers.released == 0
     graph.tick(10.6)
-    (answer,) = caller.take()
-    assert answer["result"] is False and "timed out" in answer["values"]
+    assert answers.got == [(False, "service /slow timed out waiting for its provider")]
+    assert answers.released == 1 and graph.services.pending == {}
+    (call, _request) = provider.calls[0]
+    assert not graph.services.respond(call, {}, ok=True) and len(answers.got) == 1
 
 
-def test_timeout_0_waits_the_maximum_not_forever_and_calls_are_budgeted() -> None:
-    """A timeout of 0 (rosbridge: forever) waits max_call_timeout; calls are budgeted.
-
-    Past max_pending_calls a call fails at once; expired and dropped calls give the budget back.
-    """
-    graph = Graph(settings=ServerSettings(max_call_timeout=2.0, max_pending_calls=2))
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(provider, graph, op="advertise_service", service="/slow", type="std_srvs/Trigger")
-    for k in range(3):
-        op(caller, graph, 10.0, op="call_service", service="/slow", id=k, timeout=0)
-    (refused,) = caller.take()
-    assert refused["id"] == 2 and "max_pending_calls" in refused["values"]
-    graph.tick(11.9)
-    assert caller.take() == [] and caller.session.pending_calls == 2
-    graph.tick(12.1)
-    assert [m["id"] for m in caller.take()] == [0, 1]
-    assert caller.session.pending_calls == 0 == rosbridge_of(graph).pool.used["pending_calls"]
-    op(caller, graph, 13.0, op="call_service", service="/slow", id="late")
-    rosbridge_of(graph).remove_peer(caller)
-    assert not graph.services.pending and rosbridge_of(graph).pool.used["pending_calls"] == 0
+def test_a_withdrawn_service_fails_its_waiting_calls(table: ServiceTable) -> None:
+    provider = Provider(table)
+    service = provider.provide("/s")
+    answers = Answers()
+    table.call(Peer("c"), service, {}, 5.0, answers.done, release=answers.release)
+    assert not table.withdraw(Peer("other"), "/s")  # only its provider withdraws it
+    assert table.withdraw(provider.peer, "/s")
+    assert answers.got == [(False, "service /s was unadvertised by its provider")]
+    assert answers.released == 1 and "/s" not in table.services
+    with pytest.raises(ServiceError, match="Service /s does not exist"):
+        table.lookup("/s")
 
 
-def test_provider_disconnect_fails_pending_calls(graph: Graph) -> None:
-    """A provider that leaves: its pending calls are answered with failure."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(provider, graph, op="advertise_service", service="/s", type="std_srvs/Trigger")
-    op(caller, graph, op="call_service", service="/s", id="x")
-    rosbridge_of(graph).remove_peer(provider)
-    (answer,) = caller.take()
-    assert answer["result"] is False and "unadvertised" in answer["values"]
-    op(caller, graph, op="call_service", service="/s", id="y")
-    assert "does not exist" in caller.take()[0]["values"]
+def test_a_provider_that_loses_the_name_is_told_and_its_calls_fail(table: ServiceTable) -> None:
+    """Another provider takes the name: lost(name) for the first; the same one again: no."""
+    first, second = Provider(table, "first"), Provider(table, "second")
+    service = first.provide("/s")
+    answers = Answers()
+    table.call(Peer("c"), service, {}, 5.0, answers.done)
+    first.provide("/s")  # the same provider again: nothing lost
+    assert first.lost == [] and answers.got[0][0] is False
+    assert "re-advertised" in answers.got[0][1]
+    second.provide("/s")
+    assert first.lost == ["/s"] and table.services["/s"].provider is second.peer
+    assert not table.withdraw(first.peer, "/s")
 
 
-def test_service_response_for_unknown_id_is_a_status_error(graph: Graph) -> None:
-    """A stray reply is reported to its sender only."""
-    stray = RecordingPeer(graph)
-    op(stray, graph, op="service_response", service="/s", id="nope", result=True)
-    assert stray.take()[0]["op"] == "status"
+def test_a_peer_that_leaves_takes_its_calls_and_services(table: ServiceTable) -> None:
+    """drop_peer: a caller's calls end unanswered (budget released); a provider's fail."""
+    provider = Provider(table)
+    service = provider.provide("/s")
+    gone, staying = Answers(), Answers()
+    leaving = Peer("leaving")
+    table.call(leaving, service, {}, 5.0, gone.done, release=gone.release)
+    table.call(Peer("c"), service, {}, 5.0, staying.done, release=staying.release)
+    table.drop_peer(leaving)
+    assert gone.got == [] and gone.released == 1 and len(table.pending) == 1
+    table.drop_peer(provider.peer)
+    assert staying.got == [(False, "service /s was unadvertised by its provider")]
+    assert staying.released == 1 and table.services == {} and table.pending == {}
 
 
-def test_known_service_type_completes_requests_and_responses(graph: Graph) -> None:
-    """AddTwoInts: list args zipped onto (a, b); a partial reply gets its defaults filled."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(
-        provider,
-        graph,
-        op="advertise_service",
-        service="/add",
-        type="example_interfaces/AddTwoInts",
-    )
-    op(caller, graph, op="call_service", service="add", args=[2], id=7)
-    (request,) = provider.take()
-    assert request["args"] == {"a": 2, "b": 0}
-    op(provider, graph, op="service_response", service="/add", id=request["id"], values={})
-    (answer,) = caller.take()
-    assert answer == {
-        "op": "service_response",
-        "service": "add",
-        "values": {"sum": 0},
-        "result": True,
-        "id": 7,
-    }
+def test_a_forwarder_that_raises_fails_that_call_only(table: ServiceTable) -> None:
+    def broken(call: PendingCall, request: Any) -> None:
+        raise RuntimeError("wire down")
+
+    service = table.provide(Peer("p"), "/s", "std_srvs/srv/Trigger", broken)
+    answers = Answers()
+    table.call(Peer("c"), service, {}, 5.0, answers.done, release=answers.release)
+    assert answers.got == [(False, "service /s failed: wire down")]
+    assert answers.released == 1 and table.pending == {}
 
 
-def test_invalid_request_of_a_known_type_is_refused_before_the_provider(graph: Graph) -> None:
-    """A string for an int64 field: result false naming the field; the provider sees nothing."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(
-        provider,
-        graph,
-        op="advertise_service",
-        service="/add",
-        type="example_interfaces/AddTwoInts",
-    )
-    op(caller, graph, op="call_service", service="/add", args={"a": "one"}, id=1)
-    assert provider.take() == []
-    (answer,) = caller.take()
-    assert answer["result"] is False and "a must be an integer" in answer["values"]
-
-
-def test_unknown_service_type_passes_list_args_through_unchanged(graph: Graph) -> None:
-    """No definition: no validation, no default filling."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(provider, graph, op="advertise_service", service="/x", type="my_pkg/Thing")
-    op(caller, graph, op="call_service", service="/x", args=[1, "two"], id=1)
-    (request,) = provider.take()
-    assert request["args"] == [1, "two"]
-
-
-def test_responses_are_fragmented_for_clients_that_ask(graph: Graph) -> None:
-    """call_service with fragment_size: the reply comes in fragments that join to the response."""
-    graph.add_service("/sum", "example_interfaces/srv/AddTwoInts", "/n", lambda a: {"sum": 3})
-    caller = RecordingPeer(graph, "c")
-    op(caller, graph, op="call_service", service="/sum", args=[1, 2], id="x", fragment_size=20)
-    pieces = caller.take()
-    assert len(pieces) > 1 and all(p["op"] == "fragment" for p in pieces)
-    assert {p["total"] for p in pieces} == {len(pieces)}
-    whole = json.loads("".join(p["data"] for p in sorted(pieces, key=lambda p: p["num"])))
-    assert whole["op"] == "service_response" and whole["id"] == "x"
-
-
-def test_more_list_args_than_request_fields_is_refused_naming_the_fields(graph: Graph) -> None:
-    """AddTwoInts has (a, b): [1, 2, 3] is refused before the provider, result false."""
-    provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
-    op(
-        provider,
-        graph,
-        op="advertise_service",
-        service="/add",
-        type="example_interfaces/AddTwoInts",
-    )
-    op(caller, graph, op="call_service", service="/add", args=[1, 2, 3], id=8)
-    assert provider.take() == []
-    (answer,) = caller.take()
-    assert answer["result"] is False
-    assert answer["values"] == (
-        "request of example_interfaces/srv/AddTwoInts has 2 fields (a, b), got 3 positional args"
-    )
+def test_typed_calls_complete_requests_and_responses_of_known_types() -> None:
+    """List args zipped onto the fields, defaults filled; an unknown type passes unchanged."""
+    registry = TypeRegistry()
+    prepare, finish = typed_calls(registry, Converter(registry, lambda: (0, 0)))
+    assert prepare("example_interfaces/srv/AddTwoInts", [2]) == {"a": 2, "b": 0}
+    assert finish("example_interfaces/srv/AddTwoInts", {}) == {"sum": 0}
+    assert prepare("my_pkg/srv/Thing", [1, "two"]) is None
+    assert finish("my_pkg/srv/Thing", [1]) == [1]
+    with pytest.raises(ServiceError, match="a must be an integer"):
+        prepare("example_interfaces/srv/AddTwoInts", {"a": "one"})

@@ -3,16 +3,13 @@ from __future__ import annotations
 import json
 from typing import Any
 
-import pytest
-
 from simbridge.app.config import Params, load_world
 from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
-from simbridge.errors import ProtocolError
 from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
-from simbridge.rosbridge import Refusal, ops as o
-from simbridge.rosbridge.admission import Call, Publication, Response
+from simbridge.rosbridge import ops as o
+from simbridge.rosbridge.admission import Publication
 from simbridge.sim import World
 from tests.helpers import ROOT, RecordingPeer, rosbridge_of
 
@@ -97,61 +94,3 @@ def test_cmd_vel_reaches_its_robot_and_another_robots_client_is_refused_by_scope
     ]
     assert world.robots["r2"].cmd_v == 0.0
     assert "/r2/cmd_vel" not in r1.session.advertisements
-
-
-def test_a_call_is_admitted_with_its_service_and_its_request_validated() -> None:
-    """The service table receives a complete request: list args zipped, defaults filled."""
-    graph = Graph()
-    peer = RecordingPeer(graph)
-    graph.add_service("/add", "example_interfaces/srv/AddTwoInts", "/n", lambda r: {"sum": 0})
-    call = rosbridge_of(graph).admission.admit(peer, o.CallService("add", args=[1]), 0.0)
-    assert isinstance(call, Call) and call.service is graph.services.services["/add"]
-    assert call.request == {"a": 1, "b": 0}
-
-
-def test_a_call_with_a_bad_request_or_to_no_service_is_refused_before_any_table() -> None:
-    """Refused in admission: the provider never hears of it, nothing waits, the caller is told."""
-    graph = Graph()
-    provider, caller = RecordingPeer(graph), RecordingPeer(graph)
-    advertise = {"op": "advertise_service", "service": "/add"}
-    op(provider, graph, **advertise, type="example_interfaces/AddTwoInts")
-    with pytest.raises(Refusal, match=r"Message type .* does not have a field c") as refused:
-        rosbridge_of(graph).admission.admit(
-            caller, o.CallService("/add", args={"c": 1}, id="x"), 0.0
-        )
-    assert (refused.value.op, refused.value.target, refused.value.op_id) == (
-        "call_service",
-        "/add",
-        "x",
-    )
-    (answer,) = op(caller, graph, op="call_service", service="/add", args={"c": 1}, id="x")
-    assert answer["op"] == "service_response" and answer["result"] is False
-    (answer,) = op(caller, graph, op="call_service", service="/none", id="y")
-    assert answer["values"] == "Service /none does not exist" and answer["result"] is False
-    assert provider.take() == [] and graph.services.pending == {}
-    assert caller.session.pending_calls == 0
-
-
-def test_a_providers_answers_are_admitted_validated_for_the_calls_it_serves() -> None:
-    """service_response: read and checked before routing."""
-    graph = Graph()
-    provider, caller, other = RecordingPeer(graph), RecordingPeer(graph), RecordingPeer(graph)
-    op(
-        provider,
-        graph,
-        op="advertise_service",
-        service="/add",
-        type="example_interfaces/AddTwoInts",
-    )
-    op(caller, graph, op="call_service", service="/add", args={"a": 1, "b": 2}, id="c")
-    (forwarded,) = provider.take()
-    answer = o.ServiceResponse("/add", values={}, id=forwarded["id"], result=True)
-    with pytest.raises(ProtocolError, match="from a client that does not provide it"):
-        rosbridge_of(graph).admission.admit(other, answer, 0.0)
-    response = rosbridge_of(graph).admission.admit(provider, answer, 0.0)
-    assert isinstance(response, Response) and response.ok and response.values == {"sum": 0}
-    bad = o.ServiceResponse("/add", values={"total": 3}, id=forwarded["id"], result=True)
-    response = rosbridge_of(graph).admission.admit(provider, bad, 0.0)
-    assert isinstance(response, Response) and not response.ok
-    assert response.values.startswith("service provider sent an invalid response")
-    assert caller.take() == [] and len(graph.services.pending) == 1  # nothing routed yet

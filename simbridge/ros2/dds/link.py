@@ -29,7 +29,6 @@ from __future__ import annotations
 import asyncio
 import contextlib
 import importlib
-import itertools
 import logging
 import threading
 import time
@@ -37,8 +36,6 @@ from collections import Counter, deque
 from collections.abc import Callable, Hashable
 from dataclasses import dataclass
 from typing import Any
-
-import orjson
 
 from simbridge.app.guard import ros2_access
 from simbridge.errors import ConfigError, SimbridgeError
@@ -66,9 +63,7 @@ from simbridge.ros2.dds.wire import (
 from simbridge.ros2.names import dds_type, ros_type
 from simbridge.ros2.typehash import TypeHasher
 from simbridge.rosbridge import Frame, Outgoing, Session
-from simbridge.rosbridge.encoding import encode_json
 from simbridge.rosbridge.front import Rosbridge
-from simbridge.rosbridge.ops import CallService
 
 
 __all__ = ["DdsLink", "DdsNode", "import_cyclonedds"]
@@ -97,7 +92,8 @@ REMOTE_NODE = "a ROS 2 node (DDS)"
 UNKNOWN_NODE = "/_NODE_NAME_UNKNOWN_"
 #: The writer history depth of a volatile topic (rclcpp's default profile).
 DEPTH = 10
-#: Seconds a call from DDS waits for a rosbridge client that provides the service.
+#: Seconds a call from DDS waits for a provider that is not in process (a rosbridge client,
+#: a ROS 2 process over Zenoh), capped by ``max_call_timeout``.
 SERVICE_TIMEOUT = 10.0
 #: Bytes of rmw_cyclonedds's request header, after the CDR header: the client's id (the last
 #: 8 bytes of its GUID) and the request's sequence number, both 64-bit.
@@ -197,7 +193,7 @@ class _Caller:
         return self.session.access
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        self.link._service_answer(orjson.loads(frame.data))
+        """Nothing comes as frames: the graph answers its calls through their ``done``."""
 
 
 class DdsLink:
@@ -248,8 +244,8 @@ class DdsLink:
         self._markers: dict[str, dict[DdsNode, Callable[[Any, Any], None]]] = {}
         self._marker_ids: set[int] = set()
         self._remote_nodes: set[str] = set()
-        #: Where DDS calls are carried out as rosbridge ops, for now (the graph's service table
-        #: takes calls of its own next).
+        #: Gives the link's caller its session, which the graph's peers still carry (only its
+        #: access is read: calls go to the graph's service table directly).
         self.rosbridge = rosbridge or Rosbridge(graph)
         # whatever comes from DDS is admitted as one peer of the ROS 2 peers' role
         session = self.rosbridge.new_session()
@@ -259,9 +255,10 @@ class DdsLink:
         self._access = session.access
         self._caller = _Caller(self, session)
         self._servers: dict[str, _Server] = {}
-        #: Calls from DDS waiting for the graph's answer: op id -> (server, type, header).
-        self._calls: dict[str, tuple[_Server, str, bytes]] = {}
-        self._call_ids = itertools.count(1)
+        #: Calls from DDS waiting for a provider that is not in process, at most
+        #: ``max_pending_calls`` (the budget of one rosbridge client: the DDS peers are one).
+        self.calls_waiting = 0
+        self.max_calls_waiting = graph.settings.max_pending_calls
         self._refusals: dict[str, str | None] = {}
         self._forwarding = False
         self._next_reconcile = 0.0
@@ -366,7 +363,6 @@ class DdsLink:
         self._writers.clear()
         self._readers.clear()
         self._servers.clear()
-        self._calls.clear()
         self._builtin.clear()
         self._topics.clear()
         self._discovery_writer = self._discovery_reader = None
@@ -953,39 +949,60 @@ class DdsLink:
                 )
                 raise ValueError(msg)
             header = payload[4 : 4 + REQUEST_HEADER]
-            request_type, _ = self.graph.registry.service(server.type)
+            request_type, response_type = self.graph.registry.service(server.type)
             body = payload[:4] + payload[4 + REQUEST_HEADER :]
-            args = orjson.loads(encode_json(self.reader.read(request_type, body)))
+            request = self.reader.read(request_type, body)  # the canonical request, complete
         except Exception as err:  # whatever the network sent: reported, never raised
             self.stats["bad_payloads"] += 1
             self._log(
                 f"call {name}", f"DDS: a request to {name} is not CDR of {server.type}: {err}"
             )
             return
-        op_id = f"dds:{next(self._call_ids)}"
-        self._calls[op_id] = (server, server.type, header)
-        op = CallService(service=name, args=args, id=op_id, timeout=SERVICE_TIMEOUT)
-        # a client's call as a rosbridge client's: admission (the ROS 2 peers' role), the
-        # caller's pending-call budget, the service table
-        loop = self._loop
-        self.rosbridge.dispatch(self._caller, op, loop.time() if loop is not None else 0.0)
-
-    def _service_answer(self, body: dict[str, Any]) -> None:
-        """The graph answered a call from DDS: write the reply with the request's header."""
-        pending = self._calls.pop(str(body.get("id")), None)
-        if pending is None:
-            return
-        server, type_name, header = pending
-        if not body.get("result"):
-            # rmw has no error reply: the client waits; say why here
-            self.stats["calls_failed"] += 1
-            self._log(
-                f"failed {server.name}", f"DDS: a call to {server.name}: {body.get('values')}"
+        # the graph's access rules for the ROS 2 peers' role (administrative services, other
+        # robots' services), then the service as it is now
+        refusal = self.graph.access.reach_refusal(self._access, name)
+        service = self.graph.services.services.get(name)
+        if refusal is None and (service is None or service.type != server.type):
+            refusal = f"{name} of type {server.type} does not exist (any more)"
+        waits = service is not None and service.handler is None
+        if refusal is None and waits and self.calls_waiting >= self.max_calls_waiting:
+            refusal = (
+                f"{name}: refused, DDS peers already wait for {self.max_calls_waiting} answers "
+                "(the server's max_pending_calls)"
             )
+        if refusal is not None or service is None:
+            self._failed(server, f"service {refusal}")
+            return
+
+        def done(ok: bool, values: Any) -> None:
+            self._service_answer(server, response_type, header, ok, values)
+
+        loop = self._loop
+        now = loop.time() if loop is not None else 0.0
+        deadline = now + min(SERVICE_TIMEOUT, self.graph.settings.max_call_timeout)
+        if waits:
+            self.calls_waiting += 1
+        release = self._call_ended if waits else None
+        self.graph.services.call(self._caller, service, request, deadline, done, release=release)
+
+    def _call_ended(self) -> None:
+        self.calls_waiting -= 1
+
+    def _failed(self, server: _Server, text: str) -> None:
+        # rmw has no error reply: the client waits; say why here
+        self.stats["calls_failed"] += 1
+        self._log(f"failed {server.name}", f"DDS: a call to {server.name}: {text}")
+
+    def _service_answer(
+        self, server: _Server, response_type: str, header: bytes, ok: bool, values: Any
+    ) -> None:
+        """The graph answered a call from DDS: write the reply with the request's header."""
+        if not ok:
+            self._failed(server, str(values))
             return
         try:
-            _, response_type = self.graph.registry.service(type_name)
-            msg = self.graph.converter.from_json(response_type, body.get("values") or {})
+            # complete and checked: an in-process handler may leave fields to their defaults
+            msg = self.graph.converter.from_json(response_type, values)
             data = self.cdr.serialize(response_type, msg)
             _write_raw(server.writer, data[:4] + header + data[4:])
         except Exception as err:

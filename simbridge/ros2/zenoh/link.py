@@ -8,11 +8,17 @@
   expression with rmw_zenoh's attachment, serialized to CDR once (the bytes are shared with
   ``cbor-raw`` subscribers) and only while a ROS 2 subscriber exists; latched topics are
   transient-local advanced publishers with a one-sample cache, as rmw_zenoh declares them.
-  Services are queryables; a call runs through the graph's service table as a rosbridge call
-  does (in-process handlers and services advertised by rosbridge clients alike);
+  Services are queryables; a call's CDR request is read into the canonical request
+  (:meth:`ZenohLink._on_query`: the graph's access rules for the ROS 2 peers' role first) and
+  handed to the graph's service table (in-process handlers and services advertised by
+  rosbridge clients alike), whose answer comes back to :meth:`ZenohLink._service_answer` and
+  goes out as CDR: no JSON on the way;
 * **inward**: publishers and services of other rmw_zenoh processes (found from their tokens,
   gone with them) join the graph, so rosapi lists them and rosbridge clients subscribe, publish
-  and call. Data is subscribed only while a rosbridge client or an in-process node listens.
+  and call. A remote service is provided in the graph's table with a forwarder
+  (:meth:`_Provider.forward`): the canonical request goes out as CDR in a query, the CDR reply
+  comes back as the canonical response (:meth:`ZenohLink._remote_done`). Data is subscribed only
+  while a rosbridge client or an in-process node listens.
 
 Data samples of the first :data:`CALLBACK_KEYS` subscribed keys come by a callback through an
 inbox (at once); past those, they wait in one Zenoh ring channel per key, which the event loop
@@ -41,10 +47,10 @@ from typing import Any
 import orjson
 
 from simbridge.app.guard import ros2_access
-from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
+from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.access import Access
-from simbridge.graph.services import caller
+from simbridge.graph.services import PendingCall, caller
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.robot.bridge import ROBOT_NODE
@@ -67,7 +73,6 @@ from simbridge.ros2.zenoh.attachment import Attachment, pack_attachment
 from simbridge.ros2.zenoh.config import ZenohOptions, session_config
 from simbridge.rosbridge import Frame, Outgoing, Session
 from simbridge.rosbridge.front import Rosbridge
-from simbridge.rosbridge.ops import CallService, ServiceResponse
 
 
 __all__ = ["RemoteNode", "ZenohLink", "import_zenoh"]
@@ -86,7 +91,9 @@ FULL_PERIOD = 30.0
 LOG_EVERY = 30.0
 #: Topics that many processes publish at once (every other name has one owner).
 SHARED_TOPICS = frozenset({"/tf", "/tf_static", "/rosout", "/parameter_events"})
-#: Seconds a call from ROS 2 waits for a rosbridge client that provides the service.
+#: Seconds a call from ROS 2 waits for a provider that is not in process (a rosbridge client,
+#: another ROS 2 process), and a call to another ROS 2 process for its reply (capped by
+#: ``max_call_timeout``).
 SERVICE_TIMEOUT = 10.0
 #: Samples waiting for the event loop at most (the oldest are dropped, and counted, past it);
 #: their bytes are bounded too (``zenoh_inbox_bytes``).
@@ -208,11 +215,13 @@ class _Caller:
         return self.session.access
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        self.link._service_answer(orjson.loads(frame.data))
+        """Nothing comes as frames: the graph answers its calls through their ``done``."""
 
 
 class _Provider:
     """The peer that provides a remote ROS 2 service to the graph (calls become queries)."""
+
+    __slots__ = ("entity", "label", "link", "session")
 
     def __init__(self, link: ZenohLink, session: Session, entity: Entity) -> None:
         self.link = link
@@ -226,7 +235,11 @@ class _Provider:
         return self.session.access
 
     def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        self.link._remote_call(self, frame)
+        """Nothing is sent to a remote server as frames: its calls come to :meth:`forward`."""
+
+    def forward(self, call: PendingCall, request: Any) -> None:
+        """The graph's service table forwards a call: it goes out as a query."""
+        self.link._remote_call(self, call, request)
 
 
 class ZenohLink:
@@ -242,8 +255,8 @@ class ZenohLink:
     ) -> None:
         #: The graph mapped onto ROS 2.
         self.graph = graph
-        #: Where ROS 2 calls are carried out as rosbridge ops, for now (the graph's service
-        #: table takes calls of its own next).
+        #: Gives the link's peers their sessions, which the graph's peers still carry (only
+        #: their access is read: calls and goals go to the graph's tables directly).
         self.rosbridge = rosbridge or Rosbridge(graph)
         #: Whether this process simulates robots (not ``--no-sim``): it takes a turn in the
         #: step period with the other simulators (:attr:`tick_share`).
@@ -314,10 +327,12 @@ class ZenohLink:
         self._poll_handle: asyncio.Handle | None = None
         #: Loop time of the last poll that found a sample (polls slow down after a silence).
         self._last_sample = float("-inf")
-        #: Calls from ROS 2 waiting for the graph's answer: op id -> (query, type, attachment).
-        self._queries: dict[str, tuple[Any, str, Attachment]] = {}
-        #: Calls to ROS 2 waiting for a reply: server id -> (provider, response type).
-        self._calls: dict[str, tuple[_Provider, str]] = {}
+        #: Calls from ROS 2 waiting for a provider that is not in process, at most
+        #: ``max_pending_calls`` (the budget of one rosbridge client: the ROS 2 peers are one).
+        self.calls_waiting = 0
+        self.max_calls_waiting = graph.settings.max_pending_calls
+        #: Calls to ROS 2 waiting for a reply: the graph's call id -> (provider, type, call).
+        self._calls: dict[str, tuple[_Provider, str, PendingCall]] = {}
         caller_session = self.rosbridge.new_session()
         # whatever comes from ROS 2 (samples, calls, goals, remote publishers and services)
         # passes admission as one client of the role the instructor chose (--ros2-role; in
@@ -800,6 +815,13 @@ class ZenohLink:
             self._loop.call_soon(self._drain_calls)  # type: ignore[union-attr]
 
     def _on_query(self, name: str, type_name: str, query: Any) -> None:
+        """A call from ROS 2: CDR decoded to the request, the graph's service called with it.
+
+        Refused (an error reply) when the ROS 2 peers' role may not reach the service
+        (administrative services, other robots' services: the graph's access rules), when the
+        service is gone or changed its type, when the request is not CDR of its type, or when
+        ``max_pending_calls`` calls from ROS 2 wait for providers outside this process.
+        """
         self.stats["calls_in"] += 1
         try:
             raw = query.attachment
@@ -807,45 +829,69 @@ class ZenohLink:
         except ValueError as err:
             self._fail_query(query, f"service {name}: request without a valid attachment ({err})")
             return
-        # administrative services, other robots' services: refused by the admission of the
-        # call (graph.dispatch below), as for a rosbridge client of the ROS 2 peers' role
         if self.actions.handles(name):
             self.actions.on_query(name, type_name, query, attachment)
             return
+        refusal = self.graph.access.reach_refusal(self._caller.access, name)
+        if refusal is not None:
+            logger.info("%s: service %s", self._caller.label, refusal)
+            self._fail_query(query, f"service {refusal}")
+            return
+        service = self.graph.services.services.get(name)
+        if service is None or service.type != type_name:
+            self._fail_query(query, f"Service {name} of type {type_name} does not exist")
+            return
         try:
-            request_type, _ = self.graph.registry.service(type_name)
+            request_type, response_type = self.graph.registry.service(type_name)
             payload = bytes(query.payload.to_bytes()) if query.payload is not None else b""
-            # as a rosbridge client's call_service args: plain JSON values
-            args = orjson.loads(_json(self._decode(request_type, payload)))
+            request = self._decode(request_type, payload)  # the canonical request, complete
         except Exception as err:  # whatever the network sent: reported, never raised
             self._fail_query(query, f"service {name}: request is not CDR of {type_name}: {err}")
             return
-        op_id = f"zenoh:{next(self._call_ids)}"
-        self._queries[op_id] = (query, type_name, attachment)
-        op = CallService(service=name, args=args, id=op_id, timeout=SERVICE_TIMEOUT)
-        # the straight line of a client's call: admission (the request validated), the
-        # caller's session (pending-call budget), the service table
-        self.rosbridge.dispatch(self._caller, op, asyncio.get_running_loop().time())
-
-    def _service_answer(self, body: dict[str, Any]) -> None:
-        """The graph answered a call from ROS 2: reply to the query."""
-        pending = self._queries.pop(str(body.get("id")), None)
-        if pending is None:
+        waits = service.handler is None
+        if waits and self.calls_waiting >= self.max_calls_waiting:
+            self._fail_query(
+                query,
+                f"service {name}: refused, ROS 2 peers already wait for {self.max_calls_waiting}"
+                " answers (the server's max_pending_calls); wait for them first",
+            )
             return
-        query, type_name, attachment = pending
-        service = str(body.get("service"))
-        if not body.get("result"):
-            self._fail_query(query, str(body.get("values")))
+
+        def done(ok: bool, values: Any) -> None:
+            self._service_answer(name, query, response_type, attachment, ok, values)
+
+        timeout = min(SERVICE_TIMEOUT, self.graph.settings.max_call_timeout)
+        deadline = asyncio.get_running_loop().time() + timeout
+        if waits:
+            self.calls_waiting += 1
+        release = self._call_ended if waits else None
+        self.graph.services.call(self._caller, service, request, deadline, done, release=release)
+
+    def _call_ended(self) -> None:
+        self.calls_waiting -= 1
+
+    def _service_answer(
+        self,
+        name: str,
+        query: Any,
+        response_type: str,
+        attachment: Attachment,
+        ok: bool,
+        values: Any,
+    ) -> None:
+        """The graph answered a call from ROS 2: reply to the query (CDR of the response)."""
+        if not ok:
+            self._fail_query(query, str(values))
         else:
             try:
-                _, response_type = self.graph.registry.service(type_name)
-                msg = self.graph.converter.from_json(response_type, body.get("values") or {})
+                # complete and checked: an in-process handler may leave fields to their defaults
+                msg = self.graph.converter.from_json(response_type, values)
             except SimbridgeError as err:
-                self._fail_query(query, f"response does not fit {type_name}: {err}")
-                return
-            self._reply(query, response_type, msg, attachment)
-        if split_action(service) is not None:
-            self.actions.cancelled(service)
+                self._fail_query(query, f"response does not fit {response_type}: {err}")
+            else:
+                self._reply(query, response_type, msg, attachment)
+        if split_action(name) is not None:
+            self.actions.cancelled(name)
 
     def _reply(self, query: Any, response_type: str, msg: Any, attachment: Attachment) -> None:
         """Reply to a query from ROS 2 with a response message (echoing sequence and GID)."""
@@ -1096,7 +1142,7 @@ class ZenohLink:
         if entity is None:
             provider = self._providers.pop(name, None)
             if provider is not None:
-                self.graph.services.unadvertise(provider, name)  # fails its pending calls
+                self.graph.services.withdraw(provider, name)  # fails its pending calls
             return
         if name in self._providers:
             return
@@ -1116,8 +1162,14 @@ class ZenohLink:
             self.stats["unknown_types"] += 1
             return
         provider = _Provider(self, self.rosbridge.new_session(), entity)
-        service = self.graph.services.advertise(provider, name, entity.type)
-        service.node = entity.node_fqn
+
+        def lost(name: str) -> None:  # a rosbridge client advertised the name since
+            if self._providers.get(name) is provider:
+                del self._providers[name]
+
+        self.graph.services.provide(
+            provider, name, entity.type, provider.forward, lost=lost, node=entity.node_fqn
+        )
         self._providers[name] = provider
 
     def _import_node(self, name: str) -> None:
@@ -1428,29 +1480,27 @@ class ZenohLink:
 
     # -- calls to ROS 2 ---------------------------------------------------------------------
 
-    def _remote_call(self, provider: _Provider, frame: Frame) -> None:
-        """The graph forwards a call to a remote service: send it as a query."""
-        body = orjson.loads(frame.data)
-        server_id = str(body.get("id"))
+    def _remote_call(self, provider: _Provider, call: PendingCall, request: Any) -> None:
+        """The graph forwards a call to a remote service: its request goes out as CDR."""
         entity = provider.entity
+        services = self.graph.services
         try:
             request_type, response_type = self.graph.registry.service(entity.type)
-            msg = self.graph.converter.from_json(request_type, body.get("args") or {})
-            payload = self.cdr.serialize(request_type, msg)
-        except SimbridgeError as err:
-            self._answer_remote(provider, server_id, str(err), ok=False)
+            payload = self.cdr.serialize(request_type, request)
+        except Exception as err:  # a request the caller's front end did not complete
+            services.respond(call, f"request does not fit {entity.type}: {err!r}", ok=False)
             return
         attachment = self.client_attachment(entity, next(self._call_ids))
-        self._calls[server_id] = (provider, response_type)
+        self._calls[call.id] = (provider, response_type, call)
 
         def done(replies: list[tuple[bool, bytes]]) -> None:
-            self._remote_done(server_id, replies)
+            self._remote_done(call.id, replies)
 
         try:
             self._query(entity, payload, attachment, SERVICE_TIMEOUT, done)
         except Exception as err:
-            self._calls.pop(server_id, None)
-            self._answer_remote(provider, server_id, f"query failed: {err}", ok=False)
+            self._calls.pop(call.id, None)
+            services.respond(call, f"query failed: {err}", ok=False)
 
     def client_attachment(self, entity: Entity, sequence: int) -> bytes:
         """Return the attachment of this process's ``sequence``-th request to ``entity``."""
@@ -1495,39 +1545,30 @@ class ZenohLink:
             timeout=timeout,
         )
 
-    def _remote_done(self, server_id: str, replies: list[tuple[bool, bytes]]) -> None:
-        pending = self._calls.pop(server_id, None)
+    def _remote_done(self, call_id: str, replies: list[tuple[bool, bytes]]) -> None:
+        """A remote service replied (or its query ended): the canonical response to the call."""
+        pending = self._calls.pop(call_id, None)
         if pending is None:
             return
-        provider, response_type = pending
+        provider, response_type, call = pending
+        respond = self.graph.services.respond
         if not replies:
             text = f"service {provider.entity.name} gave no reply (its node may have gone)"
-            self._answer_remote(provider, server_id, text, ok=False)
+            respond(call, text, ok=False)
             return
         ok, payload = replies[0]
         if not ok:
-            text = payload.decode(errors="replace") or "the service reported an error"
-            self._answer_remote(provider, server_id, text, ok=False)
+            respond(
+                call, payload.decode(errors="replace") or "the service reported an error", ok=False
+            )
             return
         try:
             values = self._decode(response_type, payload)
         except Exception as err:  # whatever the network sent: reported, never raised
             self.stats["bad_payloads"] += 1
-            text = f"reply is not CDR of {response_type}: {err}"
-            self._answer_remote(provider, server_id, text, ok=False)
+            respond(call, f"reply is not CDR of {response_type}: {err}", ok=False)
             return
-        self._answer_remote(provider, server_id, orjson.loads(_json(values)), ok=True)
-
-    def _answer_remote(self, provider: _Provider, server_id: str, values: Any, *, ok: bool) -> None:
-        op = ServiceResponse(
-            service=provider.entity.name, id=server_id, values=values, result=ok, has_values=True
-        )
-        try:
-            response = self.rosbridge.admission.response(provider, op)  # read and validated
-        except ProtocolError as err:
-            logger.debug("Zenoh: %s", err)
-            return
-        self.graph.services.respond(response.call, response.values, ok=response.ok)
+        respond(call, values, ok=True)
 
     def _local_publisher(self, name: str) -> str | None:
         """Return the in-process node publishing ``name``, if any."""
