@@ -1,6 +1,7 @@
 """ROS 2 over Zenoh (issue 15): the Zenoh hop, outward publishing, and a classroom of processes.
 
-``python -m bench.zenoh [hop|outward|classroom] [SECONDS]`` (default: hop and outward, 20 s).
+``python -m bench.zenoh [hop|outward|classroom|calls] [SECONDS]`` (default: hop and outward, 20
+s).
 Every process is separate: a router (``simbridge zenohd``) on a free port of 127.0.0.1, the
 simbridge processes, the clients. Peers find each other through the router, then exchange data
 directly (rmw_zenoh's default topology: the router is not a broker on one host).
@@ -15,6 +16,16 @@ directly (rmw_zenoh's default topology: the router is not a broker on one host).
   subscriber counting samples) does; ``ROUNDS`` (default 3) rounds, alternating which goes
   first, and the median of the rounds' ratios (one run's ratio moved 1.19-1.36x with the
   machine's load). Target: ROS 2 <= 1.3x the rosbridge client.
+* ``calls``: service calls across Zenoh, one at a time, ``SECONDS`` each way (default world
+  with ``--demo-nodes``): a ROS 2 client (this process, as rmw_zenoh: a query with its
+  attachment, CDR both ways) calls the in-process ``/add_two_ints``; a rosbridge client calls
+  it too, for reference; a rosbridge client calls ``/bench_add``, which this process provides
+  as a ROS 2 server (a queryable and its liveliness token), so that simbridge forwards each
+  call as a query. Per row: calls,
+  calls/s, round trip p50 and p99 in microseconds, and simbridge's CPU per call (its user +
+  system seconds over the row, minus its CPU with nobody calling over as long, per call).
+  ``SIMBRIDGE_TREE=DIR`` runs the simbridge of another checkout (e.g. a ``git worktree`` of an
+  older commit) with this process's clients: before/after figures of the same measurement.
 * ``classroom``: ``SIMS`` simulators x ``ROBOTS`` robots and ``FRONTS`` ``--no-sim`` front-ends
   x ``CLIENTS`` clients, each client on one robot's /odom and /scan through the router
   (environment variables; default 2 x 300 and 2 x 300). The clients are ``bench.loadgen``
@@ -39,12 +50,13 @@ import math
 import os
 import re
 import statistics
+import struct
 import subprocess
 import sys
 import tempfile
 import time
 import urllib.request
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
@@ -62,6 +74,7 @@ from bench.procs import (
     percentile,
     start_loadgens,
     stop,
+    tree_env,
 )
 
 
@@ -107,7 +120,7 @@ def _router_process() -> Iterator[tuple[str, psutil.Process]]:
 
 @contextmanager
 def _simbridge(
-    router: str, *options: str, zenoh: bool = True
+    router: str, *options: str, zenoh: bool = True, tree: Path = ROOT
 ) -> Iterator[tuple[psutil.Process, int]]:
     cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0", "--no-http"]
     if os.environ.get("CPROFILE"):  # each simbridge process under cProfile, to that directory
@@ -117,7 +130,8 @@ def _simbridge(
     cmd += ["--log-level", "warning", "--max-clients", "2000"]
     if zenoh:
         cmd += ["--zenoh", "--zenoh-connect", router, "--zenoh-listen", "tcp/127.0.0.1:0"]
-    proc = subprocess.Popen([*cmd, *options], cwd=ROOT, stdout=subprocess.PIPE, text=True)
+    cwd, env = tree_env(tree)
+    proc = subprocess.Popen([*cmd, *options], cwd=cwd, env=env, stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None
         line = proc.stdout.readline()
@@ -423,6 +437,200 @@ def classroom(seconds: float) -> bool:
     return ok
 
 
+#: The tutorial service every default world has (example_interfaces/srv/AddTwoInts).
+ADD_SERVICE = "/add_two_ints"
+#: The service the bench's own ROS 2 process provides (AddTwoInts, like the tutorial's).
+REMOTE_SERVICE = "/bench_add"
+#: CDR encapsulation header (little-endian plain CDR), as rmw_zenoh writes it.
+_CDR_LE = b"\x00\x01\x00\x00"
+
+
+def _mangle(name: str) -> str:
+    return name.replace("/", "%")
+
+
+def _service_token(session: Any, name: str, timeout: float = 30.0) -> list[str]:
+    """Return the parts of the liveliness token of service ``name`` (rmw_zenoh: ``SS``)."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        for reply in session.liveliness().get("@ros2_lv/**", timeout=2.0):
+            if reply.ok is None:
+                continue
+            parts = str(reply.ok.key_expr).split("/")
+            if len(parts) >= 13 and parts[5] == "SS" and parts[9] == _mangle(name):
+                return parts
+        time.sleep(0.2)
+    msg = f"no ROS 2 service {name} appeared within {timeout} s"
+    raise RuntimeError(msg)
+
+
+def _zenoh_session(router: str) -> Any:
+    import zenoh
+
+    conf = zenoh.Config()
+    conf.insert_json5("mode", '"peer"')
+    conf.insert_json5("connect/endpoints", json.dumps([router]))
+    conf.insert_json5("listen/endpoints", '["tcp/127.0.0.1:0"]')
+    conf.insert_json5("scouting/multicast/enabled", "false")
+    return zenoh.open(conf)
+
+
+def _ros2_calls(session: Any, token: list[str], seconds: float) -> list[float]:
+    """Call /add_two_ints over Zenoh as an rmw_zenoh client, one after the other.
+
+    Returns each call's round trip in seconds (query sent -> reply read, sum checked).
+    """
+    domain, dds, type_hash = token[1], token[10], token[11]
+    key = f"{domain}/{ADD_SERVICE.strip('/')}/{dds}/{type_hash}"
+    gid = os.urandom(16)
+    times: list[float] = []
+    end = time.monotonic() + seconds
+    sequence = 0
+    while time.monotonic() < end:
+        sequence += 1
+        payload = _CDR_LE + struct.pack("<qq", sequence, 2)
+        attachment = struct.pack("<qqB16s", sequence, time.time_ns(), 16, gid)
+        t0 = time.perf_counter()
+        replies = list(session.get(key, payload=payload, attachment=attachment, timeout=5.0))
+        elapsed = time.perf_counter() - t0
+        (reply,) = replies
+        body = bytes(reply.ok.payload.to_bytes())
+        (total,) = struct.unpack_from("<q", body, 4)
+        if total != sequence + 2:
+            msg = f"/add_two_ints answered {total} for {sequence} + 2"
+            raise RuntimeError(msg)
+        times.append(elapsed)
+    return times
+
+
+@contextmanager
+def _ros2_provider(router: str, like: list[str]) -> Iterator[None]:
+    """Provide ``/bench_add`` from this process as an rmw_zenoh server would.
+
+    Its type, type hash and QoS are those of the token ``like`` (simbridge's /add_two_ints).
+    """
+    session = _zenoh_session(router)
+    zid = str(session.info.zid())
+    dds, type_hash, qos = like[10], like[11], like[12]
+    head = f"@ros2_lv/0/{zid}/0"
+
+    def answer(query: Any) -> None:
+        body = bytes(query.payload.to_bytes())
+        a, b = struct.unpack_from("<qq", body, 4)
+        att = bytes(query.attachment.to_bytes())
+        query.reply(query.key_expr, _CDR_LE + struct.pack("<q", a + b), attachment=att)
+
+    queryable = session.declare_queryable(
+        f"0/{REMOTE_SERVICE.strip('/')}/{dds}/{type_hash}", answer
+    )
+    tokens = [
+        session.liveliness().declare_token(f"{head}/0/NN/%/%/bench_server"),
+        session.liveliness().declare_token(
+            f"{head}/1/SS/%/%/bench_server/{_mangle(REMOTE_SERVICE)}/{dds}/{type_hash}/{qos}"
+        ),
+    ]
+    try:
+        yield
+    finally:
+        for token in tokens:
+            token.undeclare()
+        queryable.undeclare()
+        session.close()
+
+
+async def _rosbridge_calls(port: int, service: str, seconds: float) -> list[float]:
+    """Call ``service`` (AddTwoInts) as a rosbridge client, one after the other."""
+    times: list[float] = []
+    async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
+        end = time.monotonic() + seconds
+        k = 0
+        while time.monotonic() < end:
+            k += 1
+            op = {"op": "call_service", "service": service, "id": str(k), "args": {"a": k, "b": 2}}
+            t0 = time.perf_counter()
+            await ws.send(json.dumps(op))
+            while True:
+                reply = json.loads(await ws.recv())
+                if reply.get("id") == str(k):
+                    break
+            times.append(time.perf_counter() - t0)
+            if not reply.get("result") or reply["values"].get("sum") != k + 2:
+                msg = f"{service} answered {reply!r} for {k} + 2"
+                raise RuntimeError(msg)
+    return times
+
+
+def _per_call(
+    proc: psutil.Process, idle: float, run: Callable[[], list[float]]
+) -> tuple[list[float], float]:
+    """Run ``run`` (sequential calls); return its round trips and the server's CPU s per call.
+
+    ``idle`` is the server's CPU share with nobody calling, taken off its share during the run.
+    """
+    t0, c0 = time.monotonic(), cpu_seconds(proc)
+    times = run()
+    wall, cpu = time.monotonic() - t0, cpu_seconds(proc) - c0
+    return times, max(cpu - idle * wall, 0.0) / max(len(times), 1)
+
+
+def calls(seconds: float) -> bool:
+    """Service calls across Zenoh, one at a time, from each side (see the module doc)."""
+    tree = Path(os.environ.get("SIMBRIDGE_TREE") or ROOT)
+    with _router() as router, _simbridge(router, "--demo-nodes", tree=tree) as (proc, port):
+        session = _zenoh_session(router)
+        try:
+            token = _service_token(session, ADD_SERVICE)
+            _ros2_calls(session, token, 1.0)  # warm: the first query finds its route
+            time.sleep(1)
+            t0, c0 = time.monotonic(), cpu_seconds(proc)
+            time.sleep(seconds)
+            idle = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
+            rows: list[tuple[str, list[float], float]] = []
+            ros2, ros2_cpu = _per_call(proc, idle, lambda: _ros2_calls(session, token, seconds))
+            rows.append(("ROS 2 -> simbridge (Zenoh)", ros2, ros2_cpu))
+            local, local_cpu = _per_call(
+                proc, idle, lambda: asyncio.run(_rosbridge_calls(port, ADD_SERVICE, seconds))
+            )
+            rows.append(("rosbridge -> simbridge", local, local_cpu))
+            with _ros2_provider(router, token):
+                _wait_service(port, REMOTE_SERVICE)
+                asyncio.run(_rosbridge_calls(port, REMOTE_SERVICE, 1.0))  # warm
+                remote, remote_cpu = _per_call(
+                    proc, idle, lambda: asyncio.run(_rosbridge_calls(port, REMOTE_SERVICE, seconds))
+                )
+            rows.append(("rosbridge -> ROS 2 (Zenoh)", remote, remote_cpu))
+        finally:
+            session.close()
+    print(
+        f"zenoh calls: AddTwoInts one at a time, {seconds:g} s each, simbridge of {tree},"
+        f" {load_average()}"
+    )
+    print(f"nobody calling: server CPU {100 * idle:.1f} %")
+    print(f"{'':28}{'calls':>8}{'calls/s':>9}{'p50 us':>9}{'p99 us':>9}{'server CPU us/call':>20}")
+    for label, times, cpu in rows:
+        rate = len(times) / max(sum(times), 1e-9)
+        p50, p99 = percentile(times, 0.5) * 1e6, percentile(times, 0.99) * 1e6
+        print(f"{label:28}{len(times):>8}{rate:>9.0f}{p50:>9.0f}{p99:>9.0f}{cpu * 1e6:>20.0f}")
+    return True
+
+
+def _wait_service(port: int, name: str, timeout: float = 30.0) -> None:
+    async def probe() -> None:
+        deadline = time.monotonic() + timeout
+        async with connect(f"ws://127.0.0.1:{port}") as ws:
+            while time.monotonic() < deadline:
+                op = {"op": "call_service", "service": "/rosapi/services", "id": "s"}
+                await ws.send(json.dumps(op))
+                reply = json.loads(await ws.recv())
+                if name in reply.get("values", {}).get("services", []):
+                    return
+                await asyncio.sleep(0.3)
+        msg = f"{name} did not reach simbridge within {timeout} s"
+        raise RuntimeError(msg)
+
+    asyncio.run(probe())
+
+
 def _steal() -> float:
     """Seconds of CPU the hypervisor took from this machine so far (``/proc/stat``: steal)."""
     try:
@@ -487,12 +695,13 @@ def _print_health(
 
 def main(argv: list[str] | None = None) -> int:
     args = list(argv or [])
-    parts = [a for a in args if a in ("hop", "outward", "classroom")] or ["hop", "outward"]
+    parts = [a for a in args if a in ("hop", "outward", "classroom", "calls")] or ["hop", "outward"]
     numbers = [float(a) for a in args if a.replace(".", "", 1).isdigit()]
     seconds = numbers[0] if numbers else 20.0
     ok = True
     for part in parts:
-        ok = {"hop": hop, "outward": outward, "classroom": classroom}[part](seconds) and ok
+        run = {"hop": hop, "outward": outward, "classroom": classroom, "calls": calls}[part]
+        ok = run(seconds) and ok
         print()
     return 0 if ok else 1
 
