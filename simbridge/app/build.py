@@ -164,12 +164,13 @@ def build_headless(
     *,
     seed: int = 0,
     use_sim_time: bool = True,
+    bags: Path | None = None,
 ) -> Core:
     """Make the parts without sockets, stepped by the caller on sim time.
 
     ``/sim/step`` runs a whole tick (as :meth:`Steps.tick` from the caller does). The grader
     has no tasks and no results file of its own (``simbridge grade --headless`` hands it the
-    task to run).
+    task to run); with ``bags``, it records each run into a bag in that directory.
     """
     core: Core | None = None
 
@@ -180,7 +181,12 @@ def build_headless(
     sim, robot = _world(
         None, world, params, seed=seed, no_sim=False, use_sim_time=use_sim_time, sim_step=sim_step
     )
-    grader = Grader(robot.graph, sim, ResultsLog(None), {})
+    graph = robot.graph
+    grader = Grader(graph, sim, ResultsLog(None), {}, bags=bags)
+    if bags is not None:
+        from simbridge.tools.bag import BagWriter
+
+        grader.recorder = lambda path: BagWriter(path, graph.registry)
     steps = Steps(robot, [*robot.hooks, grader.tick], realtime=False)
     core = Core(sim, robot, grader, steps)
     robot.publish_static(0.0)

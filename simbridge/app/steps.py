@@ -55,6 +55,7 @@ class Steps:
         self.hooks = hooks
         self.realtime = realtime
         self.simulate = simulate
+        self._timeouts = robot.graph.tick
         #: Parts of ticks that raised (each part is isolated: the others still ran).
         self.failures = 0
         self._failed: set[tuple[str, str, str, int | None]] = set()
@@ -74,19 +75,21 @@ class Steps:
         where it was raised), not once per tick, and counted in :attr:`failures`
         (``/healthz``).
         """
+        isolated = self.isolated
         if self.realtime:
             if now is None:
                 msg = "a real-time tick needs the loop's now"
                 raise ValueError(msg)
             if self.simulate and not self.robot.simclock.paused:
-                self.isolated("simulation step", self.advance, now)
+                isolated("simulation step", self.advance, now)
         else:
-            self.world.step()
-            now = self.world.time
+            world = self.world
+            world.step()
+            now = world.time
             self.robot.publish(now)
-        self.isolated("graph timeouts", self.robot.graph.tick, now)
+        isolated("graph timeouts", self._timeouts, now)
         for hook in self.hooks:
-            self.isolated(None, hook, now)
+            isolated(None, hook, now)
 
     def isolated(self, part: str | None, run: Hook, now: float) -> None:
         """Run one part of a tick; a failure is counted and logged once per cause.

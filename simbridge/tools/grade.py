@@ -194,15 +194,12 @@ def grade_headless(
         ConfigError: the task, world or parameter file is invalid.
     """
     from simbridge.headless import Simulation
-    from simbridge.tools.bag import BagWriter
 
     task = load_task(task_path)
     if world is None and task.world is not None:
         world = str((task_path.parent / task.world).resolve())
-    sim = Simulation(world, params)
+    sim = Simulation(world, params, bags=bags)
     grader = sim.grader
-    grader.bags = bags
-    grader.recorder = lambda path: BagWriter(path, sim.graph.registry)
     name = robot if robot is not None else next(iter(sim.world.robots))
     run = grader.start(None, name, task, official=False)
     step = controller(sim, name, run.goal.as_dict())
