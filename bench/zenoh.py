@@ -24,8 +24,9 @@ directly (rmw_zenoh's default topology: the router is not a broker on one host).
   call as a query. Per row: calls,
   calls/s, round trip p50 and p99 in microseconds, and simbridge's CPU per call (its user +
   system seconds over the row, minus its CPU with nobody calling over as long, per call).
-  ``SIMBRIDGE_TREE=DIR`` runs the simbridge of another checkout (e.g. a ``git worktree`` of an
-  older commit) with this process's clients: before/after figures of the same measurement.
+  ``SIMBRIDGE_BASELINE=DIR`` runs the same rows against another checkout's simbridge too (e.g.
+  a ``git worktree`` of an older commit), alternating over ``ROUNDS`` rounds, with the ratios:
+  before and after in one run (``SIMBRIDGE_TREE=DIR`` replaces this checkout's).
 * ``classroom``: ``SIMS`` simulators x ``ROBOTS`` robots and ``FRONTS`` ``--no-sim`` front-ends
   x ``CLIENTS`` clients, each client on one robot's /odom and /scan through the router
   (environment variables; default 2 x 300 and 2 x 300). The clients are ``bench.loadgen``
@@ -120,7 +121,11 @@ def _router_process() -> Iterator[tuple[str, psutil.Process]]:
 
 @contextmanager
 def _simbridge(
-    router: str, *options: str, zenoh: bool = True, tree: Path = ROOT
+    router: str,
+    *options: str,
+    zenoh: bool = True,
+    tree: Path = ROOT,
+    environ: dict[str, str] | None = None,
 ) -> Iterator[tuple[psutil.Process, int]]:
     cmd = [sys.executable, "-m", "simbridge", "--host", "127.0.0.1", "--port", "0", "--no-http"]
     if os.environ.get("CPROFILE"):  # each simbridge process under cProfile, to that directory
@@ -131,6 +136,7 @@ def _simbridge(
     if zenoh:
         cmd += ["--zenoh", "--zenoh-connect", router, "--zenoh-listen", "tcp/127.0.0.1:0"]
     cwd, env = tree_env(tree)
+    env.update(environ or {})
     proc = subprocess.Popen([*cmd, *options], cwd=cwd, env=env, stdout=subprocess.PIPE, text=True)
     try:
         assert proc.stdout is not None
@@ -550,7 +556,7 @@ async def _rosbridge_calls(port: int, service: str, seconds: float) -> list[floa
             t0 = time.perf_counter()
             await ws.send(json.dumps(op))
             while True:
-                reply = json.loads(await ws.recv())
+                reply = json.loads(await asyncio.wait_for(ws.recv(), 15))
                 if reply.get("id") == str(k):
                     break
             times.append(time.perf_counter() - t0)
@@ -573,10 +579,18 @@ def _per_call(
     return times, max(cpu - idle * wall, 0.0) / max(len(times), 1)
 
 
-def calls(seconds: float) -> bool:
-    """Service calls across Zenoh, one at a time, from each side (see the module doc)."""
-    tree = Path(os.environ.get("SIMBRIDGE_TREE") or ROOT)
-    with _router() as router, _simbridge(router, "--demo-nodes", tree=tree) as (proc, port):
+#: One row of ``calls``: label, round trips (s), server CPU seconds per call.
+_CallRow = tuple[str, list[float], float]
+
+
+def _call_rows(tree: Path, seconds: float) -> tuple[float, list[_CallRow]]:
+    """Run the ``calls`` rows against ``tree``'s simbridge; return its idle CPU and the rows."""
+    # one client's calls in a row pass message_rate (1000 per second): not what is measured
+    unlimited = {"SIMBRIDGE_MESSAGE_RATE": "1000000", "SIMBRIDGE_MESSAGE_BURST": "1000000"}
+    with (
+        _router() as router,
+        _simbridge(router, "--demo-nodes", tree=tree, environ=unlimited) as (proc, port),
+    ):
         session = _zenoh_session(router)
         try:
             token = _service_token(session, ADD_SERVICE)
@@ -585,7 +599,7 @@ def calls(seconds: float) -> bool:
             t0, c0 = time.monotonic(), cpu_seconds(proc)
             time.sleep(seconds)
             idle = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
-            rows: list[tuple[str, list[float], float]] = []
+            rows: list[_CallRow] = []
             ros2, ros2_cpu = _per_call(proc, idle, lambda: _ros2_calls(session, token, seconds))
             rows.append(("ROS 2 -> simbridge (Zenoh)", ros2, ros2_cpu))
             local, local_cpu = _per_call(
@@ -601,16 +615,52 @@ def calls(seconds: float) -> bool:
             rows.append(("rosbridge -> ROS 2 (Zenoh)", remote, remote_cpu))
         finally:
             session.close()
+    return idle, rows
+
+
+def calls(seconds: float) -> bool:
+    """Service calls across Zenoh, one at a time, from each side (see the module doc).
+
+    With ``SIMBRIDGE_BASELINE=DIR`` the rows run against that checkout's simbridge and this
+    one's, alternating over ``ROUNDS`` rounds (default 2), each figure the median of its rounds,
+    with the ratios current / baseline.
+    """
+    baseline = os.environ.get("SIMBRIDGE_BASELINE")
+    trees = [("current", Path(os.environ.get("SIMBRIDGE_TREE") or ROOT))]
+    if baseline:
+        trees.insert(0, ("baseline", Path(baseline)))
+    rounds = int(os.environ.get("ROUNDS", "2")) if baseline else 1
+    results: dict[str, list[tuple[float, list[_CallRow]]]] = {label: [] for label, _ in trees}
+    for k in range(rounds):
+        for label, tree in trees if k % 2 == 0 else trees[::-1]:
+            results[label].append(_call_rows(tree, seconds))
     print(
-        f"zenoh calls: AddTwoInts one at a time, {seconds:g} s each, simbridge of {tree},"
+        f"zenoh calls: AddTwoInts one at a time, {seconds:g} s each, {rounds} round(s),"
         f" {load_average()}"
     )
-    print(f"nobody calling: server CPU {100 * idle:.1f} %")
-    print(f"{'':28}{'calls':>8}{'calls/s':>9}{'p50 us':>9}{'p99 us':>9}{'server CPU us/call':>20}")
-    for label, times, cpu in rows:
-        rate = len(times) / max(sum(times), 1e-9)
-        p50, p99 = percentile(times, 0.5) * 1e6, percentile(times, 0.99) * 1e6
-        print(f"{label:28}{len(times):>8}{rate:>9.0f}{p50:>9.0f}{p99:>9.0f}{cpu * 1e6:>20.0f}")
+    medians: dict[str, dict[str, tuple[float, float, float, float]]] = {}
+    for label, tree in trees:
+        idle = statistics.median(r[0] for r in results[label])
+        print(f"{label}: simbridge of {tree}; nobody calling: server CPU {100 * idle:.1f} %")
+        print(f"{'':28}{'calls':>8}{'calls/s':>9}{'p50 us':>9}{'p99 us':>9}{'CPU us/call':>13}")
+        medians[label] = {}
+        for i, (name, _, _) in enumerate(results[label][0][1]):
+            runs = [r[1][i] for r in results[label]]
+            count = statistics.median(len(t) for _, t, _ in runs)
+            rate = statistics.median(len(t) / max(sum(t), 1e-9) for _, t, _ in runs)
+            p50 = statistics.median(percentile(t, 0.5) for _, t, _ in runs) * 1e6
+            p99 = statistics.median(percentile(t, 0.99) for _, t, _ in runs) * 1e6
+            cpu = statistics.median(c for _, _, c in runs) * 1e6
+            medians[label][name] = (rate, p50, p99, cpu)
+            print(f"{name:28}{count:>8.0f}{rate:>9.0f}{p50:>9.0f}{p99:>9.0f}{cpu:>13.0f}")
+    if baseline:
+        print("current / baseline:")
+        for name, (rate, p50, p99, cpu) in medians["current"].items():
+            b = medians["baseline"][name]
+            print(
+                f"{name:28} calls/s {rate / b[0]:.2f}x, p50 {p50 / b[1]:.2f}x,"
+                f" p99 {p99 / b[2]:.2f}x, server CPU per call {cpu / max(b[3], 1e-9):.2f}x"
+            )
     return True
 
 

@@ -377,6 +377,21 @@ async def test_rosbridge_topic_and_service_reach_ros2(zapp: App, router: Router)
         )
         reply = await asyncio.wait_for(call, 10)
         assert reply.success and reply.message == "hello from the web"
+        # calls from ROS 2 waiting for a provider outside the process are budgeted: past the
+        # limit a call is refused at once (an error reply), and an answer frees its place
+        link = zapp.zenoh
+        assert link is not None and link.calls_waiting == 0
+        link.max_calls_waiting = 1
+        first = asyncio.create_task(asyncio.to_thread(client.call, data=False))
+        request = await recv_until(conn, lambda m: m.get("op") == "call_service", timeout=5)
+        assert link.calls_waiting == 1
+        failed = link.stats["calls_failed"]
+        assert await asyncio.to_thread(client.call, data=True) is None
+        assert link.stats["calls_failed"] == failed + 1 and link.calls_waiting == 1
+        answer = {"op": "service_response", "service": "/web_hello", "id": request["id"]}
+        await send_json(conn, {**answer, "values": {"success": False}, "result": True})
+        reply = await asyncio.wait_for(first, 10)
+        assert not reply.success and reply.message == "" and link.calls_waiting == 0
         client.close()
 
 
