@@ -62,6 +62,8 @@ DEFAULT_ADMIN_SERVICES = frozenset(
         "/sim/pause",
         "/sim/step",
         "/sim/set_real_time_factor",
+        "/simbridge/motion_model",
+        "/simbridge/robot_params",
     }
 )
 

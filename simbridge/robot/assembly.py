@@ -23,6 +23,7 @@ from simbridge.app.config import world_spec
 from simbridge.app.settings import ServerSettings
 from simbridge.graph.graph import Graph
 from simbridge.robot.bridge import RobotBridge
+from simbridge.robot.controls import WorldControls
 from simbridge.robot.estop import EStop
 from simbridge.robot.roles import Roles
 from simbridge.robot.safety import Safety
@@ -68,6 +69,8 @@ class RobotGraph:
     hooks: tuple[Callable[[float], None], ...] = ()
     #: The tutorial nodes (talker, listener, /add_two_ints, /fibonacci), when asked for.
     tutorials: TutorialNodes | None = None
+    #: The instructor's controls: /simbridge/motion_model, /simbridge/robot_params.
+    controls: WorldControls | None = None
 
     def publish_static(self, now: float) -> None:
         """Publish what is latched once at start: ``/tf_static`` and ``/walls``."""
@@ -99,6 +102,7 @@ def build_robot_graph(
     graph = Graph(settings=settings)
     install_rosapi(graph)
     bridge = RobotBridge(graph, world)
+    controls = WorldControls(graph, world)
     simclock = SimClock(graph, world, advance, use_sim_time=use_sim_time)
     estop = EStop(graph, world)
     bridge.on_robot_added.append(estop.add_robot)
@@ -128,4 +132,5 @@ def build_robot_graph(
         safety=safety,
         hooks=tuple(hooks),
         tutorials=tutorials,
+        controls=controls,
     )

@@ -25,6 +25,11 @@ The state lists each client by the robot it may drive and how it connected (``cl
 token)``), every latched e-stop with who latched it, each robot's own parameters, and for each
 parameter what it affects (``affects``): e.g. mass and inertia matter in the dynamic model only.
 
+The changes to the world go through the graph's services, called as the instructor: the
+motion model and a robot's own values through ``/simbridge/motion_model`` and
+``/simbridge/robot_params`` (:mod:`simbridge.robot.controls`), the reset through ``/reset``: the
+services an admin client of any front end calls, with the same checks and messages.
+
 :func:`check_admin_token` is the one place the token is compared (constant time); other
 administrative entry points (services, CLI) reuse it.
 """
@@ -33,25 +38,32 @@ from __future__ import annotations
 
 import hmac
 from collections.abc import Callable, Iterable, Mapping
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, cast
 
 import orjson
 
-from simbridge.app.config import RealismParams
 from simbridge.app.guard import token_access
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.graph import Graph
+from simbridge.graph.access import ANY_SCOPE, Access
 from simbridge.robot.bridge import ROBOT_NODE
+from simbridge.robot.controls import (
+    MOTION_MODELS,
+    MOTION_SERVICE,
+    REALISM_NAMES,
+    ROBOT_PARAMS_SERVICE,
+    own_values,
+)
 from simbridge.robot.estop import INSTRUCTOR, EStop, connection_rights, describe_peer
 from simbridge.robot.roles import Roles
-from simbridge.sim import KinematicModel, MotionModel, World
-from simbridge.sim.dynamics import DynamicModel
-from simbridge.sim.world import PER_ROBOT_PARAMS, Robot
+from simbridge.sim import World
+from simbridge.sim.world import PER_ROBOT_PARAMS
 from simbridge.web.http import HttpRequest, HttpResponse, WebApp
 
 
 if TYPE_CHECKING:
+    from simbridge.graph.topics import Peer
     from simbridge.rosbridge.server import Client
 
 
@@ -62,13 +74,6 @@ __all__ = [
     "install_admin",
     "token_from_headers",
 ]
-
-#: Motion models the instructor can switch between, by name.
-MOTION_MODELS: dict[str, Callable[[], MotionModel]] = {
-    "kinematic": KinematicModel,
-    "dynamic": DynamicModel,
-}
-
 
 _DYNAMIC = "the dynamic motion model only (the kinematic model ignores it)"
 #: What each parameter changes, for the instructor (by dotted name or section prefix).
@@ -136,22 +141,6 @@ def token_from_headers(headers: Mapping[str, str]) -> str | None:
     if scheme.lower() == "bearer" and value.strip():
         return value.strip()
     return headers.get("x-admin-token") or None
-
-
-#: The realism profile's parameters, which each robot may have of its own (issue 26).
-REALISM_NAMES = frozenset(f"realism.{n}" for n in RealismParams.model_fields)
-
-
-def _own(robot: Robot) -> dict[str, object]:
-    """A robot's own values by dotted name (``robot.mass``, ``realism.slip``)."""
-    out: dict[str, object] = {f"robot.{k}": v for k, v in sorted(robot.overrides.items())}
-    out.update((f"realism.{k}", v) for k, v in sorted(robot.realism_own.items()))
-    return out
-
-
-def _first_line(err: Exception) -> str:
-    lines = [line.strip() for line in str(err).splitlines() if line.strip()]
-    return lines[0] if lines else type(err).__name__
 
 
 def _body(request: HttpRequest) -> dict[str, Any]:
@@ -222,7 +211,7 @@ class _Admin:
         for name, robot in sorted(self.world.robots.items()):
             s = robot.state
             robot_rows[name] = {
-                "own": _own(robot),
+                "own": own_values(robot),
                 "pose": [round(s.x, 3), round(s.y, 3), round(s.theta, 3)],
                 "held": self.world.halted(name),
                 "clients": drivers.get(name, []),
@@ -251,14 +240,9 @@ class _Admin:
         return {"params": self.graph.params.node(ROBOT_NODE).read()}
 
     def motion(self, body: dict[str, Any]) -> dict[str, Any]:
-        name = body.get("model")
-        factory = MOTION_MODELS.get(name) if isinstance(name, str) else None
-        if factory is None:
-            msg = f"unknown motion model {name!r}; choose one of {', '.join(sorted(MOTION_MODELS))}"
-            raise ServiceError(msg)
-        self.world.motion = factory()
-        self.graph.log("info", f"motion model switched to '{name}' by the instructor")
-        return {"motion_model": name}
+        """Switch the motion model through the graph's ``/simbridge/motion_model``."""
+        answer = self._call(MOTION_SERVICE, {"name": body.get("model"), "value": ""})
+        return dict(orjson.loads(answer["reason"]))
 
     def estop(self, body: dict[str, Any]) -> dict[str, Any]:
         estop = self.estops
@@ -282,54 +266,49 @@ class _Admin:
         raise ServiceError(msg)
 
     def robot(self, body: dict[str, Any]) -> dict[str, Any]:
-        name, changes = body.get("robot"), body.get("changes")
-        world = self.world
-        if not isinstance(name, str) or name not in world.robots:
-            known = ", ".join(repr(n) for n in sorted(world.robots))
-            msg = f"no robot {name!r}; robots: {known}"
-            raise ServiceError(msg)
-        if not isinstance(changes, dict) or not changes:
-            msg = 'expected {"robot": "r1", "changes": {"robot.mass": 3.0, ...}}'
-            raise ServiceError(msg)
-        own: dict[str, float | None] = {}
-        realism: dict[str, object] = {}
-        for key, value in changes.items():
-            if key in REALISM_NAMES:
-                if value is not None and not isinstance(value, bool | int | float):
-                    msg = f"{key}: expected a number or boolean (or null), got {value!r}"
-                    raise ServiceError(msg)
-                realism[key.removeprefix("realism.")] = value
-                continue
-            if not key.startswith("robot."):
-                msg = f"{key}: only robot.* and realism.* parameters may differ between robots"
-                raise ServiceError(msg)
-            if value is not None and (
-                isinstance(value, bool) or not isinstance(value, int | float)
-            ):
-                msg = f"{key}: expected a number (or null for the shared value), got {value!r}"
-                raise ServiceError(msg)
-            own[key.removeprefix("robot.")] = value
-        robot = world.robots[name]
-        before = dict(robot.realism_own)
-        try:  # all or nothing: a refused robot.* value leaves the realism values as they were
-            if realism:
-                world.set_robot_realism(name, realism)
-            if own:
-                try:
-                    world.set_robot_params(name, own)
-                except ValueError:
-                    world.set_robot_realism(name, dict.fromkeys(robot.realism_own) | before)
-                    raise
-        except ValueError as err:
-            raise ServiceError(f"robot {name}: {_first_line(err)}") from None
-        shown = ", ".join(f"{k} = {v}" for k, v in changes.items())
-        self.graph.log("info", f"robot '{name}' parameters set by the instructor: {shown}")
-        return {"robot": name, "own": _own(robot)}
+        """Set one robot's own values through the graph's ``/simbridge/robot_params``."""
+        request = {"name": body.get("robot"), "value": orjson.dumps(body.get("changes")).decode()}
+        answer = self._call(ROBOT_PARAMS_SERVICE, request)
+        return dict(orjson.loads(answer["reason"]))
 
     def reset(self, body: dict[str, Any]) -> dict[str, Any]:
-        self.world.reset()
+        """Reset the world through the graph's ``/reset``: the one reset every client calls."""
+        self._call("/reset", {})
         self.graph.log("info", "world reset by the instructor")
         return {"reset": True}
+
+    def _call(self, name: str, request: dict[str, Any]) -> Any:
+        """Call the graph's service ``name`` as the instructor; return its response.
+
+        Raises:
+            ServiceError: there is no such service (no simulation) or it refused the request.
+        """
+        service = self.graph.services.services.get(name)
+        if service is None:
+            msg = f"this server has no {name} (it runs without a simulation)"
+            raise ServiceError(msg)
+        answers: list[tuple[bool, Any]] = []
+        self.graph.services.call(
+            _INSTRUCTOR_PEER, service, request, 0.0, lambda ok, values: answers.append((ok, values))
+        )
+        ok, values = answers[0] if answers else (False, f"{name} did not answer")
+        if not ok:
+            raise ServiceError(str(values))
+        return values
+
+
+class _Instructor:
+    """The instructor at /admin, as a caller of the graph's services."""
+
+    label = INSTRUCTOR
+
+    def __init__(self) -> None:
+        self.access = Access(ANY_SCOPE, admin=True, guarded=True)
+
+
+# a Peer for the service table, which reads its label and access only (Peer's rosbridge
+# members, session and send, are going away: issue 24)
+_INSTRUCTOR_PEER = cast("Peer", _Instructor())
 
 
 def connection_check(
