@@ -40,10 +40,10 @@ from simbridge.robot.assembly import RobotGraph, build_robot_graph
 from simbridge.robot.bridge import ROBOT_NODE
 from simbridge.robot.simclock import SIM_NODE
 from simbridge.rosbridge.front import Rosbridge
-from simbridge.rosbridge.server import BridgeServer
+from simbridge.rosbridge.server import BridgeServer, Client
 from simbridge.sim import World
 from simbridge.web import WebApp
-from simbridge.web.admin import install_admin
+from simbridge.web.admin import ClientView, install_admin
 from simbridge.web.grading import install_grading_admin
 
 
@@ -117,6 +117,19 @@ def offload(work: Callable[[], None], done: Callable[[BaseException | None], Non
 
     future.add_done_callback(finished)
     return True
+
+
+def _client_view(client: Client) -> ClientView:
+    """A rosbridge connection as /admin lists it (the page imports no rosbridge type)."""
+    session = client.session
+    return ClientView(
+        peer=client,
+        id=session.client_id,
+        publishing=tuple(session.advertisements),
+        frames_sent=client.frames_sent,
+        queued=len(client.queue),
+        dropped=client.queue.dropped,
+    )
 
 
 def _strip_simulation(graph: Graph, nodes: set[str]) -> None:
@@ -263,7 +276,7 @@ def build(
         web,
         graph=graph,
         world=sim,
-        clients=lambda: server.clients,
+        clients=lambda: [_client_view(c) for c in server.clients],
         settings=settings,
         estop=robot.estop,
         roles=robot.roles,

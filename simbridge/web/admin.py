@@ -38,6 +38,7 @@ from __future__ import annotations
 
 import hmac
 from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, cast
 
 import orjson
@@ -64,12 +65,12 @@ from simbridge.web.http import HttpRequest, HttpResponse, WebApp
 
 if TYPE_CHECKING:
     from simbridge.graph.topics import Peer
-    from simbridge.rosbridge.server import Client
 
 
 __all__ = [
     "MOTION_MODELS",
     "AdminRefused",
+    "ClientView",
     "check_admin_token",
     "install_admin",
     "token_from_headers",
@@ -101,6 +102,29 @@ def affects(name: str) -> str:
     if name in AFFECTS:
         return AFFECTS[name]
     return next((text for prefix, text in AFFECTS.items() if name.startswith(prefix)), "")
+
+
+@dataclass(frozen=True, slots=True)
+class ClientView:
+    """A connected client as the console lists it, in plain values its front end fills in.
+
+    The console reads the rest (subscriptions, robots, name) from the graph's side of
+    ``peer``; the composition root makes these from the server's connections, so the page
+    imports no front end's types.
+    """
+
+    #: The client as a peer of the graph.
+    peer: Peer
+    #: Its front end's number of the connection.
+    id: int
+    #: The topics it advertises.
+    publishing: tuple[str, ...] = ()
+    #: Frames sent to it so far.
+    frames_sent: int = 0
+    #: Frames waiting in its queue.
+    queued: int = 0
+    #: Frames dropped from its queue.
+    dropped: int = 0
 
 
 class AdminRefused(SimbridgeError):
@@ -160,7 +184,7 @@ class _Admin:
         self,
         graph: Graph,
         world: World,
-        clients: Callable[[], Iterable[Client]],
+        clients: Callable[[], Iterable[ClientView]],
         estop: EStop,
         roles: Roles,
     ) -> None:
@@ -185,22 +209,23 @@ class _Admin:
                     subscribed.setdefault(peer, set()).add(topic.name)
         clients: list[dict[str, Any]] = []
         drivers: dict[str, list[str]] = {}
-        for c in sorted(self.clients(), key=lambda c: c.session.client_id):
-            robots = self.roles.robots_of(c)
-            any_robot = connection_rights(c)[0] == "*"
-            name = describe_peer(c)
+        for c in sorted(self.clients(), key=lambda c: c.id):
+            peer = c.peer
+            robots = self.roles.robots_of(peer)
+            any_robot = connection_rights(peer)[0] == "*"
+            name = describe_peer(peer)
             clients.append(
                 {
-                    "id": c.session.client_id,
-                    "label": c.label,
+                    "id": c.id,
+                    "label": peer.label,
                     "name": name,
                     "robots": robots,
                     "any_robot": any_robot,
-                    "subscriptions": sorted(subscribed.get(c, ())),
-                    "publishing": sorted(c.session.advertisements),
+                    "subscriptions": sorted(subscribed.get(peer, ())),
+                    "publishing": sorted(c.publishing),
                     "frames_sent": c.frames_sent,
-                    "queued": len(c.queue),
-                    "dropped": c.queue.dropped,
+                    "queued": c.queued,
+                    "dropped": c.dropped,
                 }
             )
             if not any_robot:
@@ -312,7 +337,7 @@ _INSTRUCTOR_PEER = cast("Peer", _Instructor())
 
 
 def connection_check(
-    settings: ServerSettings, clients: Callable[[], Iterable[Client]], request: HttpRequest
+    settings: ServerSettings, clients: Callable[[], Iterable[ClientView]], request: HttpRequest
 ) -> HttpResponse:
     """``GET /api/access?token=T``: why a WebSocket upgrade would be refused, for a page.
 
@@ -350,7 +375,7 @@ def install_admin(
     *,
     graph: Graph,
     world: World,
-    clients: Callable[[], Iterable[Client]],
+    clients: Callable[[], Iterable[ClientView]],
     settings: ServerSettings,
     estop: EStop,
     roles: Roles,
@@ -364,7 +389,7 @@ def install_admin(
         web: where the routes go.
         graph: whose ``/virtual_robot`` parameters and clients the page shows.
         world: what is reset and whose motion model is switched.
-        clients: the connected WebSocket clients, when asked.
+        clients: the connected WebSocket clients, when asked (plain records).
         settings: whose ``admin_token`` every request must present.
         estop: the e-stops the console lists, latches and releases.
         roles: what each client may drive (the clients' list names their robots).
