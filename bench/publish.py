@@ -58,7 +58,7 @@ def _frame(topic: str, msg: dict[str, Any], op_type: str | None = None) -> str:
 
 def _cases() -> dict[str, Callable[[], None]]:
     settings = ServerSettings(publish_rate=1e9, publish_burst=1_000_000_000)
-    graph = Graph(settings=settings)
+    graph = Graph()
     world = World(load_world(None), Params())
     RobotBridge(graph, world)
     guard = Guard(graph, settings, robots=lambda: world.robots.keys())

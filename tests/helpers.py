@@ -114,16 +114,35 @@ async def wait_for(predicate: Callable[[], bool], timeout: float = 3.0, step: fl
 
 #: The rosbridge front end of each graph a test made (the server's own for an App's graph).
 _FRONTS: weakref.WeakKeyDictionary[Any, Any] = weakref.WeakKeyDictionary()
+#: The server settings of each graph made by :func:`graph_for` (its rosbridge's budgets).
+_SETTINGS: weakref.WeakKeyDictionary[Any, Any] = weakref.WeakKeyDictionary()
+
+
+def graph_for(settings: Any, **kwargs: Any) -> Any:
+    """A graph with what ``settings`` give a graph; :func:`rosbridge_of` takes their budgets."""
+    from simbridge.graph import Graph
+
+    graph = Graph(
+        service_timeout=settings.service_timeout,
+        max_parameter_names=settings.max_parameter_names,
+        **kwargs,
+    )
+    _SETTINGS[graph] = settings
+    return graph
 
 
 def rosbridge_of(graph: Any, authenticator: Any = None) -> Any:
-    """Return the rosbridge front end of ``graph`` (made once; ``authenticator``: a guard)."""
-    from simbridge.app.settings import budgets
+    """Return the rosbridge front end of ``graph`` (made once; ``authenticator``: a guard).
+
+    Its budgets are those of the settings the graph was made for (:func:`graph_for`), or the
+    defaults.
+    """
+    from simbridge.app.settings import ServerSettings, budgets
     from simbridge.rosbridge.front import Rosbridge
 
     front = _FRONTS.get(graph)
     if front is None:
-        settings = graph.settings
+        settings = _SETTINGS.get(graph) or ServerSettings()
         front = _FRONTS[graph] = Rosbridge(
             graph, *budgets(settings), default_queue_length=settings.default_queue_length
         )

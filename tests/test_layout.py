@@ -149,10 +149,6 @@ SETTINGS_FRAMEWORK = (
 )
 #: Cores that take plain parameters (STYLE.md: "numpy only, plain parameters").
 PLAIN_CORES = ("simbridge.graph", "simbridge.msgs", "simbridge.sim")
-#: Modules of those cores that still import the settings, each with why: graph.graph's Graph
-#: holds the ServerSettings (its budgets and timeouts, and what the front ends read of them)
-#: until the graph is protocol-neutral (issue 24, item 1).
-SETTINGS_NOT_YET = {"simbridge.graph.graph"}
 
 
 def test_the_cores_import_no_settings_framework() -> None:
@@ -166,7 +162,7 @@ def test_the_cores_import_no_settings_framework() -> None:
         for imported in _imports(name, path, known)
         if any(imported == b or imported.startswith(b + ".") for b in SETTINGS_FRAMEWORK)
     }
-    assert wrong == SETTINGS_NOT_YET
+    assert not wrong, wrong
 
 
 def test_the_server_does_not_import_the_tools() -> None:

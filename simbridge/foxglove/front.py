@@ -80,6 +80,7 @@ from typing import Any
 
 import orjson
 
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, ProtocolError, ServiceError, SimbridgeError
 from simbridge.foxglove.mapping import (
     ADMIN_SCOPE,
@@ -297,7 +298,7 @@ class _Client:
         #: How many of them wait for a provider outside this process (``max_pending_calls``).
         self.waiting = 0
         #: Its publish rate (``publish_rate``, ``publish_burst``).
-        settings = front.graph.settings
+        settings = front.settings
         self.publishes = TokenBucket(settings.publish_rate, settings.publish_burst)
 
     @property
@@ -339,9 +340,12 @@ class FoxgloveFront:
         host: str,
         scope: str | None,
         rosbridge: Rosbridge | None = None,
+        settings: ServerSettings | None = None,
     ) -> None:
         #: The graph served.
         self.graph = graph
+        #: The server's settings (the clients' budgets, use_sim_time, admin_token).
+        self.settings = settings = settings or ServerSettings()
         #: Where the clients' messages and calls are carried out as rosbridge ops, for now.
         self.rosbridge = rosbridge or Rosbridge(graph)
         self.port_asked = port
@@ -389,7 +393,7 @@ class FoxgloveFront:
         self.connections = 0
         #: Parameter values by Foxglove name, replaced whole by the loop (read by SDK threads).
         self._params: dict[str, Any] = {}
-        self._time = graph.settings.use_sim_time
+        self._time = settings.use_sim_time
         #: Counters for /healthz.
         self.stats: dict[str, int] = {
             "published": 0,
@@ -513,7 +517,7 @@ class FoxgloveFront:
             # the SDK tells no connect or disconnect: clients are the port's sockets (at the last
             # scan) and what they do
             "clients": self.connections,
-            "max_clients": self.graph.settings.foxglove_max_clients,
+            "max_clients": self.settings.foxglove_max_clients,
             "clients_subscribed": len(self._receiving),
             "clients_publishing_or_calling": len(self._clients),
             "parameter_updates": self._holder_ws is not None,
@@ -542,7 +546,7 @@ class FoxgloveFront:
         (its handshake is over by then, so it reads the close frame, which names the refusal, as
         the server log does).
         """
-        limit = self.graph.settings.foxglove_max_clients
+        limit = self.settings.foxglove_max_clients
         clients = [(key, peer) for key, peer in watch.scan() if peer != self._own_peer]
         self.connections = len(clients)
         seen = self._first_seen
@@ -688,7 +692,7 @@ class FoxgloveFront:
             if self.scope == ADMIN_SCOPE:
                 session.connect(ANY_SCOPE, admin=True)
             elif self.scope is not None:
-                admin = self.scope == ANY_SCOPE and self.graph.settings.admin_token is None
+                admin = self.scope == ANY_SCOPE and self.settings.admin_token is None
                 session.connect(self.scope, admin=admin)
             logger.info("%s: publishing or calling", client.label)
         return client
@@ -708,7 +712,7 @@ class FoxgloveFront:
     ) -> None:
         """A client advertised a channel: it publishes ``topic`` (the graph's rules decide)."""
         client = self._client(client_id)
-        limit = self.graph.settings.max_advertisements
+        limit = self.settings.max_advertisements
         if len(client.channels) >= limit:  # each is an advertisement of the client's budget
             self.status(
                 f"{client.label}: {topic}: too many client channels (at most {limit}: "
@@ -775,7 +779,7 @@ class FoxgloveFront:
             if refusal is not None:
                 raise ProtocolError(f"publish {refusal}")
             if graph.access.guarded and not client.publishes.take(now):
-                s = graph.settings
+                s = self.settings
                 msg = (
                     f"publish {topic_name}: dropped, more than {s.publish_rate:g} publishes per "
                     f"second (the server's publish_rate, burst {s.publish_burst}); slow down"
@@ -866,8 +870,8 @@ class FoxgloveFront:
                 if prepared is not None:
                     request = prepared
             waits = service.handler is None
-            if waits and client.waiting >= self.graph.settings.max_pending_calls:
-                limit = self.graph.settings.max_pending_calls
+            if waits and client.waiting >= self.settings.max_pending_calls:
+                limit = self.settings.max_pending_calls
                 return False, (
                     f"call_service {name}: refused, this client already waits for {limit} "
                     "answers (the server's max_pending_calls); wait for them first"
@@ -880,7 +884,7 @@ class FoxgloveFront:
                 if not future.done():
                     future.set_result((ok, values))
 
-            settings = self.graph.settings
+            settings = self.settings
             timeout = min(settings.service_timeout, settings.max_call_timeout)
             if waits:
                 client.waiting += 1
@@ -937,7 +941,7 @@ class FoxgloveFront:
         return fox.Service(name, schema=schema, handler=self._handler(name))
 
     def _handler(self, name: str) -> Callable[[Any], bytes]:
-        timeout = self.graph.settings.service_timeout + CALL_MARGIN
+        timeout = self.settings.service_timeout + CALL_MARGIN
 
         def handle(request: Any) -> bytes:  # an SDK blocking-pool thread: it may wait
             loop = self._loop

@@ -18,7 +18,6 @@ import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
-from simbridge.app.settings import ServerSettings
 from simbridge.graph.access import AccessRules
 from simbridge.graph.actions import ActionTable
 from simbridge.graph.params import ParameterStore
@@ -45,12 +44,23 @@ class Graph:
     def __init__(
         self,
         registry: TypeRegistry | None = None,
-        settings: ServerSettings | None = None,
         *,
+        service_timeout: float = 5.0,
+        max_parameter_names: int = 1_000,
         wall_clock_ns: Callable[[], int] = time.time_ns,
     ) -> None:
-        #: Server settings (limits, timeouts).
-        self.settings = settings or ServerSettings()
+        """Make an empty graph.
+
+        Args:
+            registry: the interface definitions (default: the built-in ones).
+            service_timeout: seconds a call waits for a peer's provider when it gives none
+                (the server's ``service_timeout``).
+            max_parameter_names: names in one request to the parameter services (the server's
+                ``max_parameter_names``).
+            wall_clock_ns: the wall clock for header stamps (nanoseconds since the epoch).
+        """
+        #: Names in one request to the parameter services at most.
+        self.max_parameter_names = max_parameter_names
         #: Interface definitions.
         self.registry = registry or TypeRegistry()
         #: Wall clock for header stamps (nanoseconds since the epoch).
@@ -62,7 +72,7 @@ class Graph:
         self.topics.cdr_factory = self._cdr  # cbor-raw
         self._cdr_writer: CdrWriter | None = None
         #: Services.
-        self.services = ServiceTable(default_timeout=self.settings.service_timeout)
+        self.services = ServiceTable(default_timeout=service_timeout)
         #: Parameters of the in-process nodes.
         self.params = ParameterStore()
         #: Connected clients.

@@ -113,7 +113,7 @@ def install_parameter_services(graph: Graph) -> None:
 
 def _install(graph: Graph, node: ParamNode) -> None:
     store = graph.params
-    limit = graph.settings.max_parameter_names
+    limit = graph.max_parameter_names
 
     def bounded(req: dict[str, Any], field: str, service: str) -> Any:
         """Return ``req[field]`` if it names few enough parameters, before any work on it.

@@ -99,17 +99,18 @@ def build_robot_graph(
         settings: server limits and timeouts (default: the defaults).
         use_sim_time: stamp headers with sim time instead of the wall clock.
     """
-    graph = Graph(settings=settings)
+    s = settings or ServerSettings()
+    graph = Graph(service_timeout=s.service_timeout, max_parameter_names=s.max_parameter_names)
     install_rosapi(graph)
     bridge = RobotBridge(graph, world)
     controls = WorldControls(graph, world)
     simclock = SimClock(graph, world, advance, use_sim_time=use_sim_time)
-    estop = EStop(graph, world)
+    estop = EStop(graph, world, s)
     bridge.on_robot_added.append(estop.add_robot)
     bridge.on_robot_removed.append(estop.remove_robot)
     roles = Roles(graph, world, estop)
     walls = WallsPublisher(graph, world)
-    tf_republisher = install_tf_republisher(graph, lambda: world.params.sim.rate)
+    tf_republisher = install_tf_republisher(graph, lambda: world.params.sim.rate, s)
     safety = Safety(graph, world)
     bridge.on_robot_removed.append(safety.forget)
     hooks: list[Callable[[float], None]] = [tf_republisher.tick, safety.tick]

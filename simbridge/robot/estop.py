@@ -33,6 +33,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 from typing import Any
 
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph.access import NO_ROBOT
 from simbridge.graph.graph import Graph
@@ -140,13 +141,13 @@ class Latch:
 class EStop:
     """Installs the e-stop services and state topics on ``graph`` for ``world``."""
 
-    def __init__(self, graph: Graph, world: World) -> None:
+    def __init__(self, graph: Graph, world: World, settings: ServerSettings | None = None) -> None:
         self.graph = graph
         self.world = world
         #: Latched stops by id.
         self.latches: dict[int, Latch] = {}
         #: Latches past which a stop of robots already held makes no new one.
-        self.max_latches = graph.settings.max_estop_latches
+        self.max_latches = (settings or ServerSettings()).max_estop_latches
         #: Connected peers by client id (to tell whether a latch's connection is still there).
         self.connected: set[int] = set()
         self._ids = itertools.count(1)

@@ -45,6 +45,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph.actions import ABORTED, CANCELED, Goal
 from simbridge.graph.services import caller
@@ -192,9 +193,16 @@ def _moved(old: Pose, new: Pose, trans: float, angle: float) -> bool:
 class TfRepublisher:
     """Serves the tf2_web_republisher action and service from the graph's /tf and /tf_static."""
 
-    def __init__(self, graph: Graph, max_rate: Callable[[], float] | None = None) -> None:
+    def __init__(
+        self,
+        graph: Graph,
+        max_rate: Callable[[], float] | None = None,
+        settings: ServerSettings | None = None,
+    ) -> None:
         #: The graph it reads TF from and sends on.
         self.graph = graph
+        #: The server's budgets of TF requests (``tf_*``).
+        self.settings = settings or ServerSettings()
         #: The transform tree.
         self.buffer = TfBuffer()
         #: Active requests.
@@ -298,7 +306,7 @@ class TfRepublisher:
 
     def _admit(self, request: _Request, what: str) -> None:
         """Refuse a request over the owner's or the class's budget (``docs/security.md``)."""
-        s = self.graph.settings
+        s = self.settings
         if request.owner is None:
             return
         mine = [r for r in self.requests if r.owner is request.owner]
@@ -379,7 +387,7 @@ class TfRepublisher:
             msg = "republish_tfs: timeout must be a builtin_interfaces/Duration {sec, nanosec}"
             raise ServiceError(msg) from None
         # a lifetime without subscribers: never longer than tf_max_timeout (not 63 years)
-        limit = self.graph.settings.tf_max_timeout
+        limit = self.settings.tf_max_timeout
         request.timeout = min(seconds, limit) if seconds > 0 else min(10.0, limit)
         name = f"/tf_repub_{next(self._topics)}"
         request.topic = self.graph.advertise(name, _TOPIC_TYPE, REPUBLISHER_NODE)
@@ -505,10 +513,13 @@ def _check_frame(frame: object, what: str) -> None:
 
 
 def install_tf_republisher(
-    graph: Graph, max_rate: Callable[[], float] | None = None
+    graph: Graph,
+    max_rate: Callable[[], float] | None = None,
+    settings: ServerSettings | None = None,
 ) -> TfRepublisher:
     """Serve tf2_web_republisher on ``graph``; call the result's ``tick(now)`` every step.
 
-    ``max_rate`` gives the fastest rate a request is served at (the simulation rate).
+    ``max_rate`` gives the fastest rate a request is served at (the simulation rate);
+    ``settings`` the budgets of TF requests (default: the defaults).
     """
-    return TfRepublisher(graph, max_rate)
+    return TfRepublisher(graph, max_rate, settings)

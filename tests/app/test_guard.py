@@ -18,7 +18,7 @@ from simbridge.graph import Graph
 from simbridge.graph.access import Access
 from simbridge.rosbridge import TokenBucket
 from simbridge.rosbridge.rosapi import install_rosapi
-from tests.helpers import RecordingPeer, rosbridge_of
+from tests.helpers import RecordingPeer, graph_for, rosbridge_of
 
 
 WALL = 1_700_000_000.0
@@ -27,7 +27,7 @@ TOKENS = {"token-for-r1-aaaa": "r1", "token-for-all-bbb": "*", "teacher-token-cc
 
 def make(**settings: Any) -> tuple[Graph, Guard]:
     s = ServerSettings(**settings)
-    graph = Graph(settings=s, wall_clock_ns=lambda: int(WALL * 1e9))
+    graph = graph_for(s, wall_clock_ns=lambda: int(WALL * 1e9))
     install_rosapi(graph)
     graph.add_service("/reset", "std_srvs/srv/Empty", "/virtual_robot", lambda args: {})
     guard = Guard(graph, s, robots=lambda: ["r1", "r2"])

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import copy
 import dataclasses
+import inspect
 import pickle
 from typing import Annotated, Any, Literal, Self
 
@@ -25,6 +26,7 @@ from simbridge.app.settings import (
     options,
 )
 from simbridge.errors import ConfigError
+from simbridge.graph import Graph
 from simbridge.rosbridge.budget import GLOBAL_LIMITS, Limits
 
 
@@ -352,3 +354,14 @@ def test_the_environment_is_read_with_the_options_types_naming_the_variable() ->
         "environment variable SIMBRIDGE_LOG_LEVEL: must be 'debug', 'info', 'warning' or "
         "'error' (got 'loud')"
     )
+
+
+def test_the_graphs_defaults_are_the_settings_defaults() -> None:
+    """Graph takes plain parameters (no settings); a bare Graph() is as the default server's."""
+    defaults = ServerSettings()
+    parameters = inspect.signature(Graph).parameters
+    for name in ("service_timeout", "max_parameter_names"):
+        assert parameters[name].default == getattr(defaults, name), name
+    graph = Graph()
+    assert graph.services.default_timeout == defaults.service_timeout
+    assert graph.max_parameter_names == defaults.max_parameter_names

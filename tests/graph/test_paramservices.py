@@ -83,7 +83,7 @@ def test_a_request_of_too_many_names_is_refused_before_its_answer_is_built(
     graph: Graph,
 ) -> None:
     """Past max_parameter_names, each service refuses by name; at the limit it answers."""
-    limit = graph.settings.max_parameter_names
+    limit = graph.max_parameter_names
     for service, args in (
         ("describe_parameters", {"names": ["x"] * (limit + 1)}),
         ("get_parameters", {"names": ["x"] * (limit + 1)}),

@@ -14,7 +14,7 @@ from simbridge.graph import Graph
 from simbridge.rosbridge import ops as o
 from simbridge.rosbridge.actions import GoalRequest, GoalUpdate, goal_id
 from simbridge.rosbridge.rosapi import install_rosapi
-from tests.helpers import RecordingPeer, rosbridge_of
+from tests.helpers import RecordingPeer, graph_for, rosbridge_of
 
 
 @pytest.fixture
@@ -191,7 +191,7 @@ def test_goal_list_args_follow_the_same_positional_rule_as_calls(graph: Graph) -
 
 def test_goals_are_counted_per_client_and_their_arguments_are_not_kept() -> None:
     """Past max_pending_goals a goal fails by name; results give the budget back."""
-    graph = Graph(settings=ServerSettings(max_pending_goals=2))
+    graph = graph_for(ServerSettings(max_pending_goals=2))
     server, caller = served(graph)
     for k in range(3):
         goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": f"g{k}"}
@@ -211,7 +211,7 @@ def test_goals_are_counted_per_client_and_their_arguments_are_not_kept() -> None
 
 def test_a_goal_without_result_times_out_and_is_cancelled() -> None:
     """A client-served goal with no result after max_goal_timeout: aborted, server told."""
-    graph = Graph(settings=ServerSettings(max_goal_timeout=30.0))
+    graph = graph_for(ServerSettings(max_goal_timeout=30.0))
     server, caller = served(graph)
     goal = {"op": "send_action_goal", "action": "/fib", "action_type": "x/Y", "id": "g"}
     rosbridge_of(graph).receive(caller, json.dumps(goal), 10.0)

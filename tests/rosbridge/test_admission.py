@@ -11,7 +11,7 @@ from simbridge.robot.bridge import RobotBridge
 from simbridge.rosbridge import ops as o
 from simbridge.rosbridge.admission import Publication
 from simbridge.sim import World
-from tests.helpers import ROOT, RecordingPeer, rosbridge_of
+from tests.helpers import ROOT, RecordingPeer, graph_for, rosbridge_of
 
 
 TWIST = {"linear": {"x": 0.2, "y": 0.0, "z": 0.0}, "angular": {"x": 0.0, "y": 0.0, "z": 0.5}}
@@ -63,7 +63,7 @@ def test_access_rules_apply_once_a_guard_is_installed() -> None:
     """Without a guard every client is trusted (no publish rate); with one, the rate holds."""
     settings = ServerSettings(publish_rate=1.0, publish_burst=2)
     for guarded in (False, True):
-        graph = Graph(settings=settings)
+        graph = graph_for(settings)
         if guarded:
             rosbridge_of(graph, Guard(graph, settings))
         sender, listener = RecordingPeer(graph), RecordingPeer(graph)

@@ -12,7 +12,7 @@ from simbridge.errors import ProtocolError, ServiceError
 from simbridge.graph import Graph
 from simbridge.rosbridge import Refusal, ops as o
 from simbridge.rosbridge.services import Call, Response
-from tests.helpers import RecordingPeer, rosbridge_of
+from tests.helpers import RecordingPeer, graph_for, rosbridge_of
 
 
 @pytest.fixture
@@ -149,7 +149,7 @@ def test_timeout_0_waits_the_maximum_not_forever_and_calls_are_budgeted() -> Non
 
     Past max_pending_calls a call fails at once; expired and dropped calls give the budget back.
     """
-    graph = Graph(settings=ServerSettings(max_call_timeout=2.0, max_pending_calls=2))
+    graph = graph_for(ServerSettings(max_call_timeout=2.0, max_pending_calls=2))
     provider, caller = RecordingPeer(graph, "p"), RecordingPeer(graph, "c")
     op(provider, graph, op="advertise_service", service="/slow", type="std_srvs/Trigger")
     for k in range(3):

@@ -38,6 +38,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from simbridge.app.guard import ros2_access
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.access import Access
@@ -206,9 +207,12 @@ class DdsLink:
         *,
         simulator: bool = False,
         rosbridge: Rosbridge | None = None,
+        settings: ServerSettings | None = None,
     ) -> None:
         #: The graph mapped onto DDS.
         self.graph = graph
+        #: The server's settings (the link's budgets, the ROS 2 peers' role).
+        self.settings = settings = settings or ServerSettings()
         #: Domain, distribution, discovery range.
         self.options = options
         #: Whether this process simulates robots (not ``--no-sim``).
@@ -249,7 +253,7 @@ class DdsLink:
         self.rosbridge = rosbridge or Rosbridge(graph)
         # whatever comes from DDS is admitted as one peer of the ROS 2 peers' role
         session = self.rosbridge.new_session()
-        scope, admin = ros2_access(graph.settings)
+        scope, admin = ros2_access(settings)
         session.connect(scope, admin)
         self._session = session
         self._access = session.access
@@ -258,7 +262,7 @@ class DdsLink:
         #: Calls from DDS waiting for a provider that is not in process, at most
         #: ``max_pending_calls`` (the budget of one rosbridge client: the DDS peers are one).
         self.calls_waiting = 0
-        self.max_calls_waiting = graph.settings.max_pending_calls
+        self.max_calls_waiting = settings.max_pending_calls
         self._refusals: dict[str, str | None] = {}
         self._forwarding = False
         self._next_reconcile = 0.0
@@ -268,9 +272,9 @@ class DdsLink:
         self._inbox_bytes = 0
         self._inbox_lock = threading.Lock()
         self._inbox_rung = False
-        self.max_sample = graph.settings.dds_max_sample_bytes
-        self.max_inbox = graph.settings.dds_inbox_bytes
-        self.max_remote = graph.settings.dds_max_remote_endpoints
+        self.max_sample = settings.dds_max_sample_bytes
+        self.max_inbox = settings.dds_inbox_bytes
+        self.max_remote = settings.dds_max_remote_endpoints
         #: Counters for /healthz.
         self.stats: Counter[str] = Counter()
         graph.topics.taps.append(self._on_deliver)
@@ -979,7 +983,7 @@ class DdsLink:
 
         loop = self._loop
         now = loop.time() if loop is not None else 0.0
-        deadline = now + min(SERVICE_TIMEOUT, self.graph.settings.max_call_timeout)
+        deadline = now + min(SERVICE_TIMEOUT, self.settings.max_call_timeout)
         if waits:
             self.calls_waiting += 1
         release = self._call_ended if waits else None

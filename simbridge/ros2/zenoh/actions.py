@@ -53,6 +53,7 @@ from simbridge.ros2.zenoh.attachment import Attachment
 if TYPE_CHECKING:
     from collections import Counter
 
+    from simbridge.app.settings import ServerSettings
     from simbridge.graph import Graph, Peer
     from simbridge.msgs.cdr import CdrWriter
 
@@ -95,6 +96,8 @@ class ActionLink(Protocol):
 
     #: The graph mapped onto ROS 2.
     graph: Graph
+    #: The server's settings (the goals' budgets).
+    settings: ServerSettings
     #: The link's counters (``bad_payloads``, ``unknown_types``, ...).
     stats: Counter[str]
     #: Writes canonical messages as CDR.
@@ -305,7 +308,7 @@ class ActionBridge:
             msg = {"accepted": accepted, "stamp": {"sec": stamp[0], "nanosec": stamp[1]}}
             link.reply(query, response_type, msg, attachment)
 
-        settings = self.graph.settings
+        settings = link.settings
         # the graph's rule for a goal (not another robot's action), for the ROS 2 peers' role
         refusal = self.graph.access.reach_refusal(link.peer.access, name)
         if refusal is None and (name, goal_id) in self._served:

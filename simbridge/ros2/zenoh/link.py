@@ -47,6 +47,7 @@ from typing import Any
 import orjson
 
 from simbridge.app.guard import ros2_access
+from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, ServiceError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.access import Access
@@ -252,9 +253,12 @@ class ZenohLink:
         *,
         simulator: bool = False,
         rosbridge: Rosbridge | None = None,
+        settings: ServerSettings | None = None,
     ) -> None:
         #: The graph mapped onto ROS 2.
         self.graph = graph
+        #: The server's settings (the link's budgets, the ROS 2 peers' role).
+        self.settings = settings = settings or ServerSettings()
         #: Gives the link's peers their sessions, which the graph's peers still carry (only
         #: their access is read: calls and goals go to the graph's tables directly).
         self.rosbridge = rosbridge or Rosbridge(graph)
@@ -265,7 +269,7 @@ class ZenohLink:
         self.options = options
         self.zenoh = import_zenoh()
         self.config = session_config(
-            self.zenoh, options, max_sample_bytes=graph.settings.zenoh_max_sample_bytes
+            self.zenoh, options, max_sample_bytes=settings.zenoh_max_sample_bytes
         )
         self.hasher = TypeHasher(graph.registry, options.distro)
         self.cdr = CdrWriter(graph.registry)
@@ -297,7 +301,7 @@ class ZenohLink:
         self._tokens: deque[tuple[str, bool]] = deque()
         self._tokens_rung = False
         #: Remote tokens kept at most (``zenoh_max_remote_tokens``).
-        self.max_tokens = graph.settings.zenoh_max_remote_tokens
+        self.max_tokens = settings.zenoh_max_remote_tokens
         #: The remote entities by what they stand for: topic and service names (token ->
         #: entity), node names (tokens), actions' parts (token -> entity).
         self._by_name: dict[str, dict[str, Entity]] = {}
@@ -330,14 +334,14 @@ class ZenohLink:
         #: Calls from ROS 2 waiting for a provider that is not in process, at most
         #: ``max_pending_calls`` (the budget of one rosbridge client: the ROS 2 peers are one).
         self.calls_waiting = 0
-        self.max_calls_waiting = graph.settings.max_pending_calls
+        self.max_calls_waiting = settings.max_pending_calls
         #: Calls to ROS 2 waiting for a reply: the graph's call id -> (provider, type, call).
         self._calls: dict[str, tuple[_Provider, str, PendingCall]] = {}
         caller_session = self.rosbridge.new_session()
         # whatever comes from ROS 2 (samples, calls, goals, remote publishers and services)
         # passes admission as one client of the role the instructor chose (--ros2-role; in
         # class mode by default a student without a robot: it reads, it drives nothing)
-        scope, admin = ros2_access(graph.settings)
+        scope, admin = ros2_access(settings)
         caller_session.connect(scope, admin)
         self._caller = _Caller(self, caller_session)
         #: Why ROS 2 peers may not publish on a name (None: they may), by name.
@@ -361,8 +365,8 @@ class ZenohLink:
         self._calls_bytes = 0
         self._calls_rung = False
         #: The budgets of samples (``zenoh_max_sample_bytes``, ``zenoh_inbox_bytes``).
-        self.max_sample = graph.settings.zenoh_max_sample_bytes
-        self.max_inbox = graph.settings.zenoh_inbox_bytes
+        self.max_sample = settings.zenoh_max_sample_bytes
+        self.max_inbox = settings.zenoh_inbox_bytes
         #: The last oversized sample's topic and size, and whether its report is scheduled.
         self._oversized: tuple[str, int] | None = None
         self._oversized_rung = False
@@ -860,7 +864,7 @@ class ZenohLink:
         def done(ok: bool, values: Any) -> None:
             self._service_answer(name, query, response_type, attachment, ok, values)
 
-        timeout = min(SERVICE_TIMEOUT, self.graph.settings.max_call_timeout)
+        timeout = min(SERVICE_TIMEOUT, self.settings.max_call_timeout)
         deadline = asyncio.get_running_loop().time() + timeout
         if waits:
             self.calls_waiting += 1
