@@ -3,6 +3,8 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from websockets.asyncio.client import connect
+
 from simbridge.app.config import Params, load_world
 from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
@@ -10,7 +12,8 @@ from simbridge.graph import Graph
 from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.controls import WorldControls
 from simbridge.sim import World
-from tests.helpers import ROOT, RecordingPeer, rosbridge_of
+from tests.conftest import AppFactory
+from tests.helpers import ROOT, RecordingPeer, recv_until, rosbridge_of, send_json, ws_url
 
 
 ADMIN = "the-admin-token"
@@ -84,3 +87,24 @@ def test_a_students_token_is_refused_the_controls_by_name() -> None:
         assert reply["result"] is False and "administrative" in reply["values"]
         assert service in reply["values"]
     assert world.motion.name == "kinematic" and not world.robots["r3"].overrides
+
+
+async def test_over_the_socket_the_admin_token_sets_a_robots_values_and_a_students_is_refused(
+    make_app: AppFactory,
+) -> None:
+    """A real server: the WebSocket clients send what roslibjs sends; /admin sees the change."""
+    world = ROOT / "config" / "worlds" / "classroom.yaml"
+    app = await make_app(world=world, admin_token=ADMIN, client_tokens=TOKENS)
+    args = {"name": "r3", "value": '{"robot.mass": 3.0}'}
+    frame = {"op": "call_service", "service": "/simbridge/robot_params", "args": args, "id": "p"}
+    async with connect(f"{ws_url(app)}/?token=token-for-r3-cccc") as student:
+        await send_json(student, frame)
+        reply = await recv_until(student, lambda m: m.get("op") == "service_response")
+    assert reply["result"] is False and "/simbridge/robot_params" in reply["values"]
+    assert "administrative" in reply["values"] and not app.world.robots["r3"].overrides
+    async with connect(f"{ws_url(app)}/?token={ADMIN}") as admin:
+        await send_json(admin, frame)
+        reply = await recv_until(admin, lambda m: m.get("op") == "service_response")
+    assert reply["result"] is True, reply
+    assert json.loads(reply["values"]["reason"]) == {"robot": "r3", "own": {"robot.mass": 3.0}}
+    assert app.world.robots["r3"].overrides == {"mass": 3.0}
