@@ -159,7 +159,7 @@ def op(peer: RecordingPeer, graph: Any, now: float = 0.0, **fields: Any) -> None
 def clocked_graph() -> Any:
     """A graph with rosapi and a fixed wall clock (stamps 1700000000.5 s)."""
     from simbridge.graph import Graph
-    from simbridge.rosbridge.rosapi import install_rosapi
+    from simbridge.graph.rosapi import install_rosapi
 
     graph = Graph(wall_clock_ns=lambda: 1_700_000_000_500_000_000)
     install_rosapi(graph)

@@ -15,30 +15,35 @@ from tests.helpers import ROOT
 
 
 PACKAGE = ROOT / "simbridge"
+#: The front ends: each translates its own wire to the graph's calls and back.
+FRONT_ENDS = ("simbridge.rosbridge", "simbridge.ros2", "simbridge.foxglove", "simbridge.web")
 #: The sans-I/O cores and what each may not import (STYLE.md: front ends and app -> robot ->
 #: graph -> (msgs, sim)).
 CORES = {
-    "simbridge.sim": ("simbridge.graph", "simbridge.robot", "simbridge.msgs", "simbridge.ros2"),
-    "simbridge.msgs": ("simbridge.graph", "simbridge.robot", "simbridge.sim", "simbridge.ros2"),
-    "simbridge.graph": ("simbridge.robot", "simbridge.ros2", "simbridge.sim"),
-    # the robot world's nodes: on the graph, beside no front end
-    "simbridge.robot": ("simbridge.ros2",),
+    "simbridge.sim": ("simbridge.graph", "simbridge.robot", "simbridge.msgs", *FRONT_ENDS),
+    "simbridge.msgs": ("simbridge.graph", "simbridge.robot", "simbridge.sim", *FRONT_ENDS),
+    "simbridge.graph": ("simbridge.robot", "simbridge.sim", *FRONT_ENDS),
+    # the robot world's nodes: on the graph's API like any front end, beside none of them
+    "simbridge.robot": FRONT_ENDS,
     # the grader: a node on the graph with its pure parts (tasks, metrics, results, report)
-    "simbridge.grading": (),
+    "simbridge.grading": FRONT_ENDS,
 }
-#: The sans-I/O cores import no front end, no server, no loop.
+#: The sans-I/O cores import no server, no loop, no composition root.
 SHELL = (
     "asyncio",
     "websockets",
-    "simbridge.rosbridge.server",
+    "simbridge.app.build",
+    "simbridge.app.steps",
     "simbridge.app.runner",
     "simbridge.app.guard",
-    "simbridge.web",
     "simbridge.cli",
     "simbridge.tools",
     "simbridge.headless",
-    "simbridge.foxglove",
 )
+#: A front end's imports of another front end, each with why: the rosbridge port answers a
+#: plain HTTP request (the page, /healthz) with the page's own answers (rosbridge_suite's port
+#: does not), so its server takes the page's request and answer types.
+CROSSINGS_NOT_YET = {("simbridge.rosbridge.server", "simbridge.web")}
 
 
 def _module_name(path: Path) -> str:
@@ -52,9 +57,15 @@ def _modules() -> dict[str, Path]:
 
 def _imports(name: str, path: Path, known: set[str]) -> set[str]:
     """Modules of simbridge (and others, by top name) that ``path`` imports anywhere."""
+    return _imports_text(name, path, path.read_text(), known)
+
+
+def _imports_text(name: str, path: Path, text: str, known: set[str] | None = None) -> set[str]:
+    """Modules that the source ``text`` of module ``name`` (at ``path``) imports anywhere."""
+    known = known if known is not None else set(_modules())
     package = name if path.name == "__init__.py" else name.rpartition(".")[0]
     found: set[str] = set()
-    for node in ast.walk(ast.parse(path.read_text())):
+    for node in ast.walk(ast.parse(text)):
         if isinstance(node, ast.Import):
             found.update(alias.name for alias in node.names)
         elif isinstance(node, ast.ImportFrom):
@@ -163,6 +174,36 @@ def test_the_cores_import_no_settings_framework() -> None:
         if any(imported == b or imported.startswith(b + ".") for b in SETTINGS_FRAMEWORK)
     }
     assert not wrong, wrong
+
+
+def test_no_front_end_imports_another() -> None:
+    """rosbridge, ROS 2 (Zenoh, DDS), Foxglove and the page each reach the graph on their own.
+
+    None pretends to be another: no module of one imports a module of another (lazily and
+    under TYPE_CHECKING too), but for the crossings listed by name with why.
+    """
+    modules = _modules()
+    known = set(modules)
+    crossings = set()
+    for name, path in modules.items():
+        mine = next((f for f in FRONT_ENDS if name == f or name.startswith(f + ".")), None)
+        if mine is None:
+            continue
+        for imported in _imports(name, path, known):
+            other = next(
+                (f for f in FRONT_ENDS if imported == f or imported.startswith(f + ".")), None
+            )
+            if other is not None and other != mine:
+                crossings.add((name, imported))
+    assert crossings == CROSSINGS_NOT_YET
+
+
+def test_the_front_end_check_finds_a_crossing() -> None:
+    """The check itself can fail: the Zenoh link once sent its calls as rosbridge ops."""
+    path = PACKAGE / "ros2" / "zenoh" / "link.py"
+    text = "from simbridge.rosbridge.front import Rosbridge\n"
+    tree_imports = {m for m in _imports_text("simbridge.ros2.zenoh.link", path, text)}
+    assert "simbridge.rosbridge.front" in tree_imports
 
 
 def test_the_server_does_not_import_the_tools() -> None:

@@ -291,15 +291,13 @@ def build(
     if zenoh is not None:
         from simbridge.ros2.zenoh.link import ZenohLink  # the [zenoh] extra, only when asked
 
-        zenoh_link = ZenohLink(
-            graph, zenoh, simulator=not no_sim, rosbridge=rosbridge, settings=settings
-        )
+        zenoh_link = ZenohLink(graph, zenoh, simulator=not no_sim, settings=settings)
         hooks.append(zenoh_link.tick)
     dds_link = None
     if dds is not None:
         from simbridge.ros2.dds.link import DdsLink  # the [dds] extra, only when asked
 
-        dds_link = DdsLink(graph, dds, simulator=not no_sim, rosbridge=rosbridge, settings=settings)
+        dds_link = DdsLink(graph, dds, simulator=not no_sim, settings=settings)
         hooks.append(dds_link.tick)
     foxglove = None
     if settings.foxglove_port is not None:
@@ -310,7 +308,6 @@ def build(
             port=settings.foxglove_port,
             host=settings.host,
             scope=settings.foxglove_scope,
-            rosbridge=rosbridge,
             settings=settings,
         )
         hooks.append(foxglove.tick)

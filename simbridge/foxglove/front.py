@@ -74,7 +74,7 @@ import os
 import socket
 import stat
 import threading
-from collections.abc import Callable, Hashable
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -91,16 +91,13 @@ from simbridge.foxglove.mapping import (
     param_name,
     plain,
     split_param,
-    status_of,
 )
 from simbridge.graph import Graph, Topic
-from simbridge.graph.access import ANY_SCOPE, Access
+from simbridge.graph.access import ANY_SCOPE, Access, TokenBucket
 from simbridge.graph.services import typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
-from simbridge.rosbridge import Frame, Outgoing, Session
-from simbridge.rosbridge.budget import TokenBucket
-from simbridge.rosbridge.front import Rosbridge
+from simbridge.msgs.message import Outgoing
 
 
 __all__ = ["FOXGLOVE_NODE", "ConnectionWatch", "FoxgloveFront", "import_foxglove"]
@@ -284,12 +281,13 @@ def import_foxglove() -> Any:
 
 
 class _Client:
-    """One Foxglove client as a peer of the graph: its own session, budgets and access."""
+    """One Foxglove client as a peer of the graph: its access and its own budgets."""
 
-    def __init__(self, front: FoxgloveFront, client_id: int, session: Session) -> None:
+    def __init__(self, front: FoxgloveFront, client_id: int, access: Access) -> None:
         self.front = front
         self.client_id = client_id
-        self.session = session
+        #: Who the client is for the graph's rules (the guard's, then ``--foxglove-scope``).
+        self.access = access
         self.label = f"Foxglove client {client_id}"
         #: Its client channels: channel id -> (topic, encoding, type or None).
         self.channels: dict[int, tuple[str, str, str | None]] = {}
@@ -300,19 +298,6 @@ class _Client:
         #: Its publish rate (``publish_rate``, ``publish_burst``).
         settings = front.settings
         self.publishes = TokenBucket(settings.publish_rate, settings.publish_burst)
-
-    @property
-    def access(self) -> Access:
-        """Who the peer is for the graph's rules (its session's access)."""
-        return self.session.access
-
-    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        """Take what rosbridge tells this client: a refusal of its publish or advertise."""
-        if not frame.text:
-            return
-        status = status_of(frame.data)
-        if status is not None:
-            self.front.status(f"{self.label}: {status[1]}", status[0])
 
     def call_ended(self) -> None:
         """A call of this client to a provider outside the process ended."""
@@ -339,15 +324,12 @@ class FoxgloveFront:
         port: int,
         host: str,
         scope: str | None,
-        rosbridge: Rosbridge | None = None,
         settings: ServerSettings | None = None,
     ) -> None:
         #: The graph served.
         self.graph = graph
         #: The server's settings (the clients' budgets, use_sim_time, admin_token).
         self.settings = settings = settings or ServerSettings()
-        #: Where the clients' messages and calls are carried out as rosbridge ops, for now.
-        self.rosbridge = rosbridge or Rosbridge(graph)
         self.port_asked = port
         self.host = host
         #: Access of every Foxglove client (None: what a rosbridge client without a token gets).
@@ -686,14 +668,16 @@ class FoxgloveFront:
     def _client(self, client_id: int) -> _Client:
         client = self._clients.get(client_id)
         if client is None:
-            session = self.rosbridge.new_session()
-            client = self._clients[client_id] = _Client(self, client_id, session)
-            self.rosbridge.add_peer(client)  # the guard gives the access of a tokenless client
+            access = Access(peer_id=self.graph.next_peer_id())
+            client = self._clients[client_id] = _Client(self, client_id, access)
+            self.graph.add_peer(client)  # the guard gives the access of a tokenless client
             if self.scope == ADMIN_SCOPE:
-                session.connect(ANY_SCOPE, admin=True)
+                access.scope, access.admin = ANY_SCOPE, True
+                access.authenticated = access.guarded = True
             elif self.scope is not None:
-                admin = self.scope == ANY_SCOPE and self.settings.admin_token is None
-                session.connect(self.scope, admin=admin)
+                access.scope = self.scope
+                access.admin = self.scope == ANY_SCOPE and self.settings.admin_token is None
+                access.authenticated = access.guarded = True
             logger.info("%s: publishing or calling", client.label)
         return client
 
@@ -702,7 +686,7 @@ class FoxgloveFront:
         if client.channels or client.calls or self._clients.get(client.client_id) is not client:
             return
         del self._clients[client.client_id]
-        self.rosbridge.remove_peer(client)
+        self.graph.remove_peer(client)
 
     def _now(self) -> float:
         return self._loop.time() if self._loop is not None else 0.0

@@ -68,6 +68,6 @@ def status_of(data: bytes) -> tuple[str, str] | None:
 
 def plain(value: Any) -> Any:
     """Return a canonical message as plain JSON values (numpy arrays as lists, bytes base64)."""
-    from simbridge.rosbridge.encoding import encode_json
+    from simbridge.msgs.message import encode_json
 
     return orjson.loads(encode_json(value))

@@ -51,11 +51,11 @@ from simbridge.grading.report import response_svg
 from simbridge.grading.results import ResultsLog
 from simbridge.grading.task import Goal, Task, parse_task
 from simbridge.graph.graph import Graph
+from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.robot.cmdvel import twist_of
 from simbridge.robot.estop import connection_rights, describe_peer
-from simbridge.rosbridge.rosapi import request_fields
 from simbridge.sim import World
 from simbridge.sim.parameters import RealismLike, RobotLike
 from simbridge.sim.world import PER_ROBOT_PARAMS, Robot

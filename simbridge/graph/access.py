@@ -18,6 +18,7 @@ the ROS 2 role) is decided outside the graph, by the application's guard.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 
@@ -28,6 +29,7 @@ __all__ = [
     "NO_ROBOT",
     "Access",
     "AccessRules",
+    "TokenBucket",
     "in_namespace",
 ]
 
@@ -103,3 +105,44 @@ class AccessRules:
         if not self.may_reach(access, name):
             return f"{name} belongs to another robot; this peer may not use it"
         return None
+
+
+@dataclass(slots=True)
+class TokenBucket:
+    """``rate`` events per second sustained, ``burst`` at once (monotonic seconds)."""
+
+    rate: float
+    burst: float
+    tokens: float = math.nan
+    last: float = -math.inf
+
+    def take(self, now: float, cost: float = 1.0) -> bool:
+        """Spend ``cost`` tokens if there are enough; return whether the event may go on."""
+        self.refill(now)
+        if self.tokens >= cost:
+            self.tokens -= cost
+            return True
+        return False
+
+    def refill(self, now: float) -> None:
+        """Add the tokens earned since the last call."""
+        if math.isnan(self.tokens):
+            self.tokens = self.burst
+        elif now > self.last:
+            self.tokens = min(self.burst, self.tokens + (now - self.last) * self.rate)
+        self.last = max(self.last, now)
+
+    def charge(self, now: float, cost: float) -> float:
+        """Spend ``cost`` tokens even into debt; return seconds until the balance is positive."""
+        self.refill(now)
+        self.tokens -= cost
+        return 0.0 if self.tokens >= 0 else -self.tokens / self.rate
+
+    def owed(self, now: float) -> float:
+        """Return seconds until the balance is positive again (0: it is; nothing is spent).
+
+        A bucket shared by several spenders (one token's connections) may have been charged by
+        the others while one waited: it asks again before it spends.
+        """
+        self.refill(now)
+        return 0.0 if self.tokens >= 0 else -self.tokens / self.rate

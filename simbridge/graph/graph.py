@@ -13,6 +13,7 @@ time.
 
 from __future__ import annotations
 
+import itertools
 import logging
 import time
 from collections.abc import Callable
@@ -91,10 +92,15 @@ class Graph:
         #: The access rules of every front end's peers (the guard turns them on).
         self.access = AccessRules()
         self.on_disconnect.append(self.actions.drop_peer)
+        self._peer_ids = itertools.count(1)
         self.topics.advertise(ROSOUT, "rcl_interfaces/msg/Log", "/simbridge")
         self.nodes["/simbridge"] = "simbridge itself (/rosout)"
 
     # -- clients ------------------------------------------------------------------------------
+
+    def next_peer_id(self) -> int:
+        """Return a number no other peer of any front end has (``Access.peer_id``)."""
+        return next(self._peer_ids)
 
     def add_peer(self, peer: Peer) -> None:
         """Register a connected peer of a front end (the guard gives it its access)."""

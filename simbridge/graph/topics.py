@@ -16,17 +16,12 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable, Collection, Hashable, Iterable
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Protocol
+from typing import Any, Protocol
 
 from simbridge.errors import ProtocolError, TypeNotFoundError
 from simbridge.graph.access import Access
 from simbridge.msgs import Converter, TypeRegistry, normalize_type
 from simbridge.msgs.message import Outgoing
-
-
-if TYPE_CHECKING:
-    from simbridge.rosbridge.encoding import Frame
-    from simbridge.rosbridge.session import Session
 
 
 __all__ = ["BRIDGE_NODE", "InternalCallback", "Peer", "Sink", "Topic", "TopicTable"]
@@ -38,22 +33,17 @@ BRIDGE_NODE = "/rosbridge_websocket"
 
 
 class Peer(Protocol):
-    """A peer of a front end (a client, a ROS 2 node), as the graph sees it.
+    """A peer of a front end (a rosbridge client, a ROS 2 node), as the graph sees it.
 
-    ``session`` and ``send`` are rosbridge's, still read by the service and action tables.
+    Who it is, and a label for logs: what reaches it goes through its own front end.
     """
 
-    #: The client's protocol state.
-    session: Session
     #: A short label for logs ("client 3 127.0.0.1:50412").
     label: str
 
     @property
     def access(self) -> Access:
         """Who the peer is for the graph's rules (scope, admin rights, token)."""
-
-    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        """Queue one frame for the client (``key``/``limit``: drop-oldest per subscription)."""
 
 
 #: An in-process subscriber: ``(message, sending peer or None) -> None``; may raise

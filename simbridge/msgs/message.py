@@ -10,11 +10,17 @@ function the graph gives (:attr:`Outgoing.cdr`) on first use.
 
 from __future__ import annotations
 
+import base64
 from collections.abc import Callable
 from typing import Any
 
+import numpy as np
+import orjson
 
-__all__ = ["Outgoing"]
+
+__all__ = ["Outgoing", "encode_json"]
+
+_OPTS = orjson.OPT_SERIALIZE_NUMPY
 
 
 class Outgoing:
@@ -45,3 +51,43 @@ class Outgoing:
         self.stamp = stamp
         self.cdr = cdr
         self.cache: dict[Any, Any] = {}
+
+
+def _default(value: Any) -> Any:
+    if isinstance(value, bytes | bytearray | memoryview):
+        return base64.b64encode(value).decode("ascii")
+    if isinstance(value, np.ndarray):
+        return value.tolist()  # non-contiguous or exotic dtype: orjson asks us
+    if isinstance(value, np.generic):
+        return value.item()
+    raise TypeError(type(value).__name__)
+
+
+def encode_json(obj: Any) -> bytes:
+    """Return the UTF-8 JSON of a canonical message or envelope (NaN and inf as null).
+
+    An integer beyond 64 bits (a client may send one in a pass-through payload) is written as
+    the nearest double, as JavaScript would read it (``null`` past the double range).
+    """
+    try:
+        return orjson.dumps(obj, default=_default, option=_OPTS)
+    except orjson.JSONEncodeError as err:
+        if "Integer exceeds 64-bit range" not in str(err):
+            raise
+        return orjson.dumps(_as_doubles(obj), default=_default, option=_OPTS)
+
+
+def _as_doubles(obj: Any) -> Any:
+    """Return ``obj`` with every integer beyond 64 bits replaced by a double (or None)."""
+    if isinstance(obj, int) and not isinstance(obj, bool):
+        if -(2**63) <= obj < 2**64:
+            return obj
+        try:
+            return float(obj)
+        except OverflowError:
+            return None
+    if isinstance(obj, dict):
+        return {k: _as_doubles(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [_as_doubles(v) for v in obj]
+    return obj

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING
 from simbridge.app.config import world_spec
 from simbridge.app.settings import ServerSettings
 from simbridge.graph.graph import Graph
+from simbridge.graph.rosapi import install_rosapi
 from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.controls import WorldControls
 from simbridge.robot.estop import EStop
@@ -30,7 +31,6 @@ from simbridge.robot.safety import Safety
 from simbridge.robot.simclock import SimClock
 from simbridge.robot.tfrepublisher import TfRepublisher, install_tf_republisher
 from simbridge.robot.walls import WallsPublisher
-from simbridge.rosbridge.rosapi import install_rosapi
 from simbridge.sim import World
 
 

@@ -38,6 +38,7 @@ from simbridge.app.settings import SettingsError
 from simbridge.errors import ProtocolError
 from simbridge.graph.graph import Graph
 from simbridge.graph.params import ParameterRefused, ParamNode
+from simbridge.graph.rosapi import request_fields
 from simbridge.graph.topics import Peer, Topic
 from simbridge.robot.cmdvel import STARTUP_ONLY, cmd_vel_type, twist_of
 from simbridge.robot.fleet import (
@@ -46,7 +47,6 @@ from simbridge.robot.fleet import (
     install_fleet,
     remove_robot_services,
 )
-from simbridge.rosbridge.rosapi import request_fields
 from simbridge.sim import Robot, RobotState, World
 
 

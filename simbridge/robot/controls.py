@@ -31,9 +31,9 @@ import orjson
 from simbridge.app.config import RealismParams
 from simbridge.errors import ServiceError
 from simbridge.graph.graph import Graph
+from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.robot.bridge import ROBOT_NODE
-from simbridge.rosbridge.rosapi import request_fields
 from simbridge.sim import KinematicModel, MotionModel, World
 from simbridge.sim.dynamics import DynamicModel
 from simbridge.sim.world import Robot

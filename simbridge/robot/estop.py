@@ -37,9 +37,9 @@ from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph.access import NO_ROBOT
 from simbridge.graph.graph import Graph
+from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer, Topic
-from simbridge.rosbridge.rosapi import request_fields
 from simbridge.sim import World
 
 
@@ -69,20 +69,20 @@ def connection_rights(peer: Peer | None) -> tuple[str, bool]:
     The guard (:mod:`simbridge.app.guard`) gives every client its access on connect; a graph
     without a guard (a test, a tool) trusts everyone.
     """
-    if peer is None or not peer.session.guarded:
+    if peer is None or not peer.access.guarded:
         return "*", True
-    return peer.session.scope, peer.session.admin
+    return peer.access.scope, peer.access.admin
 
 
 def _credential(peer: Peer | None) -> str | None:
-    token = None if peer is None else peer.session.token
+    token = None if peer is None else peer.access.token
     return hashlib.sha256(token.encode()).hexdigest() if isinstance(token, str) else None
 
 
 def describe_peer(peer: Peer) -> str:
     """Name a connection for people: ``client 7 (r1's token)``."""
     scope, admin = connection_rights(peer)
-    token = peer.session.token
+    token = peer.access.token
     if admin and isinstance(token, str):
         what = "admin token"
     elif isinstance(token, str):
@@ -97,7 +97,7 @@ def describe_peer(peer: Peer) -> str:
             if scope == NO_ROBOT
             else f"authenticated for {scope}"
         )
-    return f"client {peer.session.client_id} ({what})"
+    return f"client {peer.access.peer_id} ({what})"
 
 
 @dataclass(slots=True)
@@ -158,8 +158,8 @@ class EStop:
         graph.add_service(
             ESTOP_RESET_SERVICE, _TRIGGER, _NODE, lambda args: self._release(args, None)
         )
-        graph.on_connect.append(lambda peer: self.connected.add(peer.session.client_id))
-        graph.on_disconnect.append(lambda peer: self.connected.discard(peer.session.client_id))
+        graph.on_connect.append(lambda peer: self.connected.add(peer.access.peer_id))
+        graph.on_disconnect.append(lambda peer: self.connected.discard(peer.access.peer_id))
         for name in list(world.robots):
             self.add_robot(name)
         self.publish()
@@ -277,7 +277,7 @@ class EStop:
             if holding is not None:
                 return holding
         by = INSTRUCTOR if peer is None else describe_peer(peer)
-        owner = None if peer is None else peer.session.client_id
+        owner = None if peer is None else peer.access.peer_id
         return self._add(Latch(next(self._ids), by, owner, _credential(peer), robots, self._now()))
 
     def _kept(self, peer: Peer | None, robots: frozenset[str] | None) -> Latch | None:
@@ -289,7 +289,7 @@ class EStop:
                 if latch.owner is None:
                     return latch
                 continue
-            client = peer.session.client_id
+            client = peer.access.peer_id
             if latch.owner == client:
                 return latch
             gone = latch.owner is not None and latch.owner not in self.connected
@@ -312,7 +312,7 @@ class EStop:
         """Whether ``peer`` (None: the instructor) may release ``latch``."""
         if peer is None or connection_rights(peer)[1]:
             return True
-        if latch.owner == peer.session.client_id:
+        if latch.owner == peer.access.peer_id:
             return True
         gone = latch.owner is not None and latch.owner not in self.connected
         return gone and latch.credential is not None and latch.credential == _credential(peer)
@@ -388,7 +388,7 @@ class EStop:
         peer = caller.get()
         latch = self.latch_for(peer, robot)
         release = ESTOP_RESET_SERVICE if robot is None else f"/{robot}/estop/reset"
-        mine = latch.owner == (None if peer is None else peer.session.client_id)
+        mine = latch.owner == (None if peer is None else peer.access.peer_id)
         if not mine:
             message = (
                 f"emergency stop: {latch.scope_text()} is held already by {latch.by} (past "

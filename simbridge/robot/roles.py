@@ -33,10 +33,10 @@ import orjson
 
 from simbridge.app.config import world_spec
 from simbridge.graph.graph import Graph
+from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.robot.estop import EStop, connection_rights, describe_peer
-from simbridge.rosbridge.rosapi import request_fields
 from simbridge.sim import World
 
 

@@ -25,8 +25,8 @@ from typing import Any
 
 from simbridge.errors import ServiceError
 from simbridge.graph.graph import Graph
+from simbridge.graph.rosapi import request_fields
 from simbridge.msgs.convert import finite_number
-from simbridge.rosbridge.rosapi import request_fields
 from simbridge.sim import World
 
 

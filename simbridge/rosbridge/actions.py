@@ -39,7 +39,7 @@ from typing import Any, Protocol
 from simbridge.errors import ConversionError, ProtocolError, TypeNotFoundError
 from simbridge.graph.actions import ABORTED, CANCELED, SUCCEEDED, UNKNOWN, Action, Goal
 from simbridge.graph.graph import Graph
-from simbridge.graph.topics import BRIDGE_NODE, Peer
+from simbridge.graph.topics import BRIDGE_NODE
 from simbridge.msgs import normalize_type, positional_args
 from simbridge.msgs.registry import MAX_TYPE_LENGTH
 from simbridge.rosbridge import ops as o
@@ -47,6 +47,7 @@ from simbridge.rosbridge.admission import Admission, Check, Typed
 from simbridge.rosbridge.encoding import json_frame
 from simbridge.rosbridge.ops import OpId, Refusal
 from simbridge.rosbridge.session import Effect, Provided, Session
+from simbridge.rosbridge.subscribers import Client
 
 
 __all__ = [
@@ -87,7 +88,7 @@ class ClientGoal:
 
     __slots__ = ("feedback_wanted", "op_id", "peer", "written")
 
-    def __init__(self, peer: Peer, op_id: OpId | None, written: str, feedback: bool) -> None:
+    def __init__(self, peer: Client, op_id: OpId | None, written: str, feedback: bool) -> None:
         self.peer = peer
         #: The client's id of the goal (echoed in the replies).
         self.op_id = op_id
@@ -123,7 +124,7 @@ class ClientServer:
 
     __slots__ = ("name", "peer", "written", "written_type")
 
-    def __init__(self, peer: Peer, name: str, written: str, written_type: str) -> None:
+    def __init__(self, peer: Client, name: str, written: str, written_type: str) -> None:
         self.peer = peer
         self.name = name
         #: The name and type as the client wrote them in ``advertise_action`` (roslibjs
@@ -172,7 +173,7 @@ class GoalUpdate:
 
 
 #: A handler of one admitted op: ``(peer, admitted, now)``.
-Handler = Callable[[Peer, Any, float], None]
+Handler = Callable[[Client, Any, float], None]
 
 
 class Front(Protocol):
@@ -181,7 +182,7 @@ class Front(Protocol):
     graph: Graph
     admission: Admission
 
-    def apply(self, peer: Peer, effects: Iterable[Effect]) -> None:
+    def apply(self, peer: Client, effects: Iterable[Effect]) -> None:
         """Carry out the effects a session returned for its client ``peer``."""
 
 
@@ -216,7 +217,7 @@ class ActionOps:
     # -- advertise_action, unadvertise_action (2.10, 2.11) ----------------------------------
 
     def _admit_advertise(
-        self, peer: Peer, session: Session, op: o.AdvertiseAction, now: float
+        self, peer: Client, session: Session, op: o.AdvertiseAction, now: float
     ) -> Typed:
         name = op.name
         if self.graph.access.guarded:
@@ -234,16 +235,16 @@ class ActionOps:
         except TypeNotFoundError as err:
             raise ProtocolError(f"advertise_action: {err}") from None
 
-    def _advertise(self, peer: Peer, admitted: Typed, now: float) -> None:
+    def _advertise(self, peer: Client, admitted: Typed, now: float) -> None:
         op, type_name = admitted.op, admitted.type
         assert type_name is not None
         effects = peer.session.provide("action", op.name, type_name, op.action, op.type)
         self.front.apply(peer, effects)  # Provided: :meth:`provided`
 
-    def _unadvertise(self, peer: Peer, op: o.UnadvertiseAction, now: float) -> None:
+    def _unadvertise(self, peer: Client, op: o.UnadvertiseAction, now: float) -> None:
         self.front.apply(peer, peer.session.withdraw("action", op.name))  # :meth:`withdrawn`
 
-    def provided(self, peer: Peer, effect: Provided) -> None:
+    def provided(self, peer: Client, effect: Provided) -> None:
         """Install an action the client advertised (its session's :class:`Provided` effect)."""
         name = effect.name
         server = ClientServer(peer, name, effect.written, effect.written_type)
@@ -261,14 +262,14 @@ class ActionOps:
             lost=lost,
         )
 
-    def withdrawn(self, peer: Peer, name: str) -> None:
+    def withdrawn(self, peer: Client, name: str) -> None:
         """Remove an action the client no longer serves (its goals end, status 6)."""
         self.actions.withdraw(peer, name)
 
     # -- send_action_goal (2.12) --------------------------------------------------------------
 
     def _admit_goal(
-        self, peer: Peer, session: Session, op: o.SendActionGoal, now: float
+        self, peer: Client, session: Session, op: o.SendActionGoal, now: float
     ) -> GoalRequest:
         rules = self.graph.access
         if rules.guarded and not rules.may_reach(session.access, op.name):
@@ -304,7 +305,7 @@ class ActionOps:
             msg = f"invalid goal for {action.type}: {err}"
             raise ProtocolError(msg) from None
 
-    def _send_goal(self, peer: Peer, request: GoalRequest, now: float) -> None:
+    def _send_goal(self, peer: Client, request: GoalRequest, now: float) -> None:
         op = request.op
         session = peer.session
         session.start_goal(op.name, op.id)  # raises Refusal past the client's budgets
@@ -320,13 +321,13 @@ class ActionOps:
         )
 
     @staticmethod
-    def refused(peer: Peer, action: str, op_id: OpId | None, reason: str) -> None:
+    def refused(peer: Client, action: str, op_id: OpId | None, reason: str) -> None:
         """Answer a goal that was not accepted: ``action_result`` false, status 0."""
         peer.send(json_frame(failed(action, op_id, reason)))
 
     # -- action_feedback, action_result (2.13, 2.14) ------------------------------------------
 
-    def _served_goal(self, peer: Peer, op_id: Any, what: str) -> Goal:
+    def _served_goal(self, peer: Client, op_id: Any, what: str) -> Goal:
         goal = None
         if isinstance(op_id, str) and op_id.startswith(_PREFIX):
             number = op_id.rpartition(":")[2]
@@ -350,23 +351,23 @@ class ActionOps:
             raise ProtocolError(msg) from None
 
     def _admit_feedback(
-        self, peer: Peer, session: Session, op: o.ActionFeedback, now: float
+        self, peer: Client, session: Session, op: o.ActionFeedback, now: float
     ) -> GoalUpdate:
         goal = self._served_goal(peer, op.id, "action_feedback")
         return GoalUpdate(goal, op, self._complete(goal, 2, op.values, "action_feedback"))
 
     def _admit_result(
-        self, peer: Peer, session: Session, op: o.ActionResult, now: float
+        self, peer: Client, session: Session, op: o.ActionResult, now: float
     ) -> GoalUpdate:
         goal = self._served_goal(peer, op.id, "action_result")
         if op.result is False:  # a failure: its reason goes to the caller as it is
             return GoalUpdate(goal, op, op.values)
         return GoalUpdate(goal, op, self._complete(goal, 1, op.values, "action_result"))
 
-    def _feedback(self, peer: Peer, update: GoalUpdate, now: float) -> None:
+    def _feedback(self, peer: Client, update: GoalUpdate, now: float) -> None:
         update.goal.feedback(update.values)
 
-    def _result(self, peer: Peer, update: GoalUpdate, now: float) -> None:
+    def _result(self, peer: Client, update: GoalUpdate, now: float) -> None:
         op = update.op
         assert isinstance(op, o.ActionResult)
         goal, values = update.goal, update.values
@@ -378,7 +379,7 @@ class ActionOps:
 
     # -- cancel_action_goal (2.15) -------------------------------------------------------------
 
-    def _cancel(self, peer: Peer, op: o.CancelActionGoal, now: float) -> None:
+    def _cancel(self, peer: Client, op: o.CancelActionGoal, now: float) -> None:
         for goal in self.actions.goals.values():
             client = goal.client
             if (

@@ -50,11 +50,12 @@ from typing import Any, Literal
 from simbridge.errors import ProtocolError, TypeNotFoundError
 from simbridge.graph.access import ANY_SCOPE, AccessRules, in_namespace
 from simbridge.graph.services import ServiceTable
-from simbridge.graph.topics import Peer, Topic, TopicTable
+from simbridge.graph.topics import Topic, TopicTable
 from simbridge.msgs import normalize_type
 from simbridge.rosbridge import ops as o
 from simbridge.rosbridge.ops import Op, Refusal
 from simbridge.rosbridge.session import NOT_AUTHENTICATED, Session
+from simbridge.rosbridge.subscribers import Client
 
 
 __all__ = [
@@ -96,7 +97,7 @@ class Typed:
 
 
 #: An op's check: ``(peer, its session, op, now) -> what the op's handler carries out``.
-Check = Callable[[Peer, Session, Any, float], Any]
+Check = Callable[[Client, Session, Any, float], Any]
 
 
 class Admission:
@@ -125,7 +126,7 @@ class Admission:
         """Access rules (checks 1-4) apply: a guard authenticates the clients."""
         return self.rules.guarded
 
-    def admit(self, peer: Peer, op: Op, now: float) -> Any:
+    def admit(self, peer: Client, op: Op, now: float) -> Any:
         """Return what the op's handler carries out, or ``None`` if the op is dropped.
 
         That is a :class:`Publication`, :class:`Typed`, what a service or action op's check
@@ -153,7 +154,7 @@ class Admission:
 
     # -- one check per kind of op -----------------------------------------------------------
 
-    def _publish(self, peer: Peer, session: Session, op: o.Publish, now: float) -> Any:
+    def _publish(self, peer: Client, session: Session, op: o.Publish, now: float) -> Any:
         name = op.name
         if self.guarded:
             if not session.take_publish(now):
@@ -181,12 +182,12 @@ class Admission:
             canonical, known = topic.type, topic.known
         return Publication(op, topic, canonical, self.topics.validate(canonical, known, op.msg))
 
-    def _advertise(self, peer: Peer, session: Session, op: o.Advertise, now: float) -> Any:
+    def _advertise(self, peer: Client, session: Session, op: o.Advertise, now: float) -> Any:
         if self.guarded:
             self.may_own(session, "advertise", op.name, not session.advertises(op.name))
         return Typed(op, self.topics.check_type(op.name, op.type))
 
-    def _subscribe(self, peer: Peer, session: Session, op: o.Subscribe, now: float) -> Any:
+    def _subscribe(self, peer: Client, session: Session, op: o.Subscribe, now: float) -> Any:
         if not op.type:
             return Typed(op, None)
         if self.guarded and session.scope != ANY_SCOPE:
@@ -228,7 +229,7 @@ def interface_type(type_name: str, kind: Literal["srv", "action"], op: str) -> s
         raise ProtocolError(f"{op}: {err}") from None
 
 
-_CHECKS: dict[type, Callable[[Admission, Peer, Session, Any, float], Any]] = {
+_CHECKS: dict[type, Callable[[Admission, Client, Session, Any, float], Any]] = {
     o.Publish: Admission._publish,
     o.Advertise: Admission._advertise,
     o.Subscribe: Admission._subscribe,

@@ -11,17 +11,15 @@ per encoding and topic spelling, however many clients receive it.
 
 from __future__ import annotations
 
-import base64
 import json
 import re
 from collections.abc import Callable
 from typing import Any, NamedTuple
 
-import numpy as np
 import orjson
 
 from simbridge.errors import ProtocolError
-from simbridge.msgs.message import Outgoing
+from simbridge.msgs.message import Outgoing, encode_json
 
 
 __all__ = [
@@ -36,7 +34,6 @@ __all__ = [
     "status_frame",
 ]
 
-_OPTS = orjson.OPT_SERIALIZE_NUMPY
 #: JSON values one frame may carry (concatenated ops); more is refused, not parsed.
 MAX_OPS_PER_FRAME = 100
 
@@ -46,46 +43,6 @@ class Frame(NamedTuple):
 
     data: bytes
     text: bool
-
-
-def _default(value: Any) -> Any:
-    if isinstance(value, bytes | bytearray | memoryview):
-        return base64.b64encode(value).decode("ascii")
-    if isinstance(value, np.ndarray):
-        return value.tolist()  # non-contiguous or exotic dtype: orjson asks us
-    if isinstance(value, np.generic):
-        return value.item()
-    raise TypeError(type(value).__name__)
-
-
-def encode_json(obj: Any) -> bytes:
-    """Return the UTF-8 JSON of a canonical message or envelope (NaN and inf as null).
-
-    An integer beyond 64 bits (a client may send one in a pass-through payload) is written as
-    the nearest double, as JavaScript would read it (``null`` past the double range).
-    """
-    try:
-        return orjson.dumps(obj, default=_default, option=_OPTS)
-    except orjson.JSONEncodeError as err:
-        if "Integer exceeds 64-bit range" not in str(err):
-            raise
-        return orjson.dumps(_as_doubles(obj), default=_default, option=_OPTS)
-
-
-def _as_doubles(obj: Any) -> Any:
-    """Return ``obj`` with every integer beyond 64 bits replaced by a double (or None)."""
-    if isinstance(obj, int) and not isinstance(obj, bool):
-        if -(2**63) <= obj < 2**64:
-            return obj
-        try:
-            return float(obj)
-        except OverflowError:
-            return None
-    if isinstance(obj, dict):
-        return {k: _as_doubles(v) for k, v in obj.items()}
-    if isinstance(obj, list | tuple):
-        return [_as_doubles(v) for v in obj]
-    return obj
 
 
 def json_frame(obj: Any) -> Frame:

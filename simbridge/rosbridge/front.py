@@ -33,14 +33,12 @@ A ``/cmd_vel`` from a page, in a straight line (each step once):
 
 from __future__ import annotations
 
-import itertools
 import logging
 from collections.abc import Callable, Iterable
 from typing import Any, Protocol
 
 from simbridge.errors import ProtocolError, SimbridgeError
 from simbridge.graph.graph import Graph
-from simbridge.graph.topics import Peer
 from simbridge.rosbridge import ops as o
 from simbridge.rosbridge.actions import ActionOps
 from simbridge.rosbridge.admission import Admission, Publication, Typed
@@ -60,21 +58,21 @@ from simbridge.rosbridge.session import (
     Unsubscribed,
     Withdrawn,
 )
-from simbridge.rosbridge.subscribers import Subscribers
+from simbridge.rosbridge.subscribers import Client, Subscribers
 
 
 __all__ = ["Authenticator", "Rosbridge"]
 
 logger = logging.getLogger(__name__)
 
-OpHandler = Callable[[Peer, Any, float], None]
-EffectHandler = Callable[[Peer, Any], None]
+OpHandler = Callable[[Client, Any, float], None]
+EffectHandler = Callable[[Client, Any], None]
 
 
 class Authenticator(Protocol):
     """What checks a client's ``auth`` op (the application's guard)."""
 
-    def auth(self, peer: Peer, op: o.Auth, now: float) -> tuple[str, str]:
+    def auth(self, peer: Client, op: o.Auth, now: float) -> tuple[str, str]:
         """Admit ``peer`` (its session's access) or refuse; return the ``status`` to send.
 
         Returns ``(level, text)``; a failed authentication is ``("error", text)`` and the
@@ -140,7 +138,6 @@ class Rosbridge:
             Provided: self._provided,
             Withdrawn: self._withdrawn,
         }
-        self._ids = itertools.count(1)
 
     # -- clients ------------------------------------------------------------------------------
 
@@ -149,13 +146,14 @@ class Rosbridge:
 
         ``token``: the one it connected with (``?token=``), if any.
         """
-        return Session(ClientId(next(self._ids)), limits=self.limits, pool=self.pool, token=token)
+        client_id = ClientId(self.graph.next_peer_id())
+        return Session(client_id, limits=self.limits, pool=self.pool, token=token)
 
-    def add_peer(self, peer: Peer) -> None:
+    def add_peer(self, peer: Client) -> None:
         """Register a connected client with the graph (the guard gives it its access)."""
         self.graph.add_peer(peer)
 
-    def remove_peer(self, peer: Peer, *, lost: bool = False) -> None:
+    def remove_peer(self, peer: Client, *, lost: bool = False) -> None:
         """Forget a client and everything it owned (subscriptions, publishers, services).
 
         Its session gives back its budgets and says what it held (effects, carried out here
@@ -168,14 +166,14 @@ class Rosbridge:
         finally:
             self.graph.remove_peer(peer, lost=lost)
 
-    def _release(self, peer: Peer) -> None:
+    def _release(self, peer: Client) -> None:
         for effect in peer.session.close():
             try:
                 self.effects[type(effect)](peer, effect)
             except Exception:
                 logger.exception("%s: cleanup after disconnect failed for %r", peer.label, effect)
 
-    def receive(self, peer: Peer, data: str | bytes, now: float) -> None:
+    def receive(self, peer: Client, data: str | bytes, now: float) -> None:
         """Handle one frame from ``peer``: every op in it, in order.
 
         The straight line of every op: the client's session parses it (names resolved,
@@ -188,7 +186,7 @@ class Rosbridge:
             else:
                 self.dispatch(peer, item, now)
 
-    def dispatch(self, peer: Peer, op: Op, now: float) -> None:
+    def dispatch(self, peer: Client, op: Op, now: float) -> None:
         """Admit one op and carry it out; a :class:`SimbridgeError` becomes an answer to the sender.
 
         The handler receives what :meth:`Admission.admit
@@ -211,7 +209,7 @@ class Rosbridge:
         except SimbridgeError as err:
             self.refuse(peer, Refusal(str(err), op_id=getattr(op, "id", None)), now, op)
 
-    def refuse(self, peer: Peer, err: ProtocolError, now: float, op: Op | None = None) -> None:
+    def refuse(self, peer: Client, err: ProtocolError, now: float, op: Op | None = None) -> None:
         """Answer ``peer`` (only) that an op was refused, in the shape its op needs.
 
         A call (``call_service``, ``send_action_goal``) always gets its failed answer: its
@@ -243,12 +241,12 @@ class Rosbridge:
         if replies:  # most refusals of a flood are counted, not told: no call for them
             self.apply(peer, replies)
 
-    def reject(self, peer: Peer, text: str, op_id: Any) -> None:
+    def reject(self, peer: Client, text: str, op_id: Any) -> None:
         """Tell ``peer`` (only) that its op failed, as a ``status`` error (not budgeted)."""
         logger.debug("%s: %s", peer.label, text)
         self.apply(peer, peer.session.status("error", text, op_id))
 
-    def apply(self, peer: Peer, effects: Iterable[Effect]) -> None:
+    def apply(self, peer: Client, effects: Iterable[Effect]) -> None:
         """Carry out the effects a session returned for its client ``peer``, in order."""
         handlers = self.effects
         for effect in effects:
@@ -256,14 +254,14 @@ class Rosbridge:
 
     # -- op handlers ------------------------------------------------------------------------
 
-    def _advertise(self, peer: Peer, admitted: Typed, now: float) -> None:
+    def _advertise(self, peer: Client, admitted: Typed, now: float) -> None:
         assert admitted.type is not None  # admitted: the canonical type
         self.apply(peer, peer.session.advertise(admitted.op, admitted.type))
 
-    def _unadvertise(self, peer: Peer, op: o.Unadvertise, now: float) -> None:
+    def _unadvertise(self, peer: Client, op: o.Unadvertise, now: float) -> None:
         self.apply(peer, peer.session.unadvertise(op))
 
-    def _publish(self, peer: Peer, admitted: Publication, now: float) -> None:
+    def _publish(self, peer: Client, admitted: Publication, now: float) -> None:
         op = admitted.op
         name = op.name
         effects = peer.session.publish(name, admitted.type)
@@ -284,40 +282,40 @@ class Rosbridge:
             return
         topics.deliver(topic, out, now, peer)
 
-    def _subscribe(self, peer: Peer, admitted: Typed, now: float) -> None:
+    def _subscribe(self, peer: Client, admitted: Typed, now: float) -> None:
         self.apply(peer, peer.session.subscribe(admitted.op, admitted.type))
 
-    def _unsubscribe(self, peer: Peer, op: o.Unsubscribe, now: float) -> None:
+    def _unsubscribe(self, peer: Client, op: o.Unsubscribe, now: float) -> None:
         self.apply(peer, peer.session.unsubscribe(op))
 
-    def _set_level(self, peer: Peer, op: o.SetLevel, now: float) -> None:
+    def _set_level(self, peer: Client, op: o.SetLevel, now: float) -> None:
         self.apply(peer, peer.session.set_level(op))
 
     # -- effects ------------------------------------------------------------------------------
 
-    def _subscribed(self, peer: Peer, effect: Subscribed) -> None:
+    def _subscribed(self, peer: Client, effect: Subscribed) -> None:
         topic = self.subscribers.subscribed(peer, effect.sub, effect.type)
         if effect.new:
             self.subscribers.replay_latched(peer, topic, effect.sub)
 
-    def _advertised(self, peer: Peer, effect: Advertised) -> None:
+    def _advertised(self, peer: Client, effect: Advertised) -> None:
         self.graph.topics.advertise(
             effect.name, effect.type, peer, effect.op_id, latch=effect.latch
         )
 
-    def _provided(self, peer: Peer, effect: Provided) -> None:
+    def _provided(self, peer: Client, effect: Provided) -> None:
         if effect.kind == "service":
             self.services.provided(peer, effect)
         else:
             self.actions.provided(peer, effect)
 
-    def _withdrawn(self, peer: Peer, effect: Withdrawn) -> None:
+    def _withdrawn(self, peer: Client, effect: Withdrawn) -> None:
         if effect.kind == "service":
             self.services.withdrawn(peer, effect)
         else:
             self.actions.withdrawn(peer, effect.name)
 
-    def _auth(self, peer: Peer, op: o.Auth, now: float) -> None:
+    def _auth(self, peer: Client, op: o.Auth, now: float) -> None:
         if self.authenticator is None:
             msg = "auth: this server takes no rosauth MAC; connect with ?token=YOUR_TOKEN"
             raise ProtocolError(msg)

@@ -48,13 +48,13 @@ from typing import Any, Protocol
 from simbridge.errors import ProtocolError, ServiceError
 from simbridge.graph.graph import Graph
 from simbridge.graph.services import PendingCall, Service, typed_calls
-from simbridge.graph.topics import Peer
 from simbridge.rosbridge import ops as o
 from simbridge.rosbridge.admission import Admission, Check, Typed, interface_type
 from simbridge.rosbridge.encoding import Frame, json_frame
 from simbridge.rosbridge.fragments import split_frame
 from simbridge.rosbridge.ops import OpId, Refusal
 from simbridge.rosbridge.session import Effect, Provided, Session, Withdrawn
+from simbridge.rosbridge.subscribers import Client
 
 
 __all__ = ["Call", "Response", "ServiceOps", "service_response"]
@@ -62,7 +62,7 @@ __all__ = ["Call", "Response", "ServiceOps", "service_response"]
 logger = logging.getLogger(__name__)
 
 #: A handler of one admitted op: ``(peer, admitted, now)``.
-Handler = Callable[[Peer, Any, float], None]
+Handler = Callable[[Client, Any, float], None]
 
 
 class Front(Protocol):
@@ -71,7 +71,7 @@ class Front(Protocol):
     graph: Graph
     admission: Admission
 
-    def apply(self, peer: Peer, effects: Iterable[Effect]) -> None:
+    def apply(self, peer: Client, effects: Iterable[Effect]) -> None:
         """Carry out the effects a session returned for its client ``peer``."""
 
 
@@ -140,7 +140,7 @@ class ServiceOps:
 
     # -- answers ------------------------------------------------------------------------------
 
-    def reply(self, peer: Peer, frame: Frame) -> None:
+    def reply(self, peer: Client, frame: Frame) -> None:
         """Send a response, in ``fragment`` pieces when the client asked for a fragment size."""
         size = peer.session.fragment_size
         if size is None or len(frame.data) <= size:
@@ -149,13 +149,13 @@ class ServiceOps:
         for piece in split_frame(frame, size, f"service_response:{next(self._fragments)}"):
             peer.send(piece)
 
-    def fail(self, peer: Peer, service: str, text: str, op_id: OpId | None) -> None:
+    def fail(self, peer: Client, service: str, text: str, op_id: OpId | None) -> None:
         """Answer a refused ``call_service`` (``service`` as the caller wrote it)."""
         self.reply(peer, service_response(service, text, result=False, op_id=op_id))
 
     # -- call_service -------------------------------------------------------------------------
 
-    def _admit_call(self, peer: Peer, session: Session, op: o.CallService, now: float) -> Call:
+    def _admit_call(self, peer: Client, session: Session, op: o.CallService, now: float) -> Call:
         """Return the call with its service and validated request.
 
         Raises:
@@ -189,7 +189,7 @@ class ServiceOps:
             request = prepared
         return Call(op, service, request)
 
-    def _call(self, peer: Peer, call: Call, now: float) -> None:
+    def _call(self, peer: Client, call: Call, now: float) -> None:
         """Call the service; the answer goes back to ``peer`` (a ``service_response``)."""
         op = call.op
         session = peer.session
@@ -213,7 +213,7 @@ class ServiceOps:
     # -- advertise_service, unadvertise_service -----------------------------------------------
 
     def _admit_advertise(
-        self, peer: Peer, session: Session, op: o.AdvertiseService, now: float
+        self, peer: Client, session: Session, op: o.AdvertiseService, now: float
     ) -> Typed:
         """Return the ``advertise_service`` with its canonical type, if the client may make it.
 
@@ -233,16 +233,16 @@ class ServiceOps:
             self.front.admission.may_own(session, "advertise_service", op.name, new)
         return Typed(op, interface_type(op.type, "srv", "advertise_service"))
 
-    def _advertise(self, peer: Peer, admitted: Typed, now: float) -> None:
+    def _advertise(self, peer: Client, admitted: Typed, now: float) -> None:
         op, type_name = admitted.op, admitted.type
         assert type_name is not None
         effects = peer.session.provide("service", op.name, type_name, op.service)
         self.front.apply(peer, effects)  # Provided: :meth:`provided`
 
-    def _unadvertise(self, peer: Peer, op: o.UnadvertiseService, now: float) -> None:
+    def _unadvertise(self, peer: Client, op: o.UnadvertiseService, now: float) -> None:
         self.front.apply(peer, peer.session.withdraw("service", op.name))  # :meth:`withdrawn`
 
-    def provided(self, peer: Peer, effect: Provided) -> None:
+    def provided(self, peer: Client, effect: Provided) -> None:
         """Make the client the provider of the service its session recorded."""
         session = peer.session
 
@@ -258,14 +258,14 @@ class ServiceOps:
             peer, effect.name, effect.type, forward, lost=lost, written=effect.written
         )
 
-    def withdrawn(self, peer: Peer, effect: Withdrawn) -> None:
+    def withdrawn(self, peer: Client, effect: Withdrawn) -> None:
         """Remove the service the client's session no longer provides."""
         self.table.withdraw(peer, effect.name)
 
     # -- service_response ---------------------------------------------------------------------
 
     def _admit_response(
-        self, peer: Peer, session: Session, op: o.ServiceResponse, now: float
+        self, peer: Client, session: Session, op: o.ServiceResponse, now: float
     ) -> Response:
         """Return the answer a provider's ``service_response`` gives its call's caller.
 
@@ -300,5 +300,5 @@ class ServiceOps:
                 ok, values = False, f"service provider sent an invalid response: {err}"
         return Response(call, ok, values)
 
-    def _respond(self, peer: Peer, response: Response, now: float) -> None:
+    def _respond(self, peer: Client, response: Response, now: float) -> None:
         self.table.respond(response.call, response.values, ok=response.ok)

@@ -39,7 +39,7 @@ from __future__ import annotations
 import hmac
 from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Any, cast
+from typing import TYPE_CHECKING, Any
 
 import orjson
 
@@ -331,9 +331,8 @@ class _Instructor:
         self.access = Access(ANY_SCOPE, admin=True, guarded=True)
 
 
-# a Peer for the service table, which reads its label and access only (Peer's rosbridge
-# members, session and send, are going away: issue 24)
-_INSTRUCTOR_PEER = cast("Peer", _Instructor())
+#: The instructor as a peer of the graph (its label and access are all the graph reads).
+_INSTRUCTOR_PEER: Peer = _Instructor()
 
 
 def connection_check(

@@ -16,8 +16,8 @@ from simbridge.app.guard import (
 from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph
 from simbridge.graph.access import Access
+from simbridge.graph.rosapi import install_rosapi
 from simbridge.rosbridge import TokenBucket
-from simbridge.rosbridge.rosapi import install_rosapi
 from tests.helpers import RecordingPeer, graph_for, rosbridge_of
 
 

@@ -7,8 +7,8 @@ import pytest
 
 from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph
+from simbridge.graph.rosapi import install_rosapi
 from simbridge.robot.bridge import RobotBridge
-from simbridge.rosbridge.rosapi import install_rosapi
 from simbridge.sim import World
 from tests.helpers import RecordingPeer, rosbridge_of
 

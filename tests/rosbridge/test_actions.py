@@ -11,9 +11,9 @@ import pytest
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph import Graph
+from simbridge.graph.rosapi import install_rosapi
 from simbridge.rosbridge import ops as o
 from simbridge.rosbridge.actions import GoalRequest, GoalUpdate, goal_id
-from simbridge.rosbridge.rosapi import install_rosapi
 from tests.helpers import RecordingPeer, graph_for, rosbridge_of
 
 

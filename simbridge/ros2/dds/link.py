@@ -33,7 +33,7 @@ import logging
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Hashable
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -44,6 +44,7 @@ from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.access import Access
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
+from simbridge.msgs.message import Outgoing
 from simbridge.ros2.dds.options import DdsOptions
 from simbridge.ros2.dds.types import IdlTypes
 from simbridge.ros2.dds.wire import (
@@ -63,8 +64,6 @@ from simbridge.ros2.dds.wire import (
 )
 from simbridge.ros2.names import dds_type, ros_type
 from simbridge.ros2.typehash import TypeHasher
-from simbridge.rosbridge import Frame, Outgoing, Session
-from simbridge.rosbridge.front import Rosbridge
 
 
 __all__ = ["DdsLink", "DdsNode", "import_cyclonedds"]
@@ -184,17 +183,10 @@ class _Caller:
 
     label = "ROS 2 (DDS)"
 
-    def __init__(self, link: DdsLink, session: Session) -> None:
+    def __init__(self, link: DdsLink, access: Access) -> None:
         self.link = link
-        self.session = session
-
-    @property
-    def access(self) -> Access:
-        """Who the peer is for the graph's rules (its session's access)."""
-        return self.session.access
-
-    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        """Nothing comes as frames: the graph answers its calls through their ``done``."""
+        #: Who the DDS peers are for the graph's rules (``--ros2-role``).
+        self.access = access
 
 
 class DdsLink:
@@ -206,7 +198,6 @@ class DdsLink:
         options: DdsOptions,
         *,
         simulator: bool = False,
-        rosbridge: Rosbridge | None = None,
         settings: ServerSettings | None = None,
     ) -> None:
         #: The graph mapped onto DDS.
@@ -248,16 +239,10 @@ class DdsLink:
         self._markers: dict[str, dict[DdsNode, Callable[[Any, Any], None]]] = {}
         self._marker_ids: set[int] = set()
         self._remote_nodes: set[str] = set()
-        #: Gives the link's caller its session, which the graph's peers still carry (only its
-        #: access is read: calls go to the graph's service table directly).
-        self.rosbridge = rosbridge or Rosbridge(graph)
         # whatever comes from DDS is admitted as one peer of the ROS 2 peers' role
-        session = self.rosbridge.new_session()
         scope, admin = ros2_access(settings)
-        session.connect(scope, admin)
-        self._session = session
-        self._access = session.access
-        self._caller = _Caller(self, session)
+        self._access = Access(scope, admin, guarded=True, peer_id=graph.next_peer_id())
+        self._caller = _Caller(self, self._access)
         self._servers: dict[str, _Server] = {}
         #: Calls from DDS waiting for a provider that is not in process, at most
         #: ``max_pending_calls`` (the budget of one rosbridge client: the DDS peers are one).

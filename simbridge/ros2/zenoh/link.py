@@ -40,7 +40,7 @@ import sys
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Collection, Hashable, Iterable
+from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -54,6 +54,7 @@ from simbridge.graph.access import Access
 from simbridge.graph.services import PendingCall, caller
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
+from simbridge.msgs.message import Outgoing
 from simbridge.robot.bridge import ROBOT_NODE
 from simbridge.robot.estop import connection_rights
 from simbridge.robot.simclock import SIM_NODE
@@ -72,8 +73,6 @@ from simbridge.ros2.typehash import TypeHasher
 from simbridge.ros2.zenoh.actions import ActionBridge, split_action
 from simbridge.ros2.zenoh.attachment import Attachment, pack_attachment
 from simbridge.ros2.zenoh.config import ZenohOptions, session_config
-from simbridge.rosbridge import Frame, Outgoing, Session
-from simbridge.rosbridge.front import Rosbridge
 
 
 __all__ = ["RemoteNode", "ZenohLink", "import_zenoh"]
@@ -206,37 +205,23 @@ class _Caller:
 
     label = "ROS 2 (Zenoh)"
 
-    def __init__(self, link: ZenohLink, session: Session) -> None:
+    def __init__(self, link: ZenohLink, access: Access) -> None:
         self.link = link
-        self.session = session
-
-    @property
-    def access(self) -> Access:
-        """Who the peer is for the graph's rules (its session's access)."""
-        return self.session.access
-
-    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        """Nothing comes as frames: the graph answers its calls through their ``done``."""
+        #: Who the ROS 2 peers are for the graph's rules (``--ros2-role``).
+        self.access = access
 
 
 class _Provider:
     """The peer that provides a remote ROS 2 service to the graph (calls become queries)."""
 
-    __slots__ = ("entity", "label", "link", "session")
+    __slots__ = ("access", "entity", "label", "link")
 
-    def __init__(self, link: ZenohLink, session: Session, entity: Entity) -> None:
+    def __init__(self, link: ZenohLink, access: Access, entity: Entity) -> None:
         self.link = link
-        self.session = session
+        #: Who the remote server is for the graph's rules (the ROS 2 peers' role).
+        self.access = access
         self.entity = entity
         self.label = f"ROS 2 service {entity.name} of {entity.node_fqn} (Zenoh)"
-
-    @property
-    def access(self) -> Access:
-        """Who the peer is for the graph's rules (its session's access)."""
-        return self.session.access
-
-    def send(self, frame: Frame, key: Hashable | None = None, limit: int = 0) -> None:
-        """Nothing is sent to a remote server as frames: its calls come to :meth:`forward`."""
 
     def forward(self, call: PendingCall, request: Any) -> None:
         """The graph's service table forwards a call: it goes out as a query."""
@@ -252,16 +237,12 @@ class ZenohLink:
         options: ZenohOptions,
         *,
         simulator: bool = False,
-        rosbridge: Rosbridge | None = None,
         settings: ServerSettings | None = None,
     ) -> None:
         #: The graph mapped onto ROS 2.
         self.graph = graph
         #: The server's settings (the link's budgets, the ROS 2 peers' role).
         self.settings = settings = settings or ServerSettings()
-        #: Gives the link's peers their sessions, which the graph's peers still carry (only
-        #: their access is read: calls and goals go to the graph's tables directly).
-        self.rosbridge = rosbridge or Rosbridge(graph)
         #: Whether this process simulates robots (not ``--no-sim``): it takes a turn in the
         #: step period with the other simulators (:attr:`tick_share`).
         self.simulator = simulator
@@ -337,13 +318,12 @@ class ZenohLink:
         self.max_calls_waiting = settings.max_pending_calls
         #: Calls to ROS 2 waiting for a reply: the graph's call id -> (provider, type, call).
         self._calls: dict[str, tuple[_Provider, str, PendingCall]] = {}
-        caller_session = self.rosbridge.new_session()
         # whatever comes from ROS 2 (samples, calls, goals, remote publishers and services)
-        # passes admission as one client of the role the instructor chose (--ros2-role; in
-        # class mode by default a student without a robot: it reads, it drives nothing)
+        # is admitted as one peer of the role the instructor chose (--ros2-role; in class
+        # mode by default a student without a robot: it reads, it drives nothing)
         scope, admin = ros2_access(settings)
-        caller_session.connect(scope, admin)
-        self._caller = _Caller(self, caller_session)
+        access = Access(scope, admin, guarded=True, peer_id=graph.next_peer_id())
+        self._caller = _Caller(self, access)
         #: Why ROS 2 peers may not publish on a name (None: they may), by name.
         self._refusals: dict[str, str | None] = {}
         self._call_ids = itertools.count(1)
@@ -1165,7 +1145,7 @@ class ZenohLink:
             )
             self.stats["unknown_types"] += 1
             return
-        provider = _Provider(self, self.rosbridge.new_session(), entity)
+        provider = _Provider(self, Access(peer_id=self.graph.next_peer_id()), entity)
 
         def lost(name: str) -> None:  # a rosbridge client advertised the name since
             if self._providers.get(name) is provider:
@@ -1826,7 +1806,7 @@ class ZenohLink:
 
 
 def _json(value: Any) -> bytes:
-    from simbridge.rosbridge.encoding import encode_json
+    from simbridge.msgs.message import encode_json
 
     return encode_json(value)
 

@@ -7,9 +7,9 @@ import pytest
 
 from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph
+from simbridge.graph.rosapi import install_rosapi
 from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.tutorials import install_tutorials
-from simbridge.rosbridge.rosapi import install_rosapi
 from simbridge.sim import World
 from tests.helpers import RecordingPeer, rosbridge_of
 
@@ -169,7 +169,7 @@ def test_details_services_and_versions(graph: Graph) -> None:
 def test_in_process_services_refuse_more_list_args_than_fields() -> None:
     """A direct call of an in-process handler follows the same rule as a client's call."""
     from simbridge.errors import ServiceError
-    from simbridge.rosbridge.rosapi import request_fields
+    from simbridge.graph.rosapi import request_fields
 
     assert request_fields(["/odom"], ("topic",), "/rosapi/topic_type") == {"topic": "/odom"}
     with pytest.raises(ServiceError, match=r"/rosapi/topic_type: request has 1 fields \(topic\)"):
