@@ -522,9 +522,8 @@ def _ros2_provider(router: str, like: list[str]) -> Iterator[None]:
         att = bytes(query.attachment.to_bytes())
         query.reply(query.key_expr, _CDR_LE + struct.pack("<q", a + b), attachment=att)
 
-    queryable = session.declare_queryable(
-        f"0/{REMOTE_SERVICE.strip('/')}/{dds}/{type_hash}", answer
-    )
+    key = f"0/{REMOTE_SERVICE.strip('/')}/{dds}/{type_hash}"
+    queryable = session.declare_queryable(key, answer, complete=True)  # as rmw_zenoh declares it
     tokens = [
         session.liveliness().declare_token(f"{head}/0/NN/%/%/bench_server"),
         session.liveliness().declare_token(
