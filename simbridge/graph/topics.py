@@ -24,7 +24,17 @@ from simbridge.msgs import Converter, TypeRegistry, normalize_type
 from simbridge.msgs.message import Outgoing
 
 
-__all__ = ["BRIDGE_NODE", "InternalCallback", "Peer", "Sink", "Topic", "TopicTable"]
+__all__ = [
+    "BRIDGE_NODE",
+    "DEFAULT_TOPIC_QOS",
+    "LATCHED_TOPIC_QOS",
+    "InternalCallback",
+    "Peer",
+    "Sink",
+    "Topic",
+    "TopicQos",
+    "TopicTable",
+]
 
 logger = logging.getLogger(__name__)
 
@@ -71,6 +81,27 @@ class Sink(Protocol):
         """Send ``out`` to its subscribers (``only``: to those of these peers alone)."""
 
 
+@dataclass(frozen=True, slots=True)
+class TopicQos:
+    """How a topic's messages are offered: what the ROS 2 front ends declare on their wire.
+
+    A publisher offers reliable delivery (a reliable writer serves reliable and best-effort
+    readers alike); a latched topic keeps its last message for late joiners (transient local,
+    keep last 1: rclcpp's ``transient_local()``, as ``/tf_static`` and ``/map``), any other
+    keeps the last 10 (ROS 2's default profile, rmw ``qos_profiles.h``).
+    """
+
+    reliable: bool = True
+    transient_local: bool = False
+    depth: int = 10
+
+
+#: ROS 2's default profile: reliable, volatile, keep last 10.
+DEFAULT_TOPIC_QOS = TopicQos()
+#: A latched topic: reliable, transient local, keep last 1.
+LATCHED_TOPIC_QOS = TopicQos(transient_local=True, depth=1)
+
+
 @dataclass(eq=False, slots=True)
 class Topic:
     """One topic of the graph."""
@@ -93,6 +124,11 @@ class Topic:
     #: The peer whose message is latched, if any, and what gives its cost back when it goes.
     latched_by: Peer | None = None
     latched_release: Callable[[], None] | None = None
+
+    @property
+    def qos(self) -> TopicQos:
+        """How the topic is offered (latched: transient local, depth 1; else the default)."""
+        return LATCHED_TOPIC_QOS if self.latch else DEFAULT_TOPIC_QOS
 
     def unused(self) -> bool:
         """Return whether nothing refers to the topic any more."""

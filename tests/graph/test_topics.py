@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 
 from simbridge.graph import Graph
+from simbridge.graph.topics import TopicQos
 from tests.helpers import RecordingPeer, clocked_graph, op, rosbridge_of
 
 
@@ -124,3 +125,15 @@ def test_disconnect_removes_subscriptions_advertisements_and_topics(graph: Graph
     op(a, graph, op="subscribe", topic="/mine")
     rosbridge_of(graph).remove_peer(a)
     assert "/mine" not in graph.topics.topics
+
+
+def test_a_topic_offers_the_ros_2_default_qos_and_a_latched_one_transient_local_depth_1(
+    graph: Graph,
+) -> None:
+    """What the ROS 2 front ends declare: reliable always; latched topics keep their last one."""
+    odom = graph.advertise("/odom", "nav_msgs/msg/Odometry", "/virtual_robot")
+    walls = graph.advertise("/walls", "visualization_msgs/msg/Marker", "/virtual_robot", latch=True)
+    assert odom.qos == TopicQos(reliable=True, transient_local=False, depth=10)
+    assert walls.qos == TopicQos(reliable=True, transient_local=True, depth=1)
+    graph.topics.latch(odom)  # a client's latched publish makes the topic latched from then on
+    assert odom.qos.transient_local

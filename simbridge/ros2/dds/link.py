@@ -42,7 +42,7 @@ from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.access import Access
-from simbridge.graph.topics import Peer
+from simbridge.graph.topics import DEFAULT_TOPIC_QOS, LATCHED_TOPIC_QOS, Peer, TopicQos
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.message import Outgoing
 from simbridge.ros2.dds.options import DdsOptions
@@ -618,7 +618,7 @@ class DdsLink:
             for owner in topic.publishers:
                 local = _local_owner(owner)
                 if local is not None:
-                    writers[topic.name] = (local, topic.type, topic.latch)
+                    writers[topic.name] = (local, topic.type, topic.qos.transient_local)
                     break
             for node, callback in topic.internal:
                 if type(node) is str and id(callback) not in self._marker_ids:
@@ -745,7 +745,8 @@ class DdsLink:
         policies = [
             policy.Reliability.Reliable(100_000_000),
             policy.Durability.TransientLocal if latched else policy.Durability.Volatile,
-            policy.History.KeepLast(1 if latched and not reader else DEPTH),
+            # a writer keeps what the graph offers; a reader the ROS 2 default
+            policy.History.KeepLast(DEPTH if reader else _offer(latched).depth),
             policy.DataRepresentation(use_cdrv0_representation=True),
         ]
         if reader:
@@ -1073,3 +1074,8 @@ def _clayer() -> Any:
 def _delete(entity: Any) -> None:
     with contextlib.suppress(Exception):
         entity.__del__()
+
+
+def _offer(latched: bool) -> TopicQos:
+    """Return the graph's offer for a topic, latched or not (``Topic.qos``)."""
+    return LATCHED_TOPIC_QOS if latched else DEFAULT_TOPIC_QOS

@@ -524,7 +524,8 @@ class ZenohLink:
         for topic in self.graph.topics.topics.values():
             if topic.type is None or not topic.known:
                 continue
-            qos = LATCHED_QOS if topic.latch else DEFAULT_QOS
+            # the graph's offer in rmw_zenoh's tokens (its default depth is elided from them)
+            qos = LATCHED_QOS if topic.qos.transient_local else DEFAULT_QOS
             for owner in topic.publishers:
                 local = self._local_owner(owner)
                 if local is not None:
