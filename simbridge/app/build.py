@@ -292,12 +292,15 @@ def build(
         from simbridge.ros2.zenoh.link import ZenohLink  # the [zenoh] extra, only when asked
 
         zenoh_link = ZenohLink(graph, zenoh, simulator=not no_sim, settings=settings)
+        graph.topics.taps.append(zenoh_link.on_deliver)  # what it forwards to ROS 2
+        graph.topics.flushers.append(zenoh_link.flush_early)
         hooks.append(zenoh_link.tick)
     dds_link = None
     if dds is not None:
         from simbridge.ros2.dds.link import DdsLink  # the [dds] extra, only when asked
 
         dds_link = DdsLink(graph, dds, simulator=not no_sim, settings=settings)
+        graph.topics.taps.append(dds_link.on_deliver)
         hooks.append(dds_link.tick)
     foxglove = None
     if settings.foxglove_port is not None:
@@ -310,6 +313,7 @@ def build(
             scope=settings.foxglove_scope,
             settings=settings,
         )
+        graph.topics.taps.append(foxglove.on_deliver)
         hooks.append(foxglove.tick)
     if recorder is not None:  # after the front ends, as when the command added it at start
         hooks.append(recorder.tick)

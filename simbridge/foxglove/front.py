@@ -386,7 +386,6 @@ class FoxgloveFront:
             "clients_refused": 0,
             "messages_dropped": 0,
         }
-        graph.topics.taps.append(self._on_deliver)
         for node in graph.params.nodes.values():
             node.on_change.append(self._param_changer(node.name))
         graph.params.on_add.append(
@@ -615,7 +614,7 @@ class FoxgloveFront:
     def _marker(self, msg: Any, source: Any) -> None:
         """The in-process subscriber that stands for Foxglove subscribers (does nothing)."""
 
-    def _on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
+    def on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
         """Tap on every delivery: log it on the topic's channel if a client subscribed."""
         entry = self._channels.get(topic.name)
         if entry is not None and entry.subscribers:

@@ -262,7 +262,6 @@ class DdsLink:
         self.max_remote = settings.dds_max_remote_endpoints
         #: Counters for /healthz.
         self.stats: Counter[str] = Counter()
-        graph.topics.taps.append(self._on_deliver)
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -816,7 +815,7 @@ class DdsLink:
         self._announced = data
         self.stats["announced"] += 1
 
-    def _on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
+    def on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
         """Tap on every delivery in the graph: write it for DDS readers."""
         if self._forwarding:
             return

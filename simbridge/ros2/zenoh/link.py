@@ -132,7 +132,7 @@ TOKEN_BATCH = 200
 #: The nodes of a simbridge simulator (a process with both takes a turn: ZenohLink.tick_share).
 _SIMULATOR_NODES = frozenset({ROBOT_NODE, SIM_NODE})
 #: Messages held back for Zenoh from which a tick's first part (its /odom) is put before the
-#: rest is computed (see ZenohLink._flush_early).
+#: rest is computed (see ZenohLink.flush_early).
 EARLY_FLUSH = 100
 #: Seconds between two polls of the ring channels while samples arrive, at least and at most;
 #: in between, the period grows with the number of channels so that polling an empty channel
@@ -358,8 +358,6 @@ class ZenohLink:
         self._liveliness_sub: Any = None
         #: Actions both ways (rcl_action's services and topics).
         self.actions = ActionBridge(self)
-        graph.topics.taps.append(self._on_deliver)
-        graph.topics.flushers.append(self._flush_early)
         self._guard_spawn()
         self._extend_access()
 
@@ -646,7 +644,7 @@ class ZenohLink:
             _quietly(entry.handle.undeclare)
         _quietly(entry.token.undeclare)
 
-    def _on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
+    def on_deliver(self, topic: Topic, out: Outgoing, source: Peer | None) -> None:
         """Tap on every delivery in the graph: forward it to ROS 2 subscribers."""
         if self._forwarding or isinstance(source, _Provider | _Caller):
             return
@@ -663,7 +661,7 @@ class ZenohLink:
             loop.call_soon(self._flush)
         self._outbox.append((entry, out))
 
-    def _flush_early(self) -> None:
+    def flush_early(self) -> None:
         """Put what is held back before the end of the callback, if that is a large burst.
 
         The graph says so when it has more to compute (a step's /odom before its scans are
@@ -676,7 +674,7 @@ class ZenohLink:
             self._flush()
 
     def _flush(self) -> None:
-        """Put what :meth:`_on_deliver` held back (at the end of the callback, or earlier)."""
+        """Put what :meth:`on_deliver` held back (at the end of the callback, or earlier)."""
         if not self._outbox:
             return
         outbox, self._outbox = self._outbox, []
