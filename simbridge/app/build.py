@@ -293,6 +293,7 @@ def build(
 
         zenoh_link = ZenohLink(graph, zenoh, simulator=not no_sim, settings=settings)
         graph.topics.taps.append(zenoh_link.on_deliver)  # what it forwards to ROS 2
+        robot.bridge.elsewhere.append(zenoh_link)  # the other processes' robots
         graph.topics.flushers.append(zenoh_link.flush_early)
         hooks.append(zenoh_link.tick)
     dds_link = None

@@ -108,7 +108,7 @@ def build_robot_graph(
     estop = EStop(graph, world, s)
     bridge.on_robot_added.append(estop.add_robot)
     bridge.on_robot_removed.append(estop.remove_robot)
-    roles = Roles(graph, world, estop)
+    roles = Roles(graph, world, estop, bridge.elsewhere)
     walls = WallsPublisher(graph, world)
     tf_republisher = install_tf_republisher(graph, lambda: world.params.sim.rate, s)
     safety = Safety(graph, world)

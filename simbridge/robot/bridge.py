@@ -43,6 +43,7 @@ from simbridge.graph.topics import Peer, Topic
 from simbridge.robot.cmdvel import STARTUP_ONLY, cmd_vel_type, twist_of
 from simbridge.robot.fleet import (
     CONTACT_TYPE,
+    Elsewhere,
     add_robot_services,
     install_fleet,
     remove_robot_services,
@@ -171,6 +172,9 @@ class RobotBridge:
         graph.params.add(self.params)
         #: Robots that were in contact at the previous step (a new contact is logged once).
         self._touching: set[str] = set()
+        #: Who simulates robots in other processes of the classroom (the composition root adds
+        #: the ROS 2 front end that sees them): their names are taken, the pages list them.
+        self.elsewhere: list[Elsewhere] = []
         install_fleet(self)
 
     def _write_params(self, flat: dict[str, Any]) -> None:

@@ -36,6 +36,7 @@ from simbridge.sim import Robot, World
 __all__ = [
     "CONTACT_DEFINITION",
     "CONTACT_TYPE",
+    "Elsewhere",
     "Fleet",
     "add_robot_services",
     "install_fleet",
@@ -60,6 +61,20 @@ _SERVICES = {
 }
 
 
+class Elsewhere(Protocol):
+    """Robots that other simbridge processes of the classroom simulate.
+
+    A ROS 2 front end sees them (another process's ``/NAME/odom`` publisher); the composition
+    root gives it to the fleet and the roles, which refuse and list those names.
+    """
+
+    def robots(self) -> list[str]:
+        """Return the names of the robots other processes simulate, sorted."""
+
+    def simulator_of(self, name: str) -> str | None:
+        """Return who simulates robot ``name`` elsewhere (for people), or None."""
+
+
 class Fleet(Protocol):
     """What the fleet services need of the robots' ROS interface (a ``RobotBridge``)."""
 
@@ -71,6 +86,8 @@ class Fleet(Protocol):
     node: str
     #: The robots that have topics, by name.
     robots: dict[str, Any]
+    #: Who simulates robots elsewhere (their names are taken).
+    elsewhere: list[Elsewhere]
 
     def add_robot(self, robot: Robot) -> None:
         """Create the topics of one robot."""
@@ -98,6 +115,11 @@ def _name(req: dict[str, Any], service: str) -> str:
     return value.strip("/")
 
 
+def _elsewhere(bridge: Fleet, name: str) -> str | None:
+    """Return who simulates robot ``name`` in another process, or None."""
+    return next((w for e in bridge.elsewhere if (w := e.simulator_of(name)) is not None), None)
+
+
 def install_fleet(bridge: Fleet) -> None:
     """Register the types and the ``/spawn`` and ``/kill`` services of ``bridge``'s world."""
     registry = bridge.graph.registry
@@ -113,11 +135,18 @@ def install_fleet(bridge: Fleet) -> None:
         pose = (_number(req, "x", "/spawn"), _number(req, "y", "/spawn"))
         theta = _number(req, "theta", "/spawn")
         name = _name(req, "/spawn")
-        if not name:
+        if not name:  # robotN, free here and in the other processes of the classroom
             n = 1
-            while f"robot{n}" in world.robots:
+            while f"robot{n}" in world.robots or _elsewhere(bridge, f"robot{n}"):
                 n += 1
             name = f"robot{n}"
+        where = _elsewhere(bridge, name)
+        if where is not None:
+            msg = (
+                f"/spawn: robot name '{name}' is taken by another simbridge process of this "
+                f"classroom ({where}); choose another name"
+            )
+            raise ServiceError(msg)
         try:
             robot = world.spawn(name, (*pose, theta))
         except ValueError as err:

@@ -37,6 +37,7 @@ from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer
 from simbridge.robot.estop import EStop, connection_rights, describe_peer
+from simbridge.robot.fleet import Elsewhere
 from simbridge.sim import World
 
 
@@ -49,10 +50,14 @@ _NODE = "/virtual_robot"
 class Roles:
     """Installs ``/simbridge/access`` on ``graph``."""
 
-    def __init__(self, graph: Graph, world: World, estop: EStop) -> None:
+    def __init__(
+        self, graph: Graph, world: World, estop: EStop, elsewhere: list[Elsewhere] | None = None
+    ) -> None:
         self.graph = graph
         self.world = world
         self.estop = estop
+        #: Who simulates robots in other processes of the classroom (listed with the others).
+        self.elsewhere = elsewhere if elsewhere is not None else []
         graph.add_service(ACCESS_SERVICE, "std_srvs/srv/Trigger", _NODE, self._access)
 
     def robots_of(self, peer: Peer | None) -> list[str]:
@@ -81,19 +86,42 @@ class Roles:
             }
         return out
 
+    def remote_info(self, known: dict[str, Any]) -> dict[str, dict[str, Any]]:
+        """Return the robots other processes simulate, not in ``known``, as :meth:`robot_info`.
+
+        A robot of another process is listed with this process's default parameters (the
+        classroom's shared configuration), no start pose and ``remote: true``.
+        """
+        names = sorted({n for e in self.elsewhere for n in e.robots()} - set(known))
+        if not names:
+            return {}
+        node = self.graph.params.nodes.get(_NODE)
+        flat = node.read() if node is not None else {}
+        shared = {
+            key: flat.get(f"robot.{key}")
+            for key in ("mass", "inertia", "max_linear_velocity", "max_angular_velocity", "radius")
+        }
+        return {
+            name: {"start": None, **shared, "own_params": False, "remote": True} for name in names
+        }
+
     def describe(self, peer: Peer | None) -> dict[str, Any]:
         """Return the access document of ``peer`` (see the module docstring)."""
         scope, admin = connection_rights(peer)
         robots = self.robots_of(peer)
+        info = self.robot_info()
+        remote = self.remote_info(info)
+        info.update(remote)
+        listed = sorted({*robots, *(n for n in remote if scope in ("*", n))})
         latches = {latch.id: latch for name in robots for latch in self.estop.held_by(name)}
         return {
             "client": "this process" if peer is None else describe_peer(peer),
             "admin": admin,
-            "robots": robots,
+            "robots": listed,
             "any_robot": scope == "*",
             "motion_model": self.world.motion.name,
             "world": world_spec(self.world).name,
-            "robot_info": self.robot_info(),
+            "robot_info": info,
             "estop": {
                 "held": [n for n in robots if self.world.halted(n)],
                 "latches": [latch.summary() for latch in latches.values()],

@@ -44,19 +44,16 @@ from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-import orjson
-
 from simbridge.app.guard import ros2_access
 from simbridge.app.settings import ServerSettings
-from simbridge.errors import ConfigError, ServiceError, SimbridgeError
+from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.access import Access
-from simbridge.graph.services import PendingCall, caller
+from simbridge.graph.services import PendingCall
 from simbridge.graph.topics import Peer
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.message import Outgoing
 from simbridge.robot.bridge import ROBOT_NODE
-from simbridge.robot.estop import connection_rights
 from simbridge.robot.simclock import SIM_NODE
 from simbridge.ros2.names import (
     ADMIN_SPACE,
@@ -358,8 +355,6 @@ class ZenohLink:
         self._liveliness_sub: Any = None
         #: Actions both ways (rcl_action's services and topics).
         self.actions = ActionBridge(self)
-        self._guard_spawn()
-        self._extend_access()
 
     # -- lifecycle ------------------------------------------------------------------------
 
@@ -1568,35 +1563,19 @@ class ZenohLink:
         topic = f"/{name}/odom"
         return next((e for e in self._remote.values() if e.kind == "MP" and e.name == topic), None)
 
-    def _guard_spawn(self) -> None:
-        """Make ``/spawn`` refuse a robot name that another process of the classroom uses."""
-        service = self.graph.services.services.get("/spawn")
-        if service is None or service.handler is None:
-            return
-        spawn = service.handler
+    def simulator_of(self, name: str) -> str | None:
+        """Return which process of the classroom simulates robot ``name``, or None.
 
-        def guarded(args: Any) -> dict[str, Any]:
-            request = dict(args) if isinstance(args, dict) else {}
-            name = str(request.get("name") or "").strip("/")
-            if not name:  # pick robotN free here and elsewhere
-                n = 1
-                while f"/robot{n}/odom" in self.graph.topics.topics:
-                    n += 1
-                request["name"] = name = f"robot{n}"
-            other = self._remote_robot(name)
-            if other is not None:
-                msg = (
-                    f"/spawn: robot name '{name}' is taken by another simbridge process of "
-                    f"this classroom ({other.node_fqn}, Zenoh session {other.zid}); "
-                    "choose another name"
-                )
-                raise ServiceError(msg)
-            return spawn(request if isinstance(args, dict) else args)
+        One end of the robot world's ``Elsewhere`` (the fleet refuses to spawn that name).
+        """
+        other = self._remote_robot(name)
+        return None if other is None else f"{other.node_fqn}, Zenoh session {other.zid}"
 
-        service.handler = guarded
+    def robots(self) -> list[str]:
+        """Return the robots other processes of the classroom simulate (``/NAME/odom``).
 
-    def remote_robots(self) -> list[str]:
-        """Return the robots other processes of the classroom simulate (``/NAME/odom``)."""
+        The other end of the robot world's ``Elsewhere`` (the pages' robot picker lists them).
+        """
         names = set()
         for entity in self._remote.values():
             parts = entity.name.split("/")
@@ -1608,47 +1587,6 @@ class ZenohLink:
             ):
                 names.add(parts[1])
         return sorted(names)
-
-    def _extend_access(self) -> None:
-        """Add the other processes' robots to ``/simbridge/access`` (the page's robot picker).
-
-        A robot of another process is listed with this process's default parameters (the
-        classroom's shared configuration), no start pose and ``remote: true``.
-        """
-        service = self.graph.services.services.get("/simbridge/access")
-        if service is None or service.handler is None:
-            return
-        access = service.handler
-        robot = self.graph.params.nodes.get("/virtual_robot")
-
-        def extended(args: Any) -> dict[str, Any]:
-            answer = access(args)
-            remote = self.remote_robots()
-            if not remote or not answer.get("success"):
-                return answer
-            doc = orjson.loads(answer["message"])
-            info = doc.setdefault("robot_info", {})
-            flat = robot.read() if robot is not None else {}
-            scope, _ = connection_rights(caller.get())
-            for name in remote:
-                if name in info:
-                    continue
-                info[name] = {
-                    "start": None,
-                    "mass": flat.get("robot.mass"),
-                    "inertia": flat.get("robot.inertia"),
-                    "max_linear_velocity": flat.get("robot.max_linear_velocity"),
-                    "max_angular_velocity": flat.get("robot.max_angular_velocity"),
-                    "radius": flat.get("robot.radius"),
-                    "own_params": False,
-                    "remote": True,
-                }
-                if scope in ("*", name) and name not in doc.get("robots", []):
-                    doc.setdefault("robots", []).append(name)
-            doc["robots"] = sorted(doc.get("robots", []))
-            return {**answer, "message": orjson.dumps(doc).decode()}
-
-        service.handler = extended
 
     # -- access ------------------------------------------------------------------------------
 
