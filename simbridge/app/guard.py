@@ -42,7 +42,6 @@ __all__ = [
     "DEFAULT_ADMIN_SERVICES",
     "NO_ROBOT",
     "Guard",
-    "ros2_access",
     "rosauth_mac",
     "token_access",
 ]
@@ -90,28 +89,6 @@ def token_access(settings: ServerSettings, token: str | None) -> tuple[str, bool
         if hmac.compare_digest(token.encode(), known.encode()):
             return (ANY_SCOPE, True) if scope == ADMIN_SCOPE else (scope, False)
     return None
-
-
-def ros2_access(settings: ServerSettings) -> tuple[str, bool]:
-    """Return ``(scope, admin)`` of ROS 2 peers (what reaches the graph from Zenoh).
-
-    ``ros2_role`` decides: ``none`` (:data:`NO_ROBOT`: it reads, drives nothing),
-    ``robot:NAME``, ``robots`` (every robot, no administration), ``admin``. Unset: what a
-    client without a token gets, except in class mode (client tokens or a rosauth secret),
-    where it is ``none``: a peer that shows no credential is no student's and no instructor's.
-    """
-    role = settings.ros2_role
-    if role is None:
-        if settings.auth_required:
-            return NO_ROBOT, False
-        return ANY_SCOPE, settings.admin_token is None
-    if role == "admin":
-        return ANY_SCOPE, True
-    if role == "robots":
-        return ANY_SCOPE, False
-    if role.startswith("robot:"):
-        return role.removeprefix("robot:"), False
-    return NO_ROBOT, False
 
 
 class Guard:

@@ -9,7 +9,6 @@ import pytest
 from simbridge.app.guard import (
     NO_ROBOT,
     Guard,
-    ros2_access,
     rosauth_mac,
     token_access,
 )
@@ -17,6 +16,7 @@ from simbridge.app.settings import ServerSettings
 from simbridge.graph import Graph
 from simbridge.graph.access import Access
 from simbridge.graph.rosapi import install_rosapi
+from simbridge.ros2.role import ros2_access
 from simbridge.rosbridge import TokenBucket
 from tests.helpers import RecordingPeer, graph_for, rosbridge_of
 

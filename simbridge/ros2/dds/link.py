@@ -37,7 +37,6 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from simbridge.app.guard import ros2_access
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
@@ -63,6 +62,7 @@ from simbridge.ros2.dds.wire import (
     typehash_user_data,
 )
 from simbridge.ros2.names import dds_type, ros_type
+from simbridge.ros2.role import ros2_access
 from simbridge.ros2.typehash import TypeHasher
 
 

@@ -44,7 +44,6 @@ from collections.abc import Callable, Collection, Iterable
 from dataclasses import dataclass, field
 from typing import Any
 
-from simbridge.app.guard import ros2_access
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
@@ -66,6 +65,7 @@ from simbridge.ros2.names import (
     split_node,
     topic_keyexpr,
 )
+from simbridge.ros2.role import ros2_access
 from simbridge.ros2.typehash import TypeHasher
 from simbridge.ros2.zenoh.actions import ActionBridge, split_action
 from simbridge.ros2.zenoh.attachment import Attachment, pack_attachment
