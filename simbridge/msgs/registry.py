@@ -43,7 +43,7 @@ __all__ = [
     "FieldSpec",
     "MessageSpec",
     "TypeRegistry",
-    "generate_interfaces_soon",
+    "generate_interfaces",
     "normalize_type",
     "short_type",
 ]
@@ -523,42 +523,37 @@ def _parse(text: str, key: str) -> dict[str, Definition]:
 
 _INTERFACES: Any = None
 _ACTIONLIB: Any = None
-#: Held while the interfaces are made (by :func:`generate_interfaces_soon`'s thread or the first
-#: lookup that needs them): a lookup waits for one under way, never repeats it.
+#: Held while the interfaces are made (by :func:`generate_interfaces` in the server's worker
+#: thread, or the first lookup that needs them): a lookup waits for one under way, never
+#: repeats it.
 _GENERATING = threading.Lock()
-_WARMUP: threading.Thread | None = None
 
 
-def generate_interfaces_soon() -> None:
-    """Make simbridge's service/action interfaces in a background thread, once per process.
+def generate_interfaces() -> None:
+    """Make simbridge's service/action interfaces now, once per process (thread-safe).
 
     Their definitions are shipped (:mod:`simbridge.msgs.definitions`): made from them, they take
     a few ms. A text edited since the file was made is parsed by rosbags (80-300 ms for all of
     them on a shared x86 core, a Pi 4B core is ~5x slower), which on the loop, at a client's
-    first rosapi call, is a gap in every client's /odom; in this thread, which gives up the GIL
-    every switch interval (5 ms), the loop keeps its ticks meanwhile. The server calls this
-    when its first client connects: an idle server keeps its footprint
-    (``tests/test_footprint.py``).
+    first rosapi call, is a gap in every client's /odom: the server runs this in a worker thread
+    when its first client connects (an idle server keeps its footprint,
+    ``tests/test_footprint.py``); a thread gives up the GIL every switch interval (5 ms), so the
+    loop keeps its ticks meanwhile. A lookup that needs them meanwhile waits for this one.
 
     The garbage collector is paused while they are made, and what they are made of (objects that
     live as long as the process) is frozen afterwards, as the startup objects are
-    (``simbridge.cli``), so that no full collection walks them again.
+    (``simbridge.app.tuning``), so that no full collection walks them again.
     """
-    global _WARMUP
-    if _INTERFACES is None and _WARMUP is None:
-
-        def run() -> None:
-            was = gc.isenabled()
-            gc.disable()
-            try:
-                _interfaces()
-            finally:
-                gc.freeze()
-                if was:
-                    gc.enable()
-
-        _WARMUP = threading.Thread(target=run, name="simbridge-interfaces", daemon=True)
-        _WARMUP.start()
+    if _INTERFACES is not None:
+        return
+    was = gc.isenabled()
+    gc.disable()
+    try:
+        _interfaces()
+    finally:
+        gc.freeze()
+        if was:
+            gc.enable()
 
 
 def _interfaces() -> Any:

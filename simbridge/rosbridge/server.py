@@ -43,7 +43,7 @@ from websockets.typing import Origin
 from simbridge.app.guard import token_access
 from simbridge.app.settings import ServerSettings
 from simbridge.graph.access import Access
-from simbridge.msgs.registry import generate_interfaces_soon
+from simbridge.msgs.registry import generate_interfaces
 from simbridge.rosbridge import Frame, SendQueue, Session, TokenBucket, status_frame
 from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.subscribers import SendEntries
@@ -250,6 +250,7 @@ class BridgeServer:
         self._corked: list[Client] = []
         self._uncork_handle: asyncio.Handle | None = None
         front.subscribers.send_many = self._send_many
+        self._interfaces_warming = False
 
     def _send_many(self, frame: Frame, entries: SendEntries) -> None:
         """Write ``frame`` to many subscribers that keep up, framed once for all.
@@ -557,6 +558,14 @@ class BridgeServer:
             self.front.apply(client, client.session.status("error", text))
         return True
 
+    def _warm_interfaces(self) -> None:
+        """Make the service/action interfaces in a worker thread, once (the first client)."""
+        if self._interfaces_warming:
+            return
+        self._interfaces_warming = True
+        future = asyncio.get_running_loop().run_in_executor(None, generate_interfaces)
+        future.add_done_callback(_log_failure)
+
     async def _handler(self, ws: ServerConnection) -> None:
         front = self.front
         token = _query_token(ws.request.path) if ws.request else None
@@ -576,7 +585,7 @@ class BridgeServer:
             _read_chunk(ws)
             self.clients.add(client)
             self.connections_total += 1
-            generate_interfaces_soon()  # off the loop, before a client's first rosapi call
+            self._warm_interfaces()  # off the loop, before a client's first rosapi call
             front.add_peer(client)
             if not session.authenticated:  # set on connect by the guard (none: all admitted)
                 self._owes_token(client)
@@ -692,3 +701,9 @@ def _query_token(target: str) -> str | None:
     _path, query = parse_target(target)
     values = query.get("token")
     return values[0] if values else None
+
+
+def _log_failure(future: asyncio.Future[None]) -> None:
+    """Log what a worker thread's job raised (the interfaces are then made on first use)."""
+    if not future.cancelled() and future.exception() is not None:
+        logger.error("making the interfaces failed", exc_info=future.exception())
