@@ -271,7 +271,7 @@ def build(
         default_queue_length=settings.default_queue_length,
     )
     web = WebApp(static_dir or resource_dir("static"), health)
-    server = BridgeServer(rosbridge, settings, web)
+    server = BridgeServer(rosbridge, settings, web.handle_websocket_port)
     install_admin(
         web,
         graph=graph,

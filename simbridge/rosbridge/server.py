@@ -25,15 +25,14 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
-import http
 import logging
 import struct
 import weakref
-from collections.abc import Hashable
+from collections.abc import Callable, Hashable
 from typing import TYPE_CHECKING, Any
+from urllib.parse import parse_qs, urlsplit
 
 from websockets.asyncio.server import Server, ServerConnection, broadcast, serve
-from websockets.datastructures import Headers
 from websockets.exceptions import ConnectionClosed
 from websockets.frames import Close, CloseCode
 from websockets.http11 import Request, Response
@@ -47,16 +46,20 @@ from simbridge.msgs.registry import generate_interfaces
 from simbridge.rosbridge import Frame, SendQueue, Session, TokenBucket, status_frame
 from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.subscribers import SendEntries
-from simbridge.web import HttpRequest, WebApp, parse_target
 
 
 if TYPE_CHECKING:
     import ssl
 
 
-__all__ = ["BridgeServer", "Client"]
+__all__ = ["BridgeServer", "Client", "HttpHandler"]
 
 logger = logging.getLogger(__name__)
+
+#: What answers a plain HTTP request (not an upgrade) on the WebSocket port: the page and
+#: ``/healthz`` where the composition root hands one in. Typed with websockets' own request and
+#: response, so that this server knows nothing of who answers.
+HttpHandler = Callable[[Request], Response]
 
 #: Socket write-buffer size above which frames are queued instead of written (bytes): the
 #: transport's high-water mark, so websockets' ``paused`` flag says it (and stays set until the
@@ -220,7 +223,7 @@ class BridgeServer:
     """rosbridge v2 over WebSocket on ``settings.host:settings.port``."""
 
     def __init__(
-        self, front: Rosbridge, settings: ServerSettings, web: WebApp | None = None
+        self, front: Rosbridge, settings: ServerSettings, http: HttpHandler | None = None
     ) -> None:
         #: What carries out every op of the clients.
         self.front = front
@@ -228,8 +231,9 @@ class BridgeServer:
         self.graph = front.graph
         #: Network settings.
         self.settings = settings
-        #: Answers plain HTTP requests on the WebSocket port (``/healthz``, the page).
-        self.web = web
+        #: Answers plain HTTP requests on the WebSocket port (``/healthz``, the page); without
+        #: it they get 426.
+        self.http = http
         #: The running websockets server.
         self.server: Server | None = None
         #: Connected clients.
@@ -332,17 +336,9 @@ class BridgeServer:
     def _process_request(self, connection: ServerConnection, request: Request) -> Response | None:
         if request.headers.get("Upgrade", "").lower() == "websocket":
             return self._admit(connection, request)
-        if self.web is None:
+        if self.http is None:
             return connection.respond(426, "this is a rosbridge WebSocket endpoint\n")
-        path, query = parse_target(request.path)
-        headers = {k.lower(): v for k, v in request.headers.raw_items()}
-        answer = self.web.handle(HttpRequest("GET", path, query, headers))
-        out = Headers(answer.headers)
-        out["Content-Length"] = str(len(answer.body))
-        out["Connection"] = "close"
-        out["Server"] = "simbridge"
-        reason = http.HTTPStatus(answer.status).phrase
-        return Response(answer.status, reason, out, answer.body)
+        return self.http(request)
 
     def _admit(self, connection: ServerConnection, request: Request) -> Response | None:
         """Refuse an upgrade with a token that grants nothing, or over its pool's slots.
@@ -698,8 +694,7 @@ def _frame_limit(ws: ServerConnection, size: int) -> None:
 
 def _query_token(target: str) -> str | None:
     """Return the ``token`` query parameter of a request target, if any."""
-    _path, query = parse_target(target)
-    values = query.get("token")
+    values = parse_qs(urlsplit(target).query).get("token")
     return values[0] if values else None
 
 

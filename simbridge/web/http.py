@@ -46,6 +46,8 @@ from urllib.parse import parse_qs, unquote, urlsplit
 
 import httptools
 import orjson
+from websockets.datastructures import Headers
+from websockets.http11 import Request, Response
 
 from simbridge.web.pool import Phase, Pool, Share, Slot, client_address
 
@@ -178,6 +180,21 @@ class WebApp:
             logger.exception("HTTP %s %s failed", request.method, request.path)
             response = HttpResponse.text("internal error\n", 500)
         return response
+
+    def handle_websocket_port(self, request: Request) -> Response:
+        """Answer a plain HTTP request that reached the WebSocket port (websockets parsed it).
+
+        websockets reads only ``GET`` requests there and closes the connection after the
+        answer; the answer is the one this port's own server gives (:meth:`handle`).
+        """
+        path, query = parse_target(request.path)
+        headers = {k.lower(): v for k, v in request.headers.raw_items()}
+        answer = self.handle(HttpRequest("GET", path, query, headers))
+        out = Headers(answer.headers)
+        out["Content-Length"] = str(len(answer.body))
+        out["Connection"] = "close"
+        out["Server"] = "simbridge"
+        return Response(answer.status, HTTPStatus(answer.status).phrase, out, answer.body)
 
     def _healthz(self, request: HttpRequest) -> HttpResponse:
         return HttpResponse.json(self.health())

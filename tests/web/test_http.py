@@ -10,6 +10,8 @@ from collections.abc import AsyncIterator
 from typing import Any
 
 import pytest
+from websockets.datastructures import Headers
+from websockets.http11 import Request
 
 from simbridge.app.config import resource_dir
 from simbridge.app.runner import App
@@ -232,6 +234,24 @@ async def test_nul_path_on_the_websocket_port_gets_400_too(
     assert not [r for r in caplog.records if r.exc_info], "a traceback was logged"
     status, _, _ = await fetch(http_url(app) + "/%00")
     assert status == 400
+
+
+def test_the_websocket_port_answers_what_the_page_answers_and_closes() -> None:
+    """The handler the rosbridge server is given: the page's answer, then the connection ends.
+
+    Same status, body and ETag as :meth:`WebApp.handle`; a matching If-None-Match is a 304.
+    """
+    web = WebApp(resource_dir("static"), lambda: {"status": "ok"})
+    page = web.handle(HttpRequest("GET", "/", {}, {}))
+    answer = web.handle_websocket_port(Request("/?x=1", Headers({"Host": "x"})))
+    assert (answer.status_code, answer.reason_phrase, answer.body) == (200, "OK", page.body)
+    assert answer.headers["ETag"] == page.headers["ETag"]
+    assert answer.headers["Connection"] == "close" and answer.headers["Server"] == "simbridge"
+    assert answer.headers["Content-Length"] == str(len(page.body))
+    again = Request("/", Headers({"If-None-Match": page.headers["ETag"]}))
+    assert web.handle_websocket_port(again).status_code == 304
+    missing = web.handle_websocket_port(Request("/nothing-here", Headers()))
+    assert (missing.status_code, missing.body) == (404, b"not found\n")
 
 
 # -- issue 29: heads bounded, pipelines yield, the pool has room for the instructor ----------
