@@ -22,6 +22,7 @@ from collections.abc import Callable, Hashable
 from typing import Any
 
 from bench.encoding import _time
+from simbridge.app.build import guard_graph
 from simbridge.app.config import Params, load_world
 from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings, budgets
@@ -62,6 +63,7 @@ def _cases() -> dict[str, Callable[[], None]]:
     world = World(load_world(None), Params())
     RobotBridge(graph, world)
     guard = Guard(graph, settings, robots=lambda: world.robots.keys())
+    guard_graph(graph, guard)
     front = Rosbridge(graph, *budgets(settings), authenticator=guard)
     sender = _Peer(front, "sender")
     for k in range(10):

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from simbridge.app.config import Params, WorldSpec, load_params, load_world, resource_dir
-from simbridge.app.guard import Guard
+from simbridge.app.guard import DEFAULT_ADMIN_SERVICES, Guard
 from simbridge.app.settings import ServerSettings, budgets
 from simbridge.app.steps import Hook, Steps
 from simbridge.grading import install_grader
@@ -56,7 +56,7 @@ if TYPE_CHECKING:
     from simbridge.tools.recorder import GraphRecorder
 
 
-__all__ = ["Core", "Parts", "build", "build_headless", "offload"]
+__all__ = ["Core", "Parts", "build", "build_headless", "guard_graph", "offload"]
 
 
 @dataclass(eq=False)
@@ -117,6 +117,20 @@ def offload(work: Callable[[], None], done: Callable[[BaseException | None], Non
 
     future.add_done_callback(finished)
     return True
+
+
+def guard_graph(graph: Graph, guard: Guard) -> None:
+    """Put ``guard`` in front of ``graph``: its access rules on, each new peer given its access.
+
+    The builder's wiring of the guard (a test that makes a guard alone calls it too): the rules
+    of :attr:`Graph.access` apply, with the guard's robots and the administrative services,
+    and the graph tells the guard of each peer that connects.
+    """
+    rules = graph.access
+    rules.guarded = True
+    rules.robots = guard.robots
+    rules.admin_services.update(DEFAULT_ADMIN_SERVICES)
+    graph.watch(guard)
 
 
 def _client_view(client: Client) -> ClientView:
@@ -264,6 +278,7 @@ def build(
     hooks: list[Hook] = [*robot.hooks, grader.tick]
 
     guard = Guard(graph, settings, robots=lambda: sim.robots.keys())
+    guard_graph(graph, guard)
     rosbridge = Rosbridge(
         graph,
         *budgets(settings),
@@ -315,6 +330,7 @@ def build(
             settings=settings,
         )
         graph.topics.taps.append(foxglove.on_deliver)
+        graph.params.on_change.append(foxglove.params_changed)  # every node's parameters
         hooks.append(foxglove.tick)
     if recorder is not None:  # after the front ends, as when the command added it at start
         hooks.append(recorder.tick)

@@ -31,7 +31,7 @@ from collections.abc import Callable, Iterable
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ProtocolError
 from simbridge.graph.access import ANY_SCOPE, NO_ROBOT, Access
-from simbridge.graph.graph import Graph
+from simbridge.graph.graph import Graph, PeerWatcher
 from simbridge.graph.topics import Peer
 from simbridge.rosbridge import ops as o
 
@@ -91,8 +91,12 @@ def token_access(settings: ServerSettings, token: str | None) -> tuple[str, bool
     return None
 
 
-class Guard:
-    """Authentication and access of a graph's clients (install once per :class:`Graph`)."""
+class Guard(PeerWatcher):
+    """Authentication and access of a graph's clients (one per :class:`Graph`).
+
+    :func:`simbridge.app.build.guard_graph` puts it in front of the graph: it turns on the
+    graph's access rules and has the graph tell the guard of each new peer.
+    """
 
     def __init__(
         self,
@@ -109,15 +113,10 @@ class Guard:
         #: Names of the robots (their namespaces are off limits to other robots' clients).
         self.robots = robots
         self._wall_time = wall_time or (lambda: graph.wall_clock_ns() / 1e9)
-        rules = graph.access
-        rules.guarded = True
-        rules.robots = robots
-        rules.admin_services.update(DEFAULT_ADMIN_SERVICES)
-        graph.on_connect.append(self.connect)
 
     # -- access ----------------------------------------------------------------------------
 
-    def connect(self, peer: Peer) -> None:
+    def peer_connected(self, peer: Peer) -> None:
         """Give a new peer its access from its connection token (``access.token``)."""
         s = self.settings
         access = peer.access

@@ -386,11 +386,6 @@ class FoxgloveFront:
             "clients_refused": 0,
             "messages_dropped": 0,
         }
-        for node in graph.params.nodes.values():
-            node.on_change.append(self._param_changer(node.name))
-        graph.params.on_add.append(
-            lambda node: node.on_change.append(self._param_changer(node.name))
-        )
         self._snapshot_params()
 
     # -- lifecycle --------------------------------------------------------------------------
@@ -951,20 +946,18 @@ class FoxgloveFront:
                 values[param_name(node.name, key)] = value
         self._params = values  # one assignment: SDK threads read either the old or the new
 
-    def _param_changer(self, node: str) -> Callable[[list[str]], None]:
-        def changed(names: list[str]) -> None:
-            self._snapshot_params()
-            # a change of a Foxglove client is published by the SDK itself (see set_parameters);
-            # one from elsewhere (/admin, rosbridge) only while a client subscribed to one (the
-            # SDK's lock hazard: module doc)
-            full = [param_name(node, n) for n in names]
-            held = self._holder_ws is not None and self._holding.issuperset(full)
-            if self.server is not None and full and not self._setting and held:
-                params = self._parameters(full)
-                if params:
-                    self.server.publish_parameter_values(params)
-
-        return changed
+    def params_changed(self, node: str, names: list[str]) -> None:
+        """A node's parameters changed (the builder adds this to ``graph.params.on_change``)."""
+        self._snapshot_params()
+        # a change of a Foxglove client is published by the SDK itself (see set_parameters);
+        # one from elsewhere (/admin, rosbridge) only while a client subscribed to one (the
+        # SDK's lock hazard: module doc)
+        full = [param_name(node, n) for n in names]
+        held = self._holder_ws is not None and self._holding.issuperset(full)
+        if self.server is not None and full and not self._setting and held:
+            params = self._parameters(full)
+            if params:
+                self.server.publish_parameter_values(params)
 
     def _parameters(self, names: list[str] | None) -> list[Any]:
         """Return the SDK parameters of ``names`` (None: all) from the snapshot."""

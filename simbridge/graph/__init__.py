@@ -6,7 +6,7 @@ carrying canonical messages; the access rules every front end's peers are admitt
 
 from __future__ import annotations
 
-from simbridge.graph.graph import ROSOUT, Graph
+from simbridge.graph.graph import ROSOUT, Graph, PeerWatcher
 from simbridge.graph.params import ParameterStore, ParamNode
 from simbridge.graph.services import PendingCall, Service, ServiceTable, caller, typed_calls
 from simbridge.graph.topics import BRIDGE_NODE, Peer, Topic, TopicTable
@@ -19,6 +19,7 @@ __all__ = [
     "ParamNode",
     "ParameterStore",
     "Peer",
+    "PeerWatcher",
     "PendingCall",
     "Service",
     "ServiceTable",

@@ -31,12 +31,30 @@ if TYPE_CHECKING:
     from simbridge.msgs.cdr import CdrWriter
 
 
-__all__ = ["ROSOUT", "Graph"]
+__all__ = ["ROSOUT", "Graph", "PeerWatcher"]
 
 logger = logging.getLogger(__name__)
 
 ROSOUT = "/rosout"
 _LOG_LEVELS = {"debug": 10, "info": 20, "warn": 30, "error": 40, "fatal": 50}
+
+
+class PeerWatcher:
+    """A part that hears of the peers of every front end; it overrides what it needs.
+
+    The application's builder hands each such part to :meth:`Graph.watch`, in one place (no
+    part adds itself to the graph from its constructor); a test that makes one part alone
+    does the same.
+    """
+
+    def peer_connected(self, peer: Peer) -> None:
+        """``peer`` connected; called before its first request."""
+
+    def peer_lost(self, peer: Peer) -> None:
+        """``peer`` went without closing its connection; called before :meth:`peer_left`."""
+
+    def peer_left(self, peer: Peer) -> None:
+        """``peer`` left (closed or lost), after the graph released what it held."""
 
 
 class Graph:
@@ -80,12 +98,12 @@ class Graph:
         self.peers: set[Peer] = set()
         #: Nodes simulated in process: name -> description (for rosapi).
         self.nodes: dict[str, str] = {BRIDGE_NODE: "the rosbridge server"}
-        #: Called with each peer that leaves, after the graph cleaned up (extensions).
+        #: Called with each peer that leaves, after the graph cleaned up (:meth:`watch`).
         self.on_disconnect: list[Callable[[Peer], None]] = []
         #: Called before :attr:`on_disconnect` with each peer lost without closing its
         #: connection (killed, crashed, unreachable; see :meth:`remove_peer`).
         self.on_lost: list[Callable[[Peer], None]] = []
-        #: Called with each peer that connects, before its first op (extensions).
+        #: Called with each peer that connects, before its first op (:meth:`watch`).
         self.on_connect: list[Callable[[Peer], None]] = []
         #: Actions (client-served and in-process) and the goals in flight.
         self.actions = ActionTable(self)
@@ -97,6 +115,23 @@ class Graph:
         self.nodes["/simbridge"] = "simbridge itself (/rosout)"
 
     # -- clients ------------------------------------------------------------------------------
+
+    def watch(self, *parts: PeerWatcher) -> None:
+        """Tell ``parts`` of every peer that connects, is lost or leaves, in this order.
+
+        Only what a part overrides of :class:`PeerWatcher` is called. The application's
+        builder is what calls this (:func:`simbridge.robot.assembly.build_robot_graph`, the
+        guard in :mod:`simbridge.app.build`).
+        """
+        base = PeerWatcher
+        for part in parts:
+            kind = type(part)
+            if kind.peer_connected is not base.peer_connected:
+                self.on_connect.append(part.peer_connected)
+            if kind.peer_lost is not base.peer_lost:
+                self.on_lost.append(part.peer_lost)
+            if kind.peer_left is not base.peer_left:
+                self.on_disconnect.append(part.peer_left)
 
     def next_peer_id(self) -> int:
         """Return a number no other peer of any front end has (``Access.peer_id``)."""

@@ -138,6 +138,10 @@ class ParameterStore:
         self.nodes: dict[str, ParamNode] = {}
         #: Called with each node added (e.g. to offer its rcl_interfaces services).
         self.on_add: list[Callable[[ParamNode], None]] = []
+        #: Called with the node's name and the changed names after every applied change of
+        #: any node (after the node's own :attr:`ParamNode.on_change`): a front end that shows
+        #: every node's parameters (the builder adds it).
+        self.on_change: list[Callable[[str, list[str]], None]] = []
 
     def add(self, node: ParamNode) -> None:
         """Register a node's parameters."""
@@ -203,3 +207,5 @@ class ParameterStore:
         changed = [k for k in changes if current[k] != new[k]]
         for callback in target.on_change:
             callback(changed)
+        for listener in self.on_change:
+            listener(target.name, changed)

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any
 
 from simbridge.errors import ProtocolError
+from simbridge.graph.graph import PeerWatcher
 from simbridge.graph.topics import Peer, Topic
 
 
@@ -95,7 +96,7 @@ class ActionlibGoal:
         self.server.send(self, self.server.result_topic, "result", payload, now)
 
 
-class ActionlibServer:
+class ActionlibServer(PeerWatcher):
     """Serves one actionlib action on ``<name>/{goal,cancel,status,feedback,result}``.
 
     Args:
@@ -145,7 +146,6 @@ class ActionlibServer:
         )
         graph.subscribe(f"{name}/goal", f"{pkg}/msg/{short}ActionGoal", node, self._on_goal)
         graph.subscribe(f"{name}/cancel", "actionlib_msgs/msg/GoalID", node, self._on_cancel)
-        graph.on_disconnect.append(self.drop_peer)
 
     @property
     def now(self) -> float:
@@ -187,7 +187,7 @@ class ActionlibServer:
                 goal.status = PREEMPTING
                 self.on_cancel(goal, self._now)
 
-    def drop_peer(self, peer: Peer) -> None:
+    def peer_left(self, peer: Peer) -> None:
         """Forget the goals of a client that left (their nodes see them as cancelled)."""
         for goal in [g for g in self.goals if g.peer is peer]:
             if not goal.done:

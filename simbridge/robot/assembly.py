@@ -121,6 +121,8 @@ def build_robot_graph(
 
         tutorials = install_tutorials(graph)
         hooks.append(tutorials.tick)
+    # who hears of the peers of every front end, in this order (no node adds itself)
+    graph.watch(estop, tf_republisher, safety, *([tutorials] if tutorials is not None else []))
     return RobotGraph(
         world=world,
         graph=graph,

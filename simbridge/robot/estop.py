@@ -36,7 +36,7 @@ from typing import Any
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph.access import NO_ROBOT
-from simbridge.graph.graph import Graph
+from simbridge.graph.graph import Graph, PeerWatcher
 from simbridge.graph.rosapi import request_fields
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer, Topic
@@ -138,7 +138,7 @@ class Latch:
         }
 
 
-class EStop:
+class EStop(PeerWatcher):
     """Installs the e-stop services and state topics on ``graph`` for ``world``."""
 
     def __init__(self, graph: Graph, world: World, settings: ServerSettings | None = None) -> None:
@@ -158,11 +158,19 @@ class EStop:
         graph.add_service(
             ESTOP_RESET_SERVICE, _TRIGGER, _NODE, lambda args: self._release(args, None)
         )
-        graph.on_connect.append(lambda peer: self.connected.add(peer.access.peer_id))
-        graph.on_disconnect.append(lambda peer: self.connected.discard(peer.access.peer_id))
         for name in list(world.robots):
             self.add_robot(name)
         self.publish()
+
+    # -- peers (Graph.watch) ----------------------------------------------------------------
+
+    def peer_connected(self, peer: Peer) -> None:
+        """Count ``peer`` connected (a latch of a connection that left is released by all)."""
+        self.connected.add(peer.access.peer_id)
+
+    def peer_left(self, peer: Peer) -> None:
+        """Count ``peer`` gone."""
+        self.connected.discard(peer.access.peer_id)
 
     # -- robots ---------------------------------------------------------------------------
 

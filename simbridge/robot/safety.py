@@ -31,7 +31,7 @@ from typing import Any
 
 from simbridge.app.config import world_params
 from simbridge.errors import ProtocolError
-from simbridge.graph.graph import Graph
+from simbridge.graph.graph import Graph, PeerWatcher
 from simbridge.graph.topics import InternalCallback, Peer
 from simbridge.msgs.convert import finite_number
 from simbridge.robot.bridge import ROBOT_NODE
@@ -52,7 +52,7 @@ def _finite_command(msg: Any) -> bool:
         return False
 
 
-class Safety:
+class Safety(PeerWatcher):
     """Stops robots whose commands went stale or whose commanding client left."""
 
     def __init__(self, graph: Graph, world: World) -> None:
@@ -71,8 +71,6 @@ class Safety:
         self._callbacks: dict[str, tuple[str, InternalCallback]] = {}
         self._unwatched: set[str] = set()
         self._follow_robots()
-        graph.on_lost.append(self.lost)
-        graph.on_disconnect.append(self.disconnected)
 
     def forget(self, name: str) -> None:
         """Stop watching a robot that left the world (its ``cmd_vel`` topic may go)."""
@@ -128,7 +126,7 @@ class Safety:
             if now - last > timeout:
                 self._stop(name, f"no /cmd_vel for {timeout:g} s (safety.cmd_vel_timeout)")
 
-    def lost(self, peer: Peer) -> None:
+    def peer_lost(self, peer: Peer) -> None:
         """Stop the robots ``peer`` commanded, when ``safety.stop_on_lost_link`` is on."""
         if not world_params(self.world).safety.stop_on_lost_link:
             return
@@ -138,7 +136,7 @@ class Safety:
                 why = f"its commanding {peer.label} was lost (gone without closing its connection)"
                 self._stop(name, why)
 
-    def disconnected(self, peer: Peer) -> None:
+    def peer_left(self, peer: Peer) -> None:
         """Stop the robots that ``peer`` commanded, when ``safety.stop_on_disconnect`` is on."""
         mine = [name for name, p in self.commander.items() if p is peer]
         for name in mine:

@@ -48,6 +48,7 @@ from typing import TYPE_CHECKING, Any
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError
 from simbridge.graph.actions import ABORTED, CANCELED, Goal
+from simbridge.graph.graph import PeerWatcher
 from simbridge.graph.services import caller
 from simbridge.graph.topics import Peer, Topic
 from simbridge.msgs.convert import finite_number
@@ -190,7 +191,7 @@ def _moved(old: Pose, new: Pose, trans: float, angle: float) -> bool:
     return d > trans or turned > angle
 
 
-class TfRepublisher:
+class TfRepublisher(PeerWatcher):
     """Serves the tf2_web_republisher action and service from the graph's /tf and /tf_static."""
 
     def __init__(
@@ -214,7 +215,6 @@ class TfRepublisher:
         #: Failures already logged (once per cause).
         self._failed: set[str] = set()
         self._max_rate = max_rate or (lambda: 20.0)
-        graph.on_disconnect.append(self.drop_peer)
         graph.actions.add_server(REPUBLISHER_NODE, _ACTION_TYPE, REPUBLISHER_NODE, self)
         graph.add_service("/republish_tfs", _SERVICE_TYPE, REPUBLISHER_NODE, self._republish)
         #: The ROS 1 actionlib interface of the same node.
@@ -333,12 +333,13 @@ class TfRepublisher:
             )
             raise ServiceError(msg)
 
-    def drop_peer(self, peer: Peer) -> None:
+    def peer_left(self, peer: Peer) -> None:
         """Remove the republished topics of a client that left (its goals are cancelled)."""
         for request in [r for r in self.requests if r.owner is peer]:
             if request.topic is not None:
                 self.graph.topics.unadvertise(request.topic.name, REPUBLISHER_NODE)
             self._remove(request)
+        self.actionlib.peer_left(peer)
 
     # -- action (ROS2TFClient) -------------------------------------------------------------
 

@@ -44,6 +44,7 @@ from typing import TYPE_CHECKING, Any
 
 from simbridge.errors import ServiceError, TypeNotFoundError
 from simbridge.graph.actions import ABORTED, CANCELED, SUCCEEDED, Goal
+from simbridge.graph.graph import PeerWatcher
 from simbridge.graph.params import ParamNode
 from simbridge.graph.topics import Peer
 from simbridge.msgs import normalize_type
@@ -102,7 +103,7 @@ class _Run:
         return self.al_goal.peer if self.al_goal is not None else None
 
 
-class TutorialNodes:
+class TutorialNodes(PeerWatcher):
     """The talker, listener, add_two_ints server and Fibonacci action servers of one graph."""
 
     def __init__(self, graph: Graph) -> None:
@@ -231,6 +232,10 @@ class TutorialNodes:
         run.due += 1.0
         if run.due <= now:  # more than a period behind: start again from now (as ros::Rate)
             run.due = now + 1.0
+
+    def peer_left(self, peer: Peer) -> None:
+        """Forget the actionlib goals of a client that left (:meth:`Graph.watch`)."""
+        self.actionlib.peer_left(peer)
 
     def tick(self, now: float) -> None:
         """Run what is due: the talker once a second, each goal's next step."""

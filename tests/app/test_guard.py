@@ -6,6 +6,7 @@ from typing import Any
 
 import pytest
 
+from simbridge.app.build import guard_graph
 from simbridge.app.guard import (
     NO_ROBOT,
     Guard,
@@ -31,13 +32,14 @@ def make(**settings: Any) -> tuple[Graph, Guard]:
     install_rosapi(graph)
     graph.add_service("/reset", "std_srvs/srv/Empty", "/virtual_robot", lambda args: {})
     guard = Guard(graph, s, robots=lambda: ["r1", "r2"])
+    guard_graph(graph, guard)
     rosbridge_of(graph, guard)
     return graph, guard
 
 
 def peer(graph: Graph, guard: Guard, token: str | None = None) -> RecordingPeer:
     p = RecordingPeer(graph, token=token)
-    guard.connect(p)
+    guard.peer_connected(p)
     return p
 
 

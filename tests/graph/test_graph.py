@@ -2,7 +2,7 @@ from __future__ import annotations
 
 import pytest
 
-from simbridge.graph import Graph
+from simbridge.graph import Graph, Peer, PeerWatcher
 from tests.helpers import RecordingPeer, clocked_graph, op, rosbridge_of
 
 
@@ -60,3 +60,25 @@ def test_rosout_reaches_in_process_subscribers_and_the_taps_without_a_rosbridge_
     graph.log("info", "world reset")
     assert [m["msg"] for m in got] == ["world reset"]  # type: ignore[index]
     assert tapped == ["/rosout"]
+
+
+class _Leaving(PeerWatcher):
+    def __init__(self) -> None:
+        self.heard: list[str] = []
+
+    def peer_lost(self, peer: Peer) -> None:
+        self.heard.append(f"lost {peer.label}")
+
+    def peer_left(self, peer: Peer) -> None:
+        self.heard.append(f"left {peer.label}")
+
+
+def test_a_watching_part_hears_what_it_overrides_lost_before_left(graph: Graph) -> None:
+    """Graph.watch (the builder's wiring): only the methods a part overrides are called."""
+    part = _Leaving()
+    graph.watch(part)
+    assert part.peer_connected not in graph.on_connect
+    a, b = RecordingPeer(graph), RecordingPeer(graph)
+    rosbridge_of(graph).remove_peer(a)
+    rosbridge_of(graph).remove_peer(b, lost=True)
+    assert part.heard == [f"left {a.label}", f"lost {b.label}", f"left {b.label}"]

@@ -118,6 +118,14 @@ def test_on_change_hears_the_names_that_changed(store: ParameterStore) -> None:
     assert heard == [["low"]]
 
 
+def test_the_store_tells_its_listeners_of_every_nodes_change(store: ParameterStore) -> None:
+    """The store's on_change (a front end showing every node's parameters) hears each node."""
+    heard: list[tuple[str, list[str]]] = []
+    store.on_change.append(lambda node, names: heard.append((node, names)))
+    store.set("/node", {"high": 2.0, "low": 0.5})
+    assert heard == [("/node", ["low"])]
+
+
 def test_unknown_node_lists_the_known_ones(store: ParameterStore) -> None:
     with pytest.raises(ServiceError, match=r"node /other has no parameters \(known: /node\)"):
         store.names("other")

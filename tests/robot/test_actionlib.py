@@ -35,6 +35,7 @@ class Echo:
             self.cancel,
             private=private,
         )
+        graph.watch(self.server)
 
     def goal(self, goal: ActionlibGoal, now: float) -> None:
         self.goals.append(goal)
@@ -142,6 +143,7 @@ def test_tf_republisher_actionlib_goal_gets_transforms_and_a_cancel_preempts() -
     """The default TFClient's goal: feedback with the requested transform; cancel -> status 2."""
     graph = Graph()
     tf = install_tf_republisher(graph)
+    graph.watch(tf)
     c = RecordingPeer(graph)
     op(c, graph, op="subscribe", topic="/tf2_web_republisher/feedback")
     op(c, graph, op="subscribe", topic="/tf2_web_republisher/result")

@@ -20,7 +20,9 @@ def make(stamped: bool, **safety: Any) -> tuple[Graph, World, Safety]:
     params = Params(robot=RobotParams(cmd_vel_stamped=stamped), safety=SafetyParams(**safety))
     world = World(WorldSpec(), params)
     RobotBridge(graph, world)
-    return graph, world, Safety(graph, world)
+    safety = Safety(graph, world)
+    graph.watch(safety)
+    return graph, world, safety
 
 
 def send(peer: RecordingPeer, graph: Graph, op: dict[str, Any], now: float = 0.0) -> None:

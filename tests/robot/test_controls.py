@@ -5,6 +5,7 @@ from typing import Any
 
 from websockets.asyncio.client import connect
 
+from simbridge.app.build import guard_graph
 from simbridge.app.config import Params, load_world
 from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
@@ -27,6 +28,7 @@ def setup() -> tuple[Graph, Guard, World]:
     WorldControls(graph, world)
     settings = ServerSettings(client_tokens=TOKENS, admin_token=ADMIN)
     guard = Guard(graph, settings, robots=world.robots.keys)
+    guard_graph(graph, guard)
     rosbridge_of(graph, guard)
     return graph, guard, world
 
@@ -39,7 +41,7 @@ def call(graph: Graph, peer: RecordingPeer, service: str, args: dict[str, Any]) 
 
 def client(graph: Graph, guard: Guard, token: str) -> RecordingPeer:
     peer = RecordingPeer(graph, token=token)
-    guard.connect(peer)
+    guard.peer_connected(peer)
     return peer
 
 

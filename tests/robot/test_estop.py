@@ -5,6 +5,7 @@ from typing import Any
 
 import pytest
 
+from simbridge.app.build import guard_graph
 from simbridge.app.config import Params, load_world
 from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
@@ -21,7 +22,9 @@ def setup() -> tuple[Graph, World, EStop]:
     graph = Graph()
     world = World(load_world(None), Params())
     RobotBridge(graph, world)
-    return graph, world, EStop(graph, world)
+    estop = EStop(graph, world)
+    graph.watch(estop)
+    return graph, world, estop
 
 
 def call(peer: RecordingPeer, graph: Graph, service: str) -> Any:
@@ -98,18 +101,20 @@ def classroom() -> tuple[Graph, World, EStop, Guard]:
     world = World(load_world(ROOT / "config" / "worlds" / "classroom.yaml"), Params())
     bridge = RobotBridge(graph, world)
     estop = EStop(graph, world)
+    graph.watch(estop)
     bridge.on_robot_added.append(estop.add_robot)
     bridge.on_robot_removed.append(estop.remove_robot)
     install_fleet(bridge)
     settings = ServerSettings(client_tokens=TOKENS, admin_token=ADMIN)
     guard = Guard(graph, settings, robots=lambda: world.robots.keys())
+    guard_graph(graph, guard)
     rosbridge_of(graph, guard)
     return graph, world, estop, guard
 
 
 def student(graph: Graph, guard: Guard, token: str) -> RecordingPeer:
     p = RecordingPeer(graph, token=token)
-    guard.connect(p)
+    guard.peer_connected(p)
     return p
 
 

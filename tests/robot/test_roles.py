@@ -3,6 +3,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from simbridge.app.build import guard_graph
 from simbridge.app.config import Params, load_world
 from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
@@ -21,15 +22,18 @@ def setup(**settings: Any) -> tuple[Graph, Guard, World]:
     graph = Graph()
     world = World(load_world(ROOT / "config" / "worlds" / "classroom.yaml"), Params())
     RobotBridge(graph, world)
-    Roles(graph, world, EStop(graph, world))
+    estop = EStop(graph, world)
+    graph.watch(estop)
+    Roles(graph, world, estop)
     guard = Guard(graph, ServerSettings(**settings), robots=world.robots.keys)
+    guard_graph(graph, guard)
     rosbridge_of(graph, guard)
     return graph, guard, world
 
 
 def access(graph: Graph, guard: Guard, token: str | None) -> Any:
     peer = RecordingPeer(graph, token=token)
-    guard.connect(peer)
+    guard.peer_connected(peer)
     frame = {"op": "call_service", "service": "/simbridge/access", "id": "a"}
     rosbridge_of(graph).receive(peer, json.dumps(frame), 0.0)
     return next(m for m in peer.take() if m.get("op") == "service_response")

@@ -15,7 +15,9 @@ def make(**safety: Any) -> tuple[Graph, World, Safety]:
     graph = Graph()
     world = World(WorldSpec(), Params(safety=SafetyParams(**safety)))
     RobotBridge(graph, world)
-    return graph, world, Safety(graph, world)
+    safety = Safety(graph, world)
+    graph.watch(safety)
+    return graph, world, safety
 
 
 def drive(graph: Graph, peer: RecordingPeer, x: Any, now: float) -> None:
@@ -110,6 +112,7 @@ def test_a_removed_robot_is_forgotten_and_its_topic_can_go() -> None:
     world = World(spec, Params(safety=SafetyParams(cmd_vel_timeout=0.5)))
     bridge = RobotBridge(graph, world)
     safety = Safety(graph, world)
+    graph.watch(safety)
     bridge.on_robot_removed.append(safety.forget)
     world.remove("r2")
     bridge.remove_robot("r2")

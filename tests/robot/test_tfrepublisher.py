@@ -191,6 +191,7 @@ def test_requests_are_counted_per_client_and_go_with_it() -> None:
     """The 11th request of a client is refused; the others' are not; a leaving client's go."""
     graph = Graph()
     repub = TfRepublisher(graph)
+    graph.watch(repub)
     one, two = RecordingPeer(graph), RecordingPeer(graph)
     for n in range(11):
         call(graph, one, **goal_op(f"g{n}"))

@@ -19,7 +19,9 @@ def graph() -> Graph:
 
 @pytest.fixture
 def nodes(graph: Graph) -> TutorialNodes:
-    return install_tutorials(graph)
+    nodes = install_tutorials(graph)
+    graph.watch(nodes)
+    return nodes
 
 
 def op(peer: RecordingPeer, graph: Graph, now: float = 0.0, **fields: Any) -> None:

@@ -3,6 +3,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
+from simbridge.app.build import guard_graph
 from simbridge.app.config import Params, load_world
 from simbridge.app.guard import Guard
 from simbridge.app.settings import ServerSettings
@@ -65,7 +66,9 @@ def test_access_rules_apply_once_a_guard_is_installed() -> None:
     for guarded in (False, True):
         graph = graph_for(settings)
         if guarded:
-            rosbridge_of(graph, Guard(graph, settings))
+            guard = Guard(graph, settings)
+            guard_graph(graph, guard)
+            rosbridge_of(graph, guard)
         sender, listener = RecordingPeer(graph), RecordingPeer(graph)
         op(listener, graph, op="subscribe", topic="/n", type="std_msgs/Int32")
         for k in range(4):
@@ -82,9 +85,10 @@ def test_cmd_vel_reaches_its_robot_and_another_robots_client_is_refused_by_scope
     RobotBridge(graph, world)
     settings = ServerSettings(client_tokens={"r1-token-aaaa": "r1"})
     guard = Guard(graph, settings, robots=world.robots.keys)
+    guard_graph(graph, guard)
     rosbridge_of(graph, guard)
     r1 = RecordingPeer(graph, token="r1-token-aaaa")
-    guard.connect(r1)  # its access from its token, as on connect
+    guard.peer_connected(r1)  # its access from its token, as on connect
     assert op(r1, graph, op="publish", topic="r1/cmd_vel", msg=TWIST) == []
     assert (world.robots["r1"].cmd_v, world.robots["r1"].cmd_omega) == (0.2, 0.5)
     out = op(r1, graph, op="publish", topic="/r2/cmd_vel", msg=TWIST)
