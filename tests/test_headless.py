@@ -81,6 +81,17 @@ def test_services_reset_and_step() -> None:
     assert sim.call_service("/sim/step")["success"] is False  # not paused
 
 
+def test_a_paused_sim_step_steps_once_and_runs_the_hooks_on_sim_time() -> None:
+    """/sim/step headless is the server's single step: one step, its hooks, sim time."""
+    sim = Simulation()
+    sim.step()
+    seen: list[tuple[int, float]] = []
+    sim.tick_hooks.append(lambda now: seen.append((sim.world.steps, now)))
+    assert sim.call_service("/sim/pause", {"data": True})["success"] is True
+    assert sim.call_service("/sim/step")["success"] is True
+    assert seen == [(2, pytest.approx(2 * sim.dt))]
+
+
 def test_runs_much_faster_than_real_time() -> None:
     """20 s of sim time with /odom and /scan subscribed takes well under 20 s (bench: ~200x)."""
     sim = Simulation()

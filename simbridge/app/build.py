@@ -13,10 +13,15 @@ reader follows:
 3. a server's front ends: the guard (who each peer is), the rosbridge front end, its WebSocket
    server, the page's HTTP answers with ``/admin`` and its grading pages, the recorder
    (``--record``), then Zenoh, DDS and Foxglove when asked for;
-4. the step sequence (:class:`~simbridge.app.steps.Steps`): the hooks of every part above in
-   that order, made once.
+4. the step sequence (:class:`~simbridge.app.steps.Steps`), made once: the hooks that depend on
+   a step (TF, the watchdog, the tutorial nodes, the grader) and the loop's (the ROS 2 and
+   Foxglove front ends, the recorder). ``/sim/step`` is its :meth:`~simbridge.app.steps.Steps.step`
+   on both, on the server's monotonic clock or the headless sim time.
 
-No part adds itself to another from elsewhere: what is wired to what is written here.
+No part adds itself to another from elsewhere: what is wired to what is written here and in
+:func:`~simbridge.robot.assembly.build_robot_graph` (the peers each node hears of,
+:meth:`Graph.watch <simbridge.graph.graph.Graph.watch>`; the guard, :func:`guard_graph`; the
+front ends' taps, flushers and parameter listeners).
 """
 
 from __future__ import annotations
@@ -170,14 +175,13 @@ def _world(
     seed: int,
     no_sim: bool,
     use_sim_time: bool,
-    sim_step: Callable[[], None],
 ) -> tuple[World, RobotGraph]:
     spec = world if isinstance(world, WorldSpec) else load_world(world)
     if no_sim:
         spec = spec.without_robots()
     prm = params if isinstance(params, Params) else load_params(params)
     sim = World(spec, prm, seed=seed)
-    robot = build_robot_graph(sim, sim_step, settings=settings, use_sim_time=use_sim_time)
+    robot = build_robot_graph(sim, settings=settings, use_sim_time=use_sim_time)
     if no_sim:
         # the robot and the clock are made and taken off again: the e-stop, the roles and the
         # admin pages are made on them (the robot's node serves /simbridge/access)
@@ -195,26 +199,19 @@ def build_headless(
 ) -> Core:
     """Make the parts without sockets, stepped by the caller on sim time.
 
-    ``/sim/step`` runs a whole tick (as :meth:`Steps.tick` from the caller does). The grader
-    has no tasks and no results file of its own (``simbridge grade --headless`` hands it the
-    task to run); with ``bags``, it records each run into a bag in that directory.
+    ``/sim/step`` runs :meth:`Steps.step` on sim time, as the server's does on its clock. The
+    grader has no tasks and no results file of its own (``simbridge grade --headless`` hands
+    it the task to run); with ``bags``, it records each run into a bag in that directory.
     """
-    core: Core | None = None
-
-    def sim_step() -> None:  # /sim/step: the step sequence made below
-        if core is not None:
-            core.steps.tick()
-
-    sim, robot = _world(
-        None, world, params, seed=seed, no_sim=False, use_sim_time=use_sim_time, sim_step=sim_step
-    )
+    sim, robot = _world(None, world, params, seed=seed, no_sim=False, use_sim_time=use_sim_time)
     graph = robot.graph
     grader = Grader(graph, sim, ResultsLog(None), {}, bags=bags)
     if bags is not None:
         from simbridge.tools.bag import BagWriter
 
         grader.recorder = lambda path: BagWriter(path, graph.registry)
-    steps = Steps(robot, [*robot.hooks, grader.tick], realtime=False)
+    steps = Steps(robot, [*robot.hooks, grader.tick], clock=lambda: sim.time, realtime=False)
+    robot.simclock.stepper = steps.step  # /sim/step: one step, as the server's
     core = Core(sim, robot, grader, steps)
     robot.publish_static(0.0)
     return core
@@ -254,20 +251,8 @@ def build(
         ConfigError: the tasks directory or the results file (named by its setting).
         BagError: the ``--record`` directory exists.
     """
-    parts: Parts | None = None
-
-    def sim_step() -> None:  # /sim/step: step and publish on the loop's clock
-        if parts is not None:
-            parts.core.steps.advance(time.monotonic())
-
     sim, robot = _world(
-        settings,
-        world,
-        params,
-        seed=seed,
-        no_sim=no_sim,
-        use_sim_time=settings.use_sim_time,
-        sim_step=sim_step,
+        settings, world, params, seed=seed, no_sim=no_sim, use_sim_time=settings.use_sim_time
     )
     graph = robot.graph
     grader = install_grader(graph, sim, settings, offload=offload)
@@ -275,7 +260,8 @@ def build(
         from simbridge.tools.bag import BagWriter
 
         grader.recorder = lambda path: BagWriter(path, graph.registry)
-    hooks: list[Hook] = [*robot.hooks, grader.tick]
+    hooks: list[Hook] = [*robot.hooks, grader.tick]  # after each step
+    loop_hooks: list[Hook] = []  # once a tick of the loop
 
     guard = Guard(graph, settings, robots=lambda: sim.robots.keys())
     guard_graph(graph, guard)
@@ -310,14 +296,14 @@ def build(
         graph.topics.taps.append(zenoh_link.on_deliver)  # what it forwards to ROS 2
         robot.bridge.elsewhere.append(zenoh_link)  # the other processes' robots
         graph.topics.flushers.append(zenoh_link.flush_early)
-        hooks.append(zenoh_link.tick)
+        loop_hooks.append(zenoh_link.tick)
     dds_link = None
     if dds is not None:
         from simbridge.ros2.dds.link import DdsLink  # the [dds] extra, only when asked
 
         dds_link = DdsLink(graph, dds, simulator=not no_sim, settings=settings)
         graph.topics.taps.append(dds_link.on_deliver)
-        hooks.append(dds_link.tick)
+        loop_hooks.append(dds_link.tick)
     foxglove = None
     if settings.foxglove_port is not None:
         from simbridge.foxglove.front import FoxgloveFront  # the [foxglove] extra, if asked
@@ -331,12 +317,20 @@ def build(
         )
         graph.topics.taps.append(foxglove.on_deliver)
         graph.params.on_change.append(foxglove.params_changed)  # every node's parameters
-        hooks.append(foxglove.tick)
+        loop_hooks.append(foxglove.tick)
     if recorder is not None:  # after the front ends, as when the command added it at start
-        hooks.append(recorder.tick)
+        loop_hooks.append(recorder.tick)
 
-    steps = Steps(robot, hooks, realtime=True, simulate=not no_sim)
-    parts = Parts(
+    steps = Steps(
+        robot,
+        hooks,
+        clock=time.monotonic,  # the loop's clock (asyncio's is time.monotonic)
+        loop_hooks=loop_hooks,
+        realtime=True,
+        simulate=not no_sim,
+    )
+    robot.simclock.stepper = steps.step  # /sim/step: one step, as the headless API's
+    return Parts(
         Core(sim, robot, grader, steps),
         guard=guard,
         rosbridge=rosbridge,
@@ -347,4 +341,3 @@ def build(
         dds=dds_link,
         foxglove=foxglove,
     )
-    return parts

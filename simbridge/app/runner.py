@@ -336,7 +336,3 @@ class App:
     def tick(self, now: float) -> None:
         """Run one tick of :attr:`steps`: step and publish (unless paused), timeouts, hooks."""
         self.steps.tick(now)
-
-    def advance(self, now: float) -> None:
-        """Step the simulation once and publish the step (/odom, /tf, /scan, /clock)."""
-        self.steps.advance(now)

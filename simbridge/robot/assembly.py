@@ -85,7 +85,6 @@ class RobotGraph:
 
 def build_robot_graph(
     world: World,
-    advance: Callable[[], None],
     *,
     settings: ServerSettings | None = None,
     use_sim_time: bool = False,
@@ -94,8 +93,6 @@ def build_robot_graph(
 
     Args:
         world: the simulation the graph exposes.
-        advance: steps the simulation once and publishes the step; ``/sim/step`` calls it (the
-            caller knows its clock: the real-time loop's or the headless sim time).
         settings: server limits and timeouts (default: the defaults).
         use_sim_time: stamp headers with sim time instead of the wall clock.
     """
@@ -104,7 +101,7 @@ def build_robot_graph(
     install_rosapi(graph)
     bridge = RobotBridge(graph, world)
     controls = WorldControls(graph, world)
-    simclock = SimClock(graph, world, advance, use_sim_time=use_sim_time)
+    simclock = SimClock(graph, world, use_sim_time=use_sim_time)
     estop = EStop(graph, world, s)
     bridge.on_robot_added.append(estop.add_robot)
     bridge.on_robot_removed.append(estop.remove_robot)

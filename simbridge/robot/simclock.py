@@ -47,8 +47,6 @@ class SimClock:
     Args:
         graph: where ``/clock`` and the services live.
         world: whose ``time`` is the sim time.
-        advance: steps the simulation once and publishes that step (the runner's or the
-            headless API's); called by ``/sim/step``.
         use_sim_time: stamp every header of ``graph`` with sim time instead of the wall clock.
     """
 
@@ -56,13 +54,14 @@ class SimClock:
         self,
         graph: Graph,
         world: World,
-        advance: Callable[[], None],
         *,
         use_sim_time: bool = False,
     ) -> None:
         self.graph = graph
         self.world = world
-        self._advance = advance
+        #: One step of the world and what depends on it, for ``/sim/step``: the application's
+        #: :meth:`simbridge.app.steps.Steps.step` (the builder sets it; None: not stepped).
+        self.stepper: Callable[[], None] | None = None
         #: Headers carry sim time.
         self.use_sim_time = use_sim_time
         #: No step happens until resumed (``/sim/pause``) except single steps.
@@ -128,7 +127,9 @@ class SimClock:
                 "success": False,
                 "message": "the simulation is running; pause it first (/sim/pause {data: true})",
             }
-        self._advance()
+        if self.stepper is None:
+            return {"success": False, "message": "this simulation has no step sequence to run"}
+        self.stepper()
         return {"success": True, "message": f"stepped to t={self.world.time:.3f} s"}
 
     def _set_rtf(self, args: Any) -> dict[str, Any]:

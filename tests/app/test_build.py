@@ -32,6 +32,7 @@ def test_the_hooks_run_in_one_list_made_once_in_the_builders_order() -> None:
     core = parts.core
     robot = core.robot
     assert core.steps.hooks == [robot.tf_republisher.tick, robot.safety.tick, core.grader.tick]
+    assert core.steps.loop_hooks == []  # no front end but rosbridge, no recorder
 
 
 def test_no_sim_leaves_no_robot_and_no_clock() -> None:
@@ -49,4 +50,4 @@ def test_an_existing_record_directory_is_refused_before_any_port(tmp_path: Path)
 def test_the_record_bag_is_made_at_start_not_when_built(tmp_path: Path) -> None:
     parts = build(_settings(), health=_health, record=(tmp_path / "bag", None))
     assert parts.recorder is not None and not (tmp_path / "bag").exists()
-    assert parts.core.steps.hooks[-1] == parts.recorder.tick
+    assert parts.core.steps.loop_hooks == [parts.recorder.tick]

@@ -39,7 +39,11 @@ async def test_clock_publishes_sim_time_every_step(ws: ClientConnection, app: Ap
 async def test_pause_stops_time_and_step_advances_exactly_one_dt(
     ws: ClientConnection, app: App
 ) -> None:
-    """While paused nothing moves; /sim/step advances one step and publishes it."""
+    """While paused nothing moves; /sim/step advances one step, publishes it and runs its hooks.
+
+    The step's hooks (TF, the watchdog, the grader) have run by the time the reply is sent, as
+    a headless step's have (tests/test_headless.py).
+    """
     await send_json(ws, {"op": "subscribe", "topic": "/clock"})
     await next_clock(ws)
     reply = await call(ws, "/sim/pause", {"data": True}, "p")
@@ -48,6 +52,8 @@ async def test_pause_stops_time_and_step_advances_exactly_one_dt(
     steps = app.world.steps
     await wait_for(lambda: app.stats.ticks >= steps + 5)  # the loop keeps ticking
     assert app.world.time == paused_at
+    hooked: list[int] = []
+    app.tick_hooks.append(lambda now: hooked.append(app.world.steps))
     seen: list[Any] = []
 
     def until_reply(m: Any) -> bool:
@@ -58,6 +64,7 @@ async def test_pause_stops_time_and_step_advances_exactly_one_dt(
     reply = await recv_until(ws, until_reply)
     assert reply["values"]["success"] is True, reply
     assert abs(app.world.time - paused_at - app.world.dt) < 1e-9
+    assert hooked[-1] == steps + 1  # ran in the step, before its reply
     clocks = [stamp_s(m["msg"]["clock"]) for m in seen if m.get("topic") == "/clock"]
     assert clocks, "the step published no /clock before its reply"
     assert abs(clocks[-1] - app.world.time) < 1e-9
