@@ -76,14 +76,29 @@ def _environment() -> dict[str, Any]:
     return environment(os.environ)
 
 
+class _Items(argparse.Action):
+    """A list-valued option: one or more values, repeatable; they replace the variable's."""
+
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: str | Sequence[Any] | None,
+        option_string: str | None = None,
+    ) -> None:
+        given = getattr(namespace, self.dest)
+        kept = () if given is self.default else tuple(given)
+        setattr(namespace, self.dest, (*kept, *(values or ())))
+
+
 def _add_options(
     parser: argparse.ArgumentParser, env: dict[str, Any], names: set[str] | None = None
 ) -> None:
     """Add the options the settings declare (:class:`~simbridge.app.settings.Option`).
 
     Each has the field's description, default and variable as its help, the field's type and
-    bounds as its check, and the variable's value (``env``) as its default; ``names``: only
-    those options.
+    bounds as its check (of each item, for a list), and the variable's value (``env``) as its
+    default; ``names``: only those options.
     """
     from simbridge.app.settings import RunOptions, ServerSettings, options
 
@@ -105,42 +120,15 @@ def _add_options(
                 help=declared.help(),
             )
             continue
+        listed: dict[str, Any] = {} if declared.item is None else {"nargs": "+", "action": _Items}
         target.add_argument(
             declared.flag,
+            **listed,
             type=_typed(declared),
             metavar=declared.metavar,
             default=env.get(declared.name, declared.info.default),
             help=declared.help(),
         )
-
-
-def _add_zenoh_options(parser: argparse.ArgumentParser) -> None:
-    """Options of ROS 2 over Zenoh that have no variable (repeatable, or read from ROS's own)."""
-    from simbridge.app.settings import ZENOH
-
-    group = next(g for g in parser._action_groups if g.title == ZENOH)
-    group.add_argument(
-        "--zenoh-connect",
-        metavar="ENDPOINT",
-        action="append",
-        default=[],
-        help="connect to this Zenoh endpoint instead, e.g. tcp/192.168.1.10:7447 (repeatable)",
-    )
-    group.add_argument(
-        "--zenoh-listen",
-        metavar="ENDPOINT",
-        action="append",
-        default=[],
-        help="listen on this Zenoh endpoint instead of tcp/localhost:0 (repeatable)",
-    )
-    group.add_argument(
-        "--ros-distro",
-        choices=["humble", "jazzy", "kilted"],
-        default=None,
-        help="match this distribution's rmw_zenoh and DDS middlewares: humble has no type "
-        "hashes (and 24-byte GIDs over DDS), jazzy and kilted use RIHS01 (default: "
-        "$ROS_DISTRO, else jazzy)",
-    )
 
 
 def _check_foxglove(args: argparse.Namespace) -> None:
@@ -164,10 +152,10 @@ def _zenoh_options(args: argparse.Namespace) -> Any:
     """
     if not args.zenoh:
         if args.zenoh_connect or args.zenoh_listen:
-            msg = "--zenoh-connect and --zenoh-listen need --zenoh"
+            msg = "--zenoh-connect and --zenoh-listen (or their variables) need --zenoh"
             raise ConfigError(msg)
         if args.ros_distro and not args.dds:
-            msg = "--ros-distro needs --zenoh or --dds"
+            msg = "--ros-distro (or SIMBRIDGE_ROS_DISTRO) needs --zenoh or --dds"
             raise ConfigError(msg)
         return None
     from simbridge.ros2.zenoh.config import ZenohOptions
@@ -248,28 +236,14 @@ def _run_parser(env: dict[str, Any]) -> argparse.ArgumentParser:
         description=(
             "A rosbridge v2 server with a built-in 2D differential-drive robot (LiDAR, /odom, "
             "/tf, /cmd_vel). Point roslibjs, roslibpy or Foxglove at ws://HOST:PORT/ and open "
-            "http://HOST:HTTP-PORT/ to drive the robot from a browser. Every option but the "
-            "repeatable ones can be set by the variable named after it."
+            "http://HOST:HTTP-PORT/ to drive the robot from a browser. Every option can be set "
+            "by the variable named after it (a repeatable one's values separated by commas)."
         ),
         epilog=f"sub-commands (simbridge COMMAND --help):\n{commands}",
         formatter_class=argparse.RawDescriptionHelpFormatter,
     )
     parser.add_argument("--version", action="version", version=f"simbridge {__version__}")
-    parser.add_argument(
-        "--no-http",
-        action="store_true",
-        help="do not serve HTTP on a port of its own (the WebSocket port still answers "
-        "/healthz and the page)",
-    )
     _add_options(parser, env)
-    _add_zenoh_options(parser)
-    parser.add_argument(
-        "--record-topics",
-        metavar="TOPIC",
-        nargs="+",
-        default=None,
-        help="topics --record records (default: every topic, also later ones)",
-    )
     return parser
 
 

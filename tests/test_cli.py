@@ -320,6 +320,7 @@ def test_bad_environment_variable_is_refused_naming_it(
         ("--stall-timeout", "-5", "greater than 0 (got '-5')"),
         ("--max-clients", "abc", "valid integer"),
         ("--port", "70000", "less than or equal to 65535"),
+        ("--ros-distro", "rolling", "'humble', 'jazzy' or 'kilted' (got 'rolling')"),
     ],
 )
 def test_bad_option_is_refused_like_the_environment(
@@ -334,6 +335,35 @@ def test_bad_option_is_refused_like_the_environment(
     err = capsys.readouterr().err
     assert f"argument {option}: must be" in err
     assert why in err
+
+
+def test_repeatable_options_replace_their_variables_and_no_http_closes_the_http_port(
+    capsys: pytest.CaptureFixture[str],
+) -> None:
+    """A list option's values replace its variable's; SIMBRIDGE_NO_HTTP is --no-http."""
+    from simbridge.app.settings import environment
+    from simbridge.cli import _run_parser, _server_values
+
+    env = environment(
+        {
+            "SIMBRIDGE_ZENOH_CONNECT": "tcp/10.0.0.1:7447,tcp/10.0.0.2:7447",
+            "SIMBRIDGE_RECORD_TOPICS": "/odom",
+            "SIMBRIDGE_NO_HTTP": "1",
+        }
+    )
+    args = _run_parser(env).parse_args([])
+    assert args.zenoh_connect == ("tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447")
+    assert args.record_topics == ("/odom",) and args.zenoh_listen == ()
+    assert _server_values(args)["http_port"] is None
+    given = ["--zenoh-connect", "tcp/a:7447", "--zenoh-connect", "tcp/b:7447"]
+    args = _run_parser(env).parse_args([*given, "--record-topics", "/tf", "/cmd_vel"])
+    assert args.zenoh_connect == ("tcp/a:7447", "tcp/b:7447")
+    assert args.record_topics == ("/tf", "/cmd_vel")
+    assert _server_values(_run_parser({}).parse_args([]))["http_port"] == 8080
+    with pytest.raises(SystemExit) as exc:
+        _run_parser({}).parse_args(["--zenoh-listen", ""])
+    assert exc.value.code == 2
+    assert "argument --zenoh-listen: must not be empty (got '')" in capsys.readouterr().err
 
 
 def test_empty_environment_variable_means_the_default() -> None:

@@ -50,11 +50,14 @@ __all__ = [
     "Count",
     "Float",
     "Int",
+    "Item",
+    "Items",
     "LogLevel",
     "Option",
     "Port",
     "Rate",
     "Record",
+    "RosDistro",
     "RunOptions",
     "Seconds",
     "ServerSettings",
@@ -221,6 +224,24 @@ Count = Annotated[Int, Field(gt=0)]
 Seconds = Annotated[Float, Field(gt=0)]
 Rate = Annotated[Float, Field(gt=0)]
 LogLevel = Literal["debug", "info", "warning", "error"]
+#: The ROS 2 distributions whose middlewares simbridge matches (``simbridge.ros2.typehash``).
+RosDistro = Literal["humble", "jazzy", "kilted"]
+
+
+def _split(value: Any) -> Any:
+    """Read a text of comma-separated items (an environment variable's) as their list.
+
+    An empty item (``a,,b``, a trailing comma) stays, to be refused naming its place.
+    """
+    if isinstance(value, str):
+        return [item.strip() for item in value.split(",")]
+    return value
+
+
+#: One item of a list-valued option: a text that is not empty.
+Item = Annotated[str, Field(min_length=1)]
+#: A list-valued option's items (a tuple: the settings are frozen); comma-separated as text.
+Items = Annotated[tuple[Item, ...], BeforeValidator(_split)]
 
 
 # -- records ------------------------------------------------------------------------------------
@@ -313,7 +334,10 @@ class Option:
 
     The option is ``--<name>`` (``name`` defaults to the field's, ``_`` as ``-``) and the
     variable ``SIMBRIDGE_<NAME>``; its help is the field's description, its default and the
-    variable. A boolean field is a flag (``--use-sim-time``).
+    variable. A boolean field is a flag (``--use-sim-time``). A list-valued field (a tuple, of
+    :data:`Items`) takes one or more values and may be repeated (``--zenoh-connect A
+    --zenoh-connect B``, ``--record-topics /odom /cmd_vel``); its variable holds them separated
+    by commas, and the command line's replace the variable's.
     """
 
     name: str = ""
@@ -776,6 +800,19 @@ class RunOptions(Record):
         "tcp/localhost:7447, domain ROS_DOMAIN_ID (default 0); ZENOH_SESSION_CONFIG_URI and "
         "ZENOH_CONFIG_OVERRIDE apply as for rmw_zenoh",
     )
+    zenoh_connect: Annotated[Items, Option(metavar="ENDPOINT", group=ZENOH)] = Field(
+        (), description="connect to this Zenoh endpoint instead, e.g. tcp/192.168.1.10:7447"
+    )
+    zenoh_listen: Annotated[Items, Option(metavar="ENDPOINT", group=ZENOH)] = Field(
+        (), description="listen on this Zenoh endpoint instead of tcp/localhost:0"
+    )
+    ros_distro: Annotated[
+        RosDistro | None, Option(group=ZENOH, default="$ROS_DISTRO, else jazzy")
+    ] = Field(
+        None,
+        description="match this distribution's rmw_zenoh and DDS middlewares: humble has no "
+        "type hashes (and 24-byte GIDs over DDS), jazzy and kilted use RIHS01",
+    )
     dds: Annotated[bool, Option(group=DDS)] = Field(
         False,
         description="join the ROS 2 graph over DDS as a default ROS 2 install does: domain "
@@ -787,10 +824,18 @@ class RunOptions(Record):
         description="run the bridge alone, without the simulated world and robot (with "
         "--zenoh: a rosbridge in front of ROS 2 nodes, or a classroom front-end)",
     )
+    no_http: Annotated[bool, Option()] = Field(
+        False,
+        description="do not serve HTTP on a port of its own (the WebSocket port still answers "
+        "/healthz and the page)",
+    )
     record: Annotated[str | None, Option(metavar="DIR")] = Field(
         None,
         description="record topics into the rosbag2 MCAP bag DIR while serving (finished on stop)",
     )
+    record_topics: Annotated[
+        Items | None, Option(metavar="TOPIC", default="every topic, also later ones")
+    ] = Field(None, description="topics --record records")
     log_level: Annotated[LogLevel, Option()] = Field("info", description="log verbosity")
 
 
@@ -826,13 +871,21 @@ class Declared:
         return self.info.annotation is bool
 
     @property
+    def item(self) -> Any | None:
+        """A list-valued option's item type with its bounds; None for a single value."""
+        kind = _unwrap_optional(self.info.annotation)
+        if typing.get_origin(kind) is Annotated:
+            kind = typing.get_args(kind)[0]
+        if typing.get_origin(kind) is tuple:
+            return typing.get_args(kind)[0]
+        return None
+
+    @property
     def metavar(self) -> str | None:
         """How the value is shown: the declared metavar, ``N`` for integers, or the choices."""
         if self.option.metavar is not None:
             return self.option.metavar
-        kind = self.info.annotation
-        if typing.get_origin(kind) in (typing.Union, types.UnionType):
-            kind = next(a for a in typing.get_args(kind) if a is not type(None))
+        kind = _unwrap_optional(self.info.annotation)
         if typing.get_origin(kind) is Annotated:
             kind = typing.get_args(kind)[0]
         if typing.get_origin(kind) is Literal:
@@ -840,12 +893,27 @@ class Declared:
         return "N" if kind is int else None
 
     def help(self) -> str:
-        """The option's help: the description, the default and the variable."""
+        """The option's help: the description, the default and the variable.
+
+        A list-valued option says it is repeatable and that its variable's items are
+        comma-separated.
+        """
         default = self.option.default
-        if default is None and not self.flag_only and self.info.default is not None:
+        listed = self.item is not None
+        if default is None and not (self.flag_only or listed) and self.info.default is not None:
             default = _number(self.info.default)
-        shown = f" (default: {default})" if default else ""
-        return f"{self.info.description}{shown} [{self.variable}]"
+        notes = [f"default: {default}"] if default else []
+        notes += ["repeatable"] if listed else []
+        shown = f" ({'; '.join(notes)})" if notes else ""
+        variable = f"{self.variable}, comma-separated" if listed else self.variable
+        return f"{self.info.description}{shown} [{variable}]"
+
+
+def _unwrap_optional(kind: Any) -> Any:
+    """Return ``X`` of ``X | None``, else ``kind``."""
+    if typing.get_origin(kind) in (typing.Union, types.UnionType):
+        return next(a for a in typing.get_args(kind) if a is not type(None))
+    return kind
 
 
 def options(*models: type[Record]) -> Iterator[Declared]:
@@ -858,13 +926,14 @@ def options(*models: type[Record]) -> Iterator[Declared]:
 
 
 def check(declared: Declared, text: str) -> Any:
-    """Return ``text`` read as the value of the option ``declared``.
+    """Return ``text`` read as one value of the option ``declared`` (of a list: one item).
 
     Raises:
         SettingsError: it is not such a value (the reason in the settings' own words).
     """
+    kind = declared.kind if declared.item is None else declared.item
     adapter: pydantic.TypeAdapter[Any] = pydantic.TypeAdapter(
-        declared.kind, config=ConfigDict(allow_inf_nan=False)
+        kind, config=ConfigDict(allow_inf_nan=False)
     )
     try:
         return adapter.validate_python(text)
@@ -877,7 +946,8 @@ def environment(environ: Mapping[str, str] | None = None) -> dict[str, Any]:
 
     Keys are the options' names (``max_clients``, ``results``); unset, empty and blank variables
     are left out (the option's default applies). Read by pydantic-settings, each variable with
-    its option's type and bounds.
+    its option's type and bounds; a list-valued option's variable holds its items separated by
+    commas (``SIMBRIDGE_ZENOH_CONNECT=tcp/10.0.0.1:7447,tcp/10.0.0.2:7447``), not JSON.
 
     Raises:
         ConfigError: a variable's value is invalid; the text names the variable, the value
@@ -899,8 +969,13 @@ def environment(environ: Mapping[str, str] | None = None) -> dict[str, Any]:
             return {k.lower(): v for k, v in given.items()}
 
     class Environment(BaseSettings):
+        # enable_decoding off: a list is comma-separated text (Items), not JSON
         model_config = SettingsConfigDict(
-            env_prefix="SIMBRIDGE_", extra="ignore", allow_inf_nan=False, frozen=True
+            env_prefix="SIMBRIDGE_",
+            extra="ignore",
+            allow_inf_nan=False,
+            frozen=True,
+            enable_decoding=False,
         )
 
         @classmethod
@@ -919,8 +994,12 @@ def environment(environ: Mapping[str, str] | None = None) -> dict[str, Any]:
     try:
         values = model()
     except pydantic.ValidationError as err:
-        text = SettingsError.of(err).describe(
-            lambda loc: f"environment variable {declared[loc.partition('.')[0]].variable}"
-        )
+
+        def variable(path: str) -> str:  # zenoh_connect[1]: SIMBRIDGE_ZENOH_CONNECT[1]
+            name, _, rest = path.partition("[")
+            where = f"[{rest}" if rest else ""
+            return f"environment variable {declared[name.partition('.')[0]].variable}{where}"
+
+        text = SettingsError.of(err).describe(variable)
         raise ConfigError(text) from None
     return {name: getattr(values, name) for name in values.model_fields_set}

@@ -329,7 +329,8 @@ def test_every_option_is_declared_with_a_description_a_flag_and_a_variable() -> 
     assert len(flags) == len(declared) >= 25
     for d in declared:
         assert d.info.description, d.field
-        assert d.help().endswith(f"[{d.variable}]")
+        listed = ", comma-separated" if d.item is not None else ""
+        assert d.help().endswith(f"[{d.variable}{listed}]")
     assert flags["--results"].field == "results_file"
     assert flags["--results"].variable == "SIMBRIDGE_RESULTS"
     assert "(default: 200)" in flags["--max-clients"].help()
@@ -338,6 +339,57 @@ def test_every_option_is_declared_with_a_description_a_flag_and_a_variable() -> 
         check(flags["--max-clients"], "0")
     with pytest.raises(SettingsError, match="not a ROS 2 role"):
         check(flags["--ros2-role"], "boss")
+
+
+def test_list_valued_options_are_repeatable_and_their_variables_comma_separated() -> None:
+    """--zenoh-connect, --zenoh-listen and --record-topics: each item checked, by its place."""
+    flags = {d.flag: d for d in options(ServerSettings, RunOptions)}
+    assert {f for f, d in flags.items() if d.item is not None} == {
+        "--zenoh-connect",
+        "--zenoh-listen",
+        "--record-topics",
+    }
+    assert flags["--zenoh-connect"].help() == (
+        "connect to this Zenoh endpoint instead, e.g. tcp/192.168.1.10:7447 (repeatable) "
+        "[SIMBRIDGE_ZENOH_CONNECT, comma-separated]"
+    )
+    assert "(default: every topic, also later ones; repeatable)" in flags["--record-topics"].help()
+    assert check(flags["--zenoh-listen"], "tcp/127.0.0.1:0") == "tcp/127.0.0.1:0"  # one item
+    with pytest.raises(SettingsError, match=r"^must not be empty \(got ''\)$"):
+        check(flags["--record-topics"], "")
+    env = environment(
+        {
+            "SIMBRIDGE_ZENOH_CONNECT": "tcp/10.0.0.1:7447, tcp/10.0.0.2:7447",
+            "SIMBRIDGE_RECORD_TOPICS": "/odom",
+        }
+    )
+    assert env == {
+        "zenoh_connect": ("tcp/10.0.0.1:7447", "tcp/10.0.0.2:7447"),
+        "record_topics": ("/odom",),
+    }
+    with pytest.raises(ConfigError) as err:
+        environment({"SIMBRIDGE_ZENOH_LISTEN": "tcp/127.0.0.1:0,"})
+    assert str(err.value) == (
+        "environment variable SIMBRIDGE_ZENOH_LISTEN[1]: must not be empty (got '')"
+    )
+
+
+def test_ros_distro_and_no_http_are_declared_as_the_front_ends_read_them() -> None:
+    """--ros-distro's choices are the distributions the ROS 2 front ends speak; --no-http a flag."""
+    from simbridge.ros2.dds.options import _DISTROS
+    from simbridge.ros2.typehash import DISTROS
+
+    flags = {d.flag: d for d in options(ServerSettings, RunOptions)}
+    distro = flags["--ros-distro"]
+    assert distro.metavar == "{" + ",".join(DISTROS) + "}" and tuple(_DISTROS) == DISTROS
+    assert [check(distro, d) for d in DISTROS] == list(DISTROS)
+    with pytest.raises(SettingsError, match="must be 'humble', 'jazzy' or 'kilted'"):
+        check(distro, "rolling")
+    assert flags["--no-http"].flag_only
+    assert environment({"SIMBRIDGE_NO_HTTP": "yes", "SIMBRIDGE_ROS_DISTRO": "humble"}) == {
+        "no_http": True,
+        "ros_distro": "humble",
+    }
 
 
 def test_the_environment_is_read_with_the_options_types_naming_the_variable() -> None:
