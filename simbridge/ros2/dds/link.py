@@ -30,16 +30,14 @@ import asyncio
 import contextlib
 import importlib
 import logging
-import threading
-import time
-from collections import Counter, deque
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, SimbridgeError
-from simbridge.graph import BRIDGE_NODE, Graph, Topic
+from simbridge.graph import Graph, Topic
 from simbridge.graph.access import Access
 from simbridge.graph.topics import DEFAULT_TOPIC_QOS, LATCHED_TOPIC_QOS, Peer, TopicQos
 from simbridge.msgs.cdr import CdrReader, CdrWriter
@@ -61,6 +59,18 @@ from simbridge.ros2.dds.wire import (
     topic_name,
     typehash_user_data,
 )
+from simbridge.ros2.link import (
+    SHARED_TOPICS,
+    ForeignNode,
+    Inbox,
+    Logbook,
+    Refusals,
+    Ros2Peer,
+    Take,
+    local_publisher,
+    outward_services,
+    outward_topics,
+)
 from simbridge.ros2.names import dds_type, ros_type
 from simbridge.ros2.role import ros2_access
 from simbridge.ros2.typehash import TypeHasher
@@ -73,15 +83,6 @@ logger = logging.getLogger(__name__)
 INSTALL_HINT = 'pip install "simbridge[dds]" (in a checkout: pip install ".[dds]")'
 #: Seconds between two reads of DDS discovery and comparisons with the graph.
 RECONCILE_PERIOD = 0.5
-#: Seconds between two log lines about the same problem.
-LOG_EVERY = 30.0
-#: Topics that many processes publish at once (every other name has one owner).
-SHARED_TOPICS = frozenset({"/tf", "/tf_static", "/rosout", "/parameter_events"})
-#: Samples waiting for the event loop at most (past it, new ones are dropped and counted).
-INBOX_LIMIT = 20_000
-#: Samples handed to the graph per event-loop callback at most, and their bytes at most.
-DRAIN_BATCH = 500
-DRAIN_BYTES = 1_000_000
 #: Samples a data listener takes from its reader at once.
 TAKE_BATCH = 64
 #: Discovery samples read per reconcile at most, per built-in topic.
@@ -113,33 +114,13 @@ def import_cyclonedds(what: str = "--dds") -> Any:
         raise ConfigError(msg) from None
 
 
-class DdsNode(str):
-    """A node of another DDS participant, as the owner of a topic's publisher in the graph.
+class DdsNode(ForeignNode):
+    """A node of another DDS participant (``DdsNode(name, guid)``: the participant's GUID)."""
 
-    It reads as the node's name but is never equal to a local node of that name, nor to a
-    node of that name in another participant.
-    """
-
-    participant: str
-
-    def __new__(cls, name: str, participant: str) -> DdsNode:
-        """Make the owner for node ``name`` of the participant ``participant`` (its GUID)."""
-        node = super().__new__(cls, name)
-        node.participant = participant
-        return node
-
-    def __eq__(self, other: object) -> bool:
-        return (
-            isinstance(other, DdsNode)
-            and str.__eq__(self, other)
-            and self.participant == other.participant
-        )
-
-    def __ne__(self, other: object) -> bool:
-        return not self.__eq__(other)
-
-    def __hash__(self) -> int:
-        return hash(("dds", str(self), self.participant))
+    @property
+    def participant(self) -> str:
+        """The GUID (hex) of the node's participant."""
+        return self.origin
 
 
 @dataclass(eq=False, slots=True)
@@ -178,7 +159,7 @@ class _Server:
     gids: tuple[bytes, bytes]  # reader's, writer's
 
 
-class _Caller:
+class _Caller(Ros2Peer):
     """The peer that makes a DDS client's call through the graph's service table."""
 
     label = "ROS 2 (DDS)"
@@ -204,6 +185,11 @@ class DdsLink:
         self.graph = graph
         #: The server's settings (the link's budgets, the ROS 2 peers' role).
         self.settings = settings = settings or ServerSettings()
+        #: Counters for /healthz.
+        self.stats: Counter[str] = Counter()
+        #: Warnings, rate-limited (also on /rosout).
+        self.logbook = Logbook(graph, "DDS", "simbridge.dds", self.stats, logger)
+        self._log = self.logbook.warn
         #: Domain, distribution, discovery range.
         self.options = options
         #: Whether this process simulates robots (not ``--no-sim``).
@@ -243,31 +229,36 @@ class DdsLink:
         scope, admin = ros2_access(settings)
         self._access = Access(scope, admin, guarded=True, peer_id=graph.next_peer_id())
         self._caller = _Caller(self, self._access)
+        #: Why DDS peers may not publish on a name (None: they may), by name.
+        self.refusals = Refusals(graph, self._access, self.logbook)
+        self._refused = self.refusals.refused
         self._servers: dict[str, _Server] = {}
         #: Calls from DDS waiting for a provider that is not in process, at most
         #: ``max_pending_calls`` (the budget of one rosbridge client: the DDS peers are one).
         self.calls_waiting = 0
         self.max_calls_waiting = settings.max_pending_calls
-        self._refusals: dict[str, str | None] = {}
         self._forwarding = False
         self._next_reconcile = 0.0
-        self._logged: dict[str, float] = {}
-        #: Samples from Cyclone's threads waiting for the event loop: (taker, name, bytes).
-        self._inbox: deque[tuple[Callable[[str, bytes], None], str, bytes]] = deque()
-        self._inbox_bytes = 0
-        self._inbox_lock = threading.Lock()
-        self._inbox_rung = False
         self.max_sample = settings.dds_max_sample_bytes
         self.max_inbox = settings.dds_inbox_bytes
         self.max_remote = settings.dds_max_remote_endpoints
-        #: Counters for /healthz.
-        self.stats: Counter[str] = Counter()
+        #: Samples from Cyclone's threads waiting for the event loop (past its bounds, new
+        #: ones are dropped: ``dropped_inbox``; over ``dds_max_sample_bytes``:
+        #: ``dropped_oversized``).
+        self.inbox = Inbox(
+            self.logbook,
+            max_bytes=self.max_inbox,
+            max_sample=self.max_sample,
+            dropped="dropped_inbox",
+            oversized="dropped_oversized",
+            setting="dds",
+        )
 
     # -- lifecycle ------------------------------------------------------------------------
 
     async def start(self) -> None:
         """Join the domain (the participant, ``ros_discovery_info``, discovery readers)."""
-        self._loop = asyncio.get_running_loop()
+        self._loop = self.inbox.loop = asyncio.get_running_loop()
         try:
             self._open()
         except Exception as err:  # Cyclone refuses the configuration or the network
@@ -344,7 +335,7 @@ class DdsLink:
     async def close(self) -> None:
         """Leave the domain (every endpoint goes with the participant)."""
         participant, self.participant = self.participant, None
-        self._loop = None  # Cyclone's threads hand nothing more to the event loop
+        self._loop = self.inbox.loop = None  # Cyclone's threads hand nothing more to the loop
         if participant is None:
             return
         self.state = "closed"
@@ -526,7 +517,7 @@ class DdsLink:
                 self.stats["unknown_types"] += 1
                 if "/" not in type_name:
                     continue  # not even a ROS type name: not listed
-            local = self._local_publisher(name)
+            local = local_publisher(topics.topics.get(name))
             if local is not None and name not in SHARED_TOPICS:
                 self._log(
                     f"clash {name}",
@@ -595,37 +586,19 @@ class DdsLink:
             nodes[name] = REMOTE_NODE
             self._remote_nodes.add(name)
 
-    def _local_publisher(self, name: str) -> str | None:
-        topic = self.graph.topics.topics.get(name)
-        if topic is None:
-            return None
-        for owner in topic.publishers:
-            local = _local_owner(owner)
-            if local is not None:
-                return local
-        return None
-
     # -- outward ----------------------------------------------------------------------------
 
     def _wanted(self) -> tuple[dict[str, tuple[str, str, bool]], dict[str, tuple[str, str]]]:
         """Return the local writers (name -> node, type, latched) and readers (name -> ...)."""
         writers: dict[str, tuple[str, str, bool]] = {}
         readers: dict[str, tuple[str, str]] = {}
-        for topic in self.graph.topics.topics.values():
-            if topic.type is None or not topic.known:
-                continue
-            for owner in topic.publishers:
-                local = _local_owner(owner)
-                if local is not None:
-                    writers[topic.name] = (local, topic.type, topic.qos.transient_local)
-                    break
-            for node, callback in topic.internal:
-                if type(node) is str and id(callback) not in self._marker_ids:
-                    readers[topic.name] = (node, topic.type)
-                    break
-            else:
-                if topic.sinks:
-                    readers[topic.name] = (BRIDGE_NODE, topic.type)
+        for topic, publishers, subscribers in outward_topics(self.graph, self._marker_ids):
+            type_name = topic.type or ""
+            # one writer and one reader a topic, under the first node that has it
+            if publishers:
+                writers[topic.name] = (publishers[0], type_name, topic.qos.transient_local)
+            if subscribers:
+                readers[topic.name] = (subscribers[0], type_name)
         return writers, readers
 
     def _export_local(self) -> None:
@@ -669,14 +642,11 @@ class DdsLink:
 
     def _wanted_services(self) -> dict[str, tuple[str, str]]:
         """Return the services to serve on DDS: name -> (node, type)."""
-        out: dict[str, tuple[str, str]] = {}
-        registry = self.graph.registry
-        for service in self.graph.services.services.values():
-            if service.type not in registry.services or "/_action/" in service.name:
-                continue
-            node = service.node if service.handler is not None else BRIDGE_NODE
-            out[service.name] = (node, service.type)
-        return out
+        return {
+            service.name: (node, service.type)
+            for service, node in outward_services(self.graph)
+            if "/_action/" not in service.name
+        }
 
     def _export_services(self) -> None:
         wanted = self._wanted_services()
@@ -841,62 +811,23 @@ class DdsLink:
 
     # -- samples from DDS -------------------------------------------------------------------
 
-    def hand_over(self, name: str, reader: Any, take: Callable[[str, bytes], None]) -> None:
+    def hand_over(self, name: str, reader: Any, take: Take) -> None:
         """Take a reader's samples and queue them for the event loop (Cyclone's threads).
 
-        Past ``dds_inbox_bytes`` or :data:`INBOX_LIMIT` samples, or over
-        ``dds_max_sample_bytes``, a sample is dropped here and counted.
+        Past ``dds_inbox_bytes`` or ``INBOX_LIMIT`` samples, or over ``dds_max_sample_bytes``,
+        a sample is dropped here and counted.
         """
         try:
             samples = _take_raw(reader, TAKE_BATCH)
         except Exception:  # the reader went with the participant
             return
-        ring = False
-        with self._inbox_lock:
-            for data, valid in samples:
-                if not valid:
-                    continue
-                size = len(data)
-                if size > self.max_sample:
-                    self.stats["dropped_oversized"] += 1
-                    continue
-                if len(self._inbox) >= INBOX_LIMIT or self._inbox_bytes + size > self.max_inbox:
-                    self.stats["dropped_inbox"] += 1
-                    continue
-                self._inbox.append((take, name, data))
-                self._inbox_bytes += size
-            if self._inbox and not self._inbox_rung:
-                self._inbox_rung = ring = True
-        loop = self._loop
-        if ring and loop is not None:
-            with contextlib.suppress(RuntimeError):  # the loop closed meanwhile
-                loop.call_soon_threadsafe(self._drain)
-
-    def _drain(self) -> None:
-        """Hand the samples that arrived to the graph, a bounded batch per callback."""
-        inbox = self._inbox
-        budget = DRAIN_BYTES
-        for _ in range(DRAIN_BATCH):
-            with self._inbox_lock:
-                if not inbox:
-                    break
-                take, name, payload = inbox.popleft()
-                self._inbox_bytes -= len(payload)
-            take(name, payload)
-            budget -= len(payload)
-            if budget <= 0:
-                break
-        with self._inbox_lock:
-            again = bool(inbox) and self._loop is not None
-            self._inbox_rung = again
-        if again:
-            self._loop.call_soon(self._drain)  # type: ignore[union-attr]
+        self.inbox.put_many(take, name, [data for data, valid in samples if valid])
 
     def _on_sample(self, name: str, payload: bytes) -> None:
         topic = self.graph.topics.topics.get(name)
         if topic is None or topic.type is None or self.participant is None:
             return
-        if self._refusals.get(name, "") is not None and self._refused(name, "a sample on"):
+        if self.refusals.cache.get(name, "") is not None and self._refused(name, "a sample on"):
             return
         self.stats["received"] += 1
         try:
@@ -1004,40 +935,7 @@ class DdsLink:
 
     def refusal(self, name: str) -> str | None:
         """Return why DDS peers may not publish on ``name``; None if they may (cached)."""
-        try:
-            return self._refusals[name]
-        except KeyError:
-            pass
-        if len(self._refusals) >= 100_000:
-            self._refusals.clear()
-        text = self.graph.access.publish_refusal(self._access, name)
-        self._refusals[name] = text
-        return text
-
-    def _refused(self, name: str, what: str, *, count: bool = True) -> bool:
-        text = self.refusal(name)
-        if text is None:
-            return False
-        if count:
-            self.stats["refused"] += 1
-        self._log(f"refused {name}", f"DDS: {what} {text} (ROS 2 peers' role; --ros2-role)")
-        return True
-
-    def _log(self, key: str, text: str) -> None:
-        """Log a warning at most once per :data:`LOG_EVERY` seconds per ``key``."""
-        now = time.monotonic()
-        if now - self._logged.get(key, -LOG_EVERY) >= LOG_EVERY:
-            self._logged[key] = now
-            self.graph.log("warn", text, name="simbridge.dds")
-
-
-def _local_owner(owner: object) -> str | None:
-    """The node a topic's owner stands for here; None for another process's node."""
-    if type(owner) is str:
-        return owner
-    if isinstance(owner, str):
-        return None  # a node of another process (DDS or Zenoh)
-    return BRIDGE_NODE  # a rosbridge client
+        return self.refusals.refusal(name)
 
 
 def _write_raw(writer: Any, data: bytes) -> None:

@@ -37,7 +37,6 @@ import importlib
 import itertools
 import logging
 import sys
-import threading
 import time
 from collections import Counter, deque
 from collections.abc import Callable, Collection, Iterable
@@ -46,7 +45,7 @@ from typing import Any
 
 from simbridge.app.settings import ServerSettings
 from simbridge.errors import ConfigError, SimbridgeError
-from simbridge.graph import BRIDGE_NODE, Graph, Topic
+from simbridge.graph import Graph, Topic
 from simbridge.graph.access import Access
 from simbridge.graph.services import PendingCall
 from simbridge.graph.topics import Peer
@@ -54,6 +53,21 @@ from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.message import Outgoing
 from simbridge.robot.bridge import ROBOT_NODE
 from simbridge.robot.simclock import SIM_NODE
+from simbridge.ros2.link import (
+    DRAIN_BATCH,
+    DRAIN_BYTES,
+    SHARED_TOPICS,
+    ForeignNode,
+    Inbox,
+    Logbook,
+    Refusals,
+    Ros2Peer,
+    Take,
+    local_owner,
+    local_publisher,
+    outward_services,
+    outward_topics,
+)
 from simbridge.ros2.names import (
     ADMIN_SPACE,
     DEFAULT_QOS,
@@ -84,22 +98,10 @@ RECONCILE_PERIOD = 0.5
 #: for a change made around the tables. A full pass took 15-30 ms with 300 robots, which every
 #: 0.5 s delayed a tick's messages (bench.zenoh classroom).
 FULL_PERIOD = 30.0
-#: Seconds between two log lines about the same problem.
-LOG_EVERY = 30.0
-#: Topics that many processes publish at once (every other name has one owner).
-SHARED_TOPICS = frozenset({"/tf", "/tf_static", "/rosout", "/parameter_events"})
 #: Seconds a call from ROS 2 waits for a provider that is not in process (a rosbridge client,
 #: another ROS 2 process), and a call to another ROS 2 process for its reply (capped by
 #: ``max_call_timeout``).
 SERVICE_TIMEOUT = 10.0
-#: Samples waiting for the event loop at most (the oldest are dropped, and counted, past it);
-#: their bytes are bounded too (``zenoh_inbox_bytes``).
-INBOX_LIMIT = 20_000
-#: Samples handed to the graph per event-loop callback at most, and their bytes at most (a
-#: sample bigger than that goes alone): 500 samples of 4 MB in one callback had stalled the
-#: loop 1.5-1.8 s (issue 29).
-DRAIN_BATCH = 500
-DRAIN_BYTES = 1_000_000
 #: Calls from ROS 2 (Zenoh queries) waiting for the event loop at most; their request bytes are
 #: bounded by ``zenoh_inbox_bytes`` too. Past either, a call is refused on Zenoh's thread with
 #: an error reply (counted: ``calls_refused``) instead of growing the loop's queue.
@@ -159,29 +161,13 @@ def import_zenoh(what: str = "--zenoh") -> Any:
         raise ConfigError(msg) from None
 
 
-class RemoteNode(str):
-    """A node of another process, as the owner of a topic's publisher in the graph.
+class RemoteNode(ForeignNode):
+    """A node of another rmw_zenoh process (``RemoteNode(name, zid)``: its Zenoh session)."""
 
-    It reads as the node's name (rosapi lists it so) but is never equal to a local node of the
-    same name, nor to a node of that name in a third process.
-    """
-
-    zid: str
-
-    def __new__(cls, name: str, zid: str) -> RemoteNode:
-        """Make the owner for node ``name`` of the Zenoh session ``zid``."""
-        node = super().__new__(cls, name)
-        node.zid = zid
-        return node
-
-    def __eq__(self, other: object) -> bool:
-        return isinstance(other, RemoteNode) and str.__eq__(self, other) and self.zid == other.zid
-
-    def __ne__(self, other: object) -> bool:
-        return not self.__eq__(other)
-
-    def __hash__(self) -> int:
-        return hash(("remote", str(self), self.zid))
+    @property
+    def zid(self) -> str:
+        """The Zenoh session id of the node's process."""
+        return self.origin
 
 
 @dataclass(eq=False, slots=True)
@@ -197,7 +183,7 @@ class _Declared:
     sequence: itertools.count[int] = field(default_factory=lambda: itertools.count(1))
 
 
-class _Caller:
+class _Caller(Ros2Peer):
     """The peer that makes a ROS 2 call through the graph's service table."""
 
     label = "ROS 2 (Zenoh)"
@@ -208,7 +194,7 @@ class _Caller:
         self.access = access
 
 
-class _Provider:
+class _Provider(Ros2Peer):
     """The peer that provides a remote ROS 2 service to the graph (calls become queries)."""
 
     __slots__ = ("access", "entity", "label", "link")
@@ -240,6 +226,12 @@ class ZenohLink:
         self.graph = graph
         #: The server's settings (the link's budgets, the ROS 2 peers' role).
         self.settings = settings = settings or ServerSettings()
+        #: Counters for /healthz.
+        self.stats: Counter[str] = Counter()
+        #: Warnings, rate-limited (also on /rosout), and notes said once.
+        self.logbook = Logbook(graph, "Zenoh", "simbridge.ros2.zenoh", self.stats, logger)
+        self._log = self.logbook.warn
+        self._note = self.logbook.note
         #: Whether this process simulates robots (not ``--no-sim``): it takes a turn in the
         #: step period with the other simulators (:attr:`tick_share`).
         self.simulator = simulator
@@ -322,36 +314,34 @@ class ZenohLink:
         access = Access(scope, admin, guarded=True, peer_id=graph.next_peer_id())
         self._caller = _Caller(self, access)
         #: Why ROS 2 peers may not publish on a name (None: they may), by name.
-        self._refusals: dict[str, str | None] = {}
+        self.refusals = Refusals(graph, access, self.logbook)
+        self._refused = self.refusals.refused
         self._call_ids = itertools.count(1)
         self._forwarding = False
         self._next_reconcile = 0.0
         self._next_full = 0.0
         self._generation = -1
-        self._logged: dict[str, float] = {}
-        #: Samples from Zenoh's threads waiting for the event loop (who takes each, its
-        #: topic, its bytes), their bytes, and whether the loop was woken; under the lock
-        #: (several Zenoh threads hand samples over).
-        self._inbox: deque[tuple[Callable[[str, bytes], None], str, bytes]] = deque()
-        self._inbox_bytes = 0
-        self._inbox_lock = threading.Lock()
-        self._inbox_rung = False
+        #: The budgets of samples (``zenoh_max_sample_bytes``, ``zenoh_inbox_bytes``).
+        self.max_sample = settings.zenoh_max_sample_bytes
+        self.max_inbox = settings.zenoh_inbox_bytes
+        #: Samples from Zenoh's threads waiting for the event loop (past its bounds, the oldest
+        #: are dropped: ``samples_dropped``); its lock guards the link's other queues too.
+        self.inbox = Inbox(
+            self.logbook,
+            max_bytes=self.max_inbox,
+            max_sample=self.max_sample,
+            dropped="samples_dropped",
+            oversized="samples_oversized",
+            setting="zenoh",
+        )
         #: Calls from ROS 2 waiting for the event loop (service, type, query, request bytes),
         #: their bytes, and whether the loop was woken; under the inbox's lock.
         self._call_inbox: deque[tuple[str, str, Any, int]] = deque()
         self._calls_bytes = 0
         self._calls_rung = False
-        #: The budgets of samples (``zenoh_max_sample_bytes``, ``zenoh_inbox_bytes``).
-        self.max_sample = settings.zenoh_max_sample_bytes
-        self.max_inbox = settings.zenoh_inbox_bytes
-        #: The last oversized sample's topic and size, and whether its report is scheduled.
-        self._oversized: tuple[str, int] | None = None
-        self._oversized_rung = False
         self._switch_interval = sys.getswitchinterval()
         #: Deliveries to send to ROS 2 at the end of the current event-loop callback.
         self._outbox: list[tuple[_Declared, Outgoing]] = []
-        #: Counters for /healthz.
-        self.stats: Counter[str] = Counter()
         self._liveliness_sub: Any = None
         #: Actions both ways (rcl_action's services and topics).
         self.actions = ActionBridge(self)
@@ -360,7 +350,7 @@ class ZenohLink:
 
     async def start(self) -> None:
         """Open the session (in a thread: it may wait for the network) and start watching."""
-        self._loop = asyncio.get_running_loop()
+        self._loop = self.inbox.loop = asyncio.get_running_loop()
         # Zenoh's threads hand each sample over under the GIL; behind a busy event loop they
         # waited up to the 5 ms switch interval (a sample's p50 latency 2.2 ms -> 1.0 ms at
         # 0.5 ms, with the loop 70 % busy: measured with 4500 samples/s)
@@ -393,7 +383,7 @@ class ZenohLink:
         if session is None:
             return
         self.state = "closed"
-        self._loop = None  # Zenoh's threads hand nothing more to the event loop
+        self._loop = self.inbox.loop = None  # Zenoh's threads hand nothing more to the loop
         sys.setswitchinterval(self._switch_interval)
         self.actions.close()
         for entry in list(self._declared.values()):
@@ -498,44 +488,23 @@ class ZenohLink:
 
     # -- outward ----------------------------------------------------------------------------
 
-    def _local_owner(self, owner: object) -> str | None:
-        """Return the node name an owner stands for, or None when it is not local."""
-        if isinstance(owner, RemoteNode):
-            return None
-        if isinstance(owner, str):
-            return owner
-        if isinstance(owner, _Provider | _Caller):
-            return None
-        return BRIDGE_NODE  # a rosbridge client
-
     def _wanted(self) -> dict[tuple[str, str, str], tuple[str, str, Qos]]:
         """Return the local entities: (kind, node, name) -> (kind, type, QoS)."""
         want: dict[tuple[str, str, str], tuple[str, str, Qos]] = {}
         for node in self.graph.nodes:
             if node not in self._remote_nodes:
                 want[("NN", node, "")] = ("NN", "", DEFAULT_QOS)
-        for topic in self.graph.topics.topics.values():
-            if topic.type is None or not topic.known:
-                continue
+        for topic, publishers, subscribers in outward_topics(self.graph, self._marker_ids):
+            type_name = topic.type or ""
             # the graph's offer in rmw_zenoh's tokens (its default depth is elided from them)
             qos = LATCHED_QOS if topic.qos.transient_local else DEFAULT_QOS
-            for owner in topic.publishers:
-                local = self._local_owner(owner)
-                if local is not None:
-                    want[("MP", local, topic.name)] = ("MP", topic.type, qos)
-            for node, callback in topic.internal:
-                if id(callback) not in self._marker_ids:
-                    want[("MS", node, topic.name)] = ("MS", topic.type, DEFAULT_QOS)
-            if topic.sinks:
-                want[("MS", BRIDGE_NODE, topic.name)] = ("MS", topic.type, DEFAULT_QOS)
-        for service in self.graph.services.services.values():
-            if service.provider is not None and isinstance(service.provider, _Provider):
-                continue
-            if service.type not in self.graph.registry.services:
-                continue
+            for node in publishers:
+                want[("MP", node, topic.name)] = ("MP", type_name, qos)
+            for node in subscribers:
+                want[("MS", node, topic.name)] = ("MS", type_name, DEFAULT_QOS)
+        for service, node in outward_services(self.graph):
             if not self.actions.exports_service(service.name):
                 continue  # the cancel service of another process's action
-            node = service.node if service.handler is not None else BRIDGE_NODE
             want[("SS", node, service.name)] = ("SS", service.type, DEFAULT_QOS)
         want.update(self.actions.wanted())
         for key in list(want):
@@ -629,7 +598,7 @@ class ZenohLink:
 
     def _first_owner(self, topic: Topic) -> str:
         for owner in topic.publishers:
-            node = self._local_owner(owner)
+            node = local_owner(owner)
             if node is not None:
                 return node
         return ""
@@ -740,7 +709,7 @@ class ZenohLink:
         payload = query.payload
         size = len(payload) if payload is not None else 0
         refusal = None
-        with self._inbox_lock:
+        with self.inbox.lock:
             if size > self.max_sample:
                 refusal = (
                     f"service {name}: request of {size} bytes over zenoh_max_sample_bytes "
@@ -777,7 +746,7 @@ class ZenohLink:
         """Take the calls from ROS 2 that arrived, :data:`DRAIN_BATCH` per callback at most."""
         calls = self._call_inbox
         for _ in range(DRAIN_BATCH):
-            with self._inbox_lock:
+            with self.inbox.lock:
                 if not calls:
                     break
                 name, type_name, query, size = calls.popleft()
@@ -786,7 +755,7 @@ class ZenohLink:
                 self._on_query(name, type_name, query)
             except Exception:  # one call's fault stops neither the drain nor the others
                 logger.exception("Zenoh: a call on %s", name)
-        with self._inbox_lock:
+        with self.inbox.lock:
             again = bool(calls) and self._loop is not None
             self._calls_rung = again
         if again:
@@ -900,7 +869,7 @@ class ZenohLink:
 
     def _on_token(self, sample: Any) -> None:  # a Zenoh thread
         put = sample.kind == self.zenoh.SampleKind.PUT
-        with self._inbox_lock:
+        with self.inbox.lock:
             self._tokens.append((str(sample.key_expr), put))
             ring = not self._tokens_rung
             self._tokens_rung = True  # one wake-up of the event loop per burst
@@ -917,7 +886,7 @@ class ZenohLink:
         """
         tokens = self._tokens
         batch = []
-        with self._inbox_lock:
+        with self.inbox.lock:
             for _ in range(min(len(tokens), TOKEN_BATCH)):
                 batch.append(tokens.popleft())
         names: set[str] = set()
@@ -946,7 +915,7 @@ class ZenohLink:
             self._update_subscribers(names)
             if quiet and not (clients or self._clients_on(names)):
                 self._generation = self._signature()
-        with self._inbox_lock:
+        with self.inbox.lock:
             again = bool(tokens) and self._loop is not None
             self._tokens_rung = again
         if again:
@@ -1091,7 +1060,7 @@ class ZenohLink:
                     "its messages are not bridged",
                 )
                 self.stats["unknown_types"] += 1
-            local = self._local_publisher(name)
+            local = local_publisher(topics.topics.get(name), clients=False)
             if local is not None and name not in SHARED_TOPICS:
                 self._note(
                     f"clash {name}",
@@ -1324,7 +1293,7 @@ class ZenohLink:
                 payload = sample.payload
                 size = len(payload)
                 if size > self.max_sample:
-                    self._drop_oversized(name, size)
+                    self.inbox.oversized(name, size)
                 else:
                     self._on_sample(name, bytes(payload.to_bytes()))
                     room -= size
@@ -1354,84 +1323,26 @@ class ZenohLink:
 
         return on_sample
 
-    def hand_over(self, take: Callable[[str, bytes], None], name: str, payload: Any) -> None:
+    def hand_over(self, take: Take, name: str, payload: Any) -> None:
         """Queue a sample's payload (Zenoh bytes) for ``take(name, bytes)`` on the event loop.
 
         Called on Zenoh's threads. A payload over ``zenoh_max_sample_bytes`` is dropped before
-        it is copied (counted, reported once per :data:`LOG_EVERY`); past
-        :data:`INBOX_LIMIT` samples or ``zenoh_inbox_bytes`` bytes waiting, the oldest go
-        (counted: the loop is overloaded).
+        it is copied (counted, reported once per ``LOG_EVERY``); past the inbox's bounds
+        (``INBOX_LIMIT`` samples, ``zenoh_inbox_bytes``), the oldest go (counted: the loop is
+        overloaded).
         """
         size = len(payload)
         if size > self.max_sample:
-            self._drop_oversized(name, size)
+            self.inbox.oversized(name, size)
             return
-        data = bytes(payload.to_bytes())
-        inbox = self._inbox
-        with self._inbox_lock:
-            while inbox and (
-                len(inbox) >= INBOX_LIMIT or self._inbox_bytes + size > self.max_inbox
-            ):
-                self._inbox_bytes -= len(inbox.popleft()[2])
-                self.stats["samples_dropped"] += 1
-            inbox.append((take, name, data))
-            self._inbox_bytes += size
-            ring = not self._inbox_rung
-            self._inbox_rung = True  # one wake-up of the event loop per burst
-        loop = self._loop
-        if ring and loop is not None:
-            loop.call_soon_threadsafe(self._drain)
-
-    def _drop_oversized(self, name: str, size: int) -> None:
-        """Count a sample over ``zenoh_max_sample_bytes``; have the loop report it (any thread)."""
-        self.stats["samples_oversized"] += 1
-        self._oversized = (name, size)
-        loop = self._loop
-        if not self._oversized_rung and loop is not None:
-            self._oversized_rung = True
-            loop.call_soon_threadsafe(self._report_oversized)
-
-    def _report_oversized(self) -> None:
-        self._oversized_rung = False
-        if self._oversized is not None:
-            name, size = self._oversized
-            self._log(
-                "oversized",
-                f"Zenoh: a sample of {size} bytes on {name} dropped: over zenoh_max_sample_bytes "
-                f"({self.max_sample}); {self.stats['samples_oversized']} dropped so far",
-            )
-
-    def _drain(self) -> None:
-        """Hand the samples that arrived to the graph (the event loop).
-
-        Only those already there, at most :data:`DRAIN_BATCH` of them and :data:`DRAIN_BYTES`
-        bytes: under a flood, the loop's other work (clients, the tick) runs between two
-        batches instead of waiting for the flood to end.
-        """
-        inbox = self._inbox
-        budget = DRAIN_BYTES
-        for _ in range(DRAIN_BATCH):
-            with self._inbox_lock:
-                if not inbox:
-                    break
-                take, name, payload = inbox.popleft()
-                self._inbox_bytes -= len(payload)
-            take(name, payload)
-            budget -= len(payload)
-            if budget <= 0:
-                break
-        with self._inbox_lock:
-            again = bool(inbox) and self._loop is not None
-            self._inbox_rung = again
-        if again:
-            self._loop.call_soon(self._drain)  # type: ignore[union-attr]
+        self.inbox.put(take, name, bytes(payload.to_bytes()))
 
     def _on_sample(self, name: str, payload: bytes) -> None:
         topic = self.graph.topics.topics.get(name)
         if topic is None or topic.type is None or self.session is None:
             return
         # (names allowed are kept as None: one look-up on the way of every sample)
-        if self._refusals.get(name, "") is not None and self._refused(name, "a sample on"):
+        if self.refusals.cache.get(name, "") is not None and self._refused(name, "a sample on"):
             return
         self.stats["received"] += 1
         try:
@@ -1548,16 +1459,6 @@ class ZenohLink:
             return
         respond(call, values, ok=True)
 
-    def _local_publisher(self, name: str) -> str | None:
-        """Return the in-process node publishing ``name``, if any."""
-        topic = self.graph.topics.topics.get(name)
-        if topic is None:
-            return None
-        for owner in topic.publishers:
-            if isinstance(owner, str) and not isinstance(owner, RemoteNode):
-                return owner
-        return None
-
     def _remote_robot(self, name: str) -> Entity | None:
         """Return the remote publisher of ``/<name>/odom`` (a robot of another process)."""
         topic = f"/{name}/odom"
@@ -1593,31 +1494,10 @@ class ZenohLink:
     def refusal(self, name: str) -> str | None:
         """Return why ROS 2 peers may not publish on (or provide) ``name``; None if they may.
 
-        The admission's scope rule for the ROS 2 peers' role (:func:`ros2_access`), kept per
-        name: samples of a refused name are never subscribed to (and dropped if they come),
-        remote publishers, services and actions under it are not brought into the graph.
+        Samples of a refused name are never subscribed to (and dropped if they come); remote
+        publishers, services and actions under it are not brought into the graph.
         """
-        try:
-            return self._refusals[name]
-        except KeyError:
-            pass
-        if len(self._refusals) >= 100_000:
-            # names come from the graph's topics and the remote tokens (at most
-            # zenoh_max_remote_tokens): a clear is rare, and the cache then fills again
-            self._refusals.clear()
-        text = self.graph.access.publish_refusal(self._caller.access, name)
-        self._refusals[name] = text
-        return text
-
-    def _refused(self, name: str, what: str, *, count: bool = True) -> bool:
-        """Whether ROS 2 may not bring ``name`` in; log (rate-limited) and count a refusal."""
-        text = self.refusal(name)
-        if text is None:
-            return False
-        if count:
-            self.stats["refused"] += 1
-        self._log(f"refused {name}", f"Zenoh: {what} {text} (ROS 2 peers' role; --ros2-role)")
-        return True
+        return self.refusals.refusal(name)
 
     # -- what the action bridge uses (ActionLink of simbridge.ros2.zenoh.actions) -------------
 
@@ -1717,29 +1597,12 @@ class ZenohLink:
             on_error(f"query failed: {err}")
 
     def log(self, key: str, text: str) -> None:
-        """Log a warning at most once per :data:`LOG_EVERY` seconds per ``key``."""
+        """Log a warning at most once per ``LOG_EVERY`` seconds per ``key``."""
         self._log(key, text)
 
     def note(self, key: str, text: str) -> None:
         """Count a name clash; log it once."""
         self._note(key, text)
-
-    # -- logging -----------------------------------------------------------------------------
-
-    def _note(self, key: str, text: str) -> None:
-        """Count a name clash; log it once (at INFO: classrooms have them by design)."""
-        self.stats["name_clashes"] += 1
-        if key not in self._logged:
-            self._logged[key] = time.monotonic()
-            logger.info("%s", text)
-
-    def _log(self, key: str, text: str) -> None:
-        """Log a warning at most once per :data:`LOG_EVERY` seconds per ``key``."""
-        now = time.monotonic()
-        if now - self._logged.get(key, -LOG_EVERY) >= LOG_EVERY:
-            self._logged[key] = now
-            # the log and /rosout: a rosbridge client sees why a topic stays silent
-            self.graph.log("warn", text, name="simbridge.ros2.zenoh")
 
 
 def _json(value: Any) -> bytes:

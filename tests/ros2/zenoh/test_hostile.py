@@ -266,7 +266,7 @@ async def test_oversized_samples_are_dropped_and_the_loop_and_a_good_command_go_
         robot = next(iter(zapp.world.robots.values()))
         x0 = robot.state.x
         assert await _publish_until(pub, lambda: robot.state.x > x0 + 0.05, 8.0)
-        assert link._inbox_bytes == 0 and link.state == "connected"
+        assert link.inbox.bytes == 0 and link.state == "connected"
     finally:
         pub.close()
 

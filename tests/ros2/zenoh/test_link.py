@@ -443,10 +443,11 @@ def test_token_of_sdk_parses(router: Router) -> None:
 async def test_a_flood_of_samples_is_handed_over_in_batches_and_bounded(
     zapp: App, router: Router
 ) -> None:
-    from simbridge.ros2.zenoh.link import DRAIN_BATCH, DRAIN_BYTES, INBOX_LIMIT
+    from simbridge.ros2.link import DRAIN_BATCH, DRAIN_BYTES, INBOX_LIMIT
 
     link = zapp.zenoh
     assert link is not None
+    inbox = link.inbox
     on_sample = link._sample_handler("/nobody_listens")
 
     class Payload:
@@ -466,25 +467,25 @@ async def test_a_flood_of_samples_is_handed_over_in_batches_and_bounded(
     small = Sample(4)
     for _ in range(INBOX_LIMIT + 10):
         on_sample(small)
-    assert len(link._inbox) == INBOX_LIMIT and link.stats["samples_dropped"] == 10
-    link._drain()  # one batch, then the loop's other work, then the next batch
-    assert len(link._inbox) == INBOX_LIMIT - DRAIN_BATCH
-    await wait_for(lambda: not link._inbox, timeout=10)
+    assert len(inbox.samples) == INBOX_LIMIT and link.stats["samples_dropped"] == 10
+    inbox.drain()  # one batch, then the loop's other work, then the next batch
+    assert len(inbox.samples) == INBOX_LIMIT - DRAIN_BATCH
+    await wait_for(lambda: not inbox.samples, timeout=10)
     # by size: one over zenoh_max_sample_bytes is dropped uncopied and reported (rate-limited)
     on_sample(Sample(link.max_sample + 1))
-    assert not link._inbox and link.stats["samples_oversized"] == 1
-    await wait_for(lambda: "oversized" in link._logged, timeout=5)
+    assert not inbox.samples and link.stats["samples_oversized"] == 1
+    await wait_for(lambda: "oversized" in link.logbook.logged, timeout=5)
     # by bytes held: the oldest go past zenoh_inbox_bytes; a batch hands over DRAIN_BYTES
     big = Sample(link.max_sample)
     dropped = link.stats["samples_dropped"]
     for _ in range(link.max_inbox // link.max_sample + 3):
         on_sample(big)
-    assert link._inbox_bytes <= link.max_inbox
+    assert inbox.bytes <= link.max_inbox
     assert link.stats["samples_dropped"] == dropped + 3
-    held = len(link._inbox)
-    link._drain()
-    assert held - len(link._inbox) == max(1, DRAIN_BYTES // link.max_sample)
-    await wait_for(lambda: not link._inbox and link._inbox_bytes == 0, timeout=10)
+    held = len(inbox.samples)
+    inbox.drain()
+    assert held - len(inbox.samples) == max(1, DRAIN_BYTES // link.max_sample)
+    await wait_for(lambda: not inbox.samples and inbox.bytes == 0, timeout=10)
 
 
 async def _receive_from(zapp: App, conn: Any, pub: Any, name: str) -> dict[str, Any]:
