@@ -87,10 +87,12 @@ class Simulation:
         self.robot = core.robot
         #: The ROS graph.
         self.graph = core.graph
+        bridge, clock = self.robot.bridge, self.robot.simclock
+        assert bridge is not None and clock is not None  # a headless world always simulates
         #: The robot's topics and services.
-        self.bridge = self.robot.bridge
+        self.bridge = bridge
         #: /clock and the sim-time services.
-        self.clock = self.robot.simclock
+        self.clock = clock
         #: The grader (``/simbridge/grade/*``), as the server has it: no tasks and no results
         #: file of its own (``simbridge grade --headless`` hands it the task to run).
         self.grader = core.grader

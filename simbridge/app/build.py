@@ -7,8 +7,8 @@ reader follows:
 
 1. the world (``--no-sim``: the walls without robots) and its ROS graph
    (:func:`~simbridge.robot.assembly.build_robot_graph`: rosapi, the robots, safety, e-stop,
-   /walls, /clock, tf2_web_republisher, the tutorial nodes); under ``--no-sim`` what the robot
-   and the clock declared is taken off again;
+   /walls, /clock, tf2_web_republisher, the tutorial nodes); ``--no-sim`` builds it without
+   the parts that simulate (``simulate=False``: no robot, no clock, no e-stop, no roles);
 2. the grader (a server's tasks and results journal; headless: none of either);
 3. a server's front ends: the guard (who each peer is), the rosbridge front end, its WebSocket
    server, the page's HTTP answers with ``/admin`` and its grading pages, the recorder
@@ -42,8 +42,6 @@ from simbridge.grading.grader import Grader
 from simbridge.grading.results import ResultsLog
 from simbridge.graph.graph import Graph
 from simbridge.robot.assembly import RobotGraph, build_robot_graph
-from simbridge.robot.bridge import ROBOT_NODE
-from simbridge.robot.simclock import SIM_NODE
 from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.server import BridgeServer, Client
 from simbridge.sim import World
@@ -151,22 +149,6 @@ def _client_view(client: Client) -> ClientView:
     )
 
 
-def _strip_simulation(graph: Graph, nodes: set[str]) -> None:
-    """Remove what the simulated nodes declared from ``graph`` (``--no-sim``)."""
-    topics = graph.topics
-    for name, topic in list(topics.topics.items()):
-        for owner in [o for o in topic.publishers if isinstance(o, str) and o in nodes]:
-            topics.unadvertise(name, owner, None)
-        for callback in [c for n, c in topic.internal if n in nodes]:
-            topics.unsubscribe_internal(name, callback)
-    services = graph.services.services
-    for name in [n for n, s in services.items() if s.node in nodes]:
-        del services[name]
-    for node in nodes:
-        graph.nodes.pop(node, None)
-        graph.params.nodes.pop(node, None)
-
-
 def _world(
     settings: ServerSettings | None,
     world: WorldSpec | Path | str | None,
@@ -181,12 +163,25 @@ def _world(
         spec = spec.without_robots()
     prm = params if isinstance(params, Params) else load_params(params)
     sim = World(spec, prm, seed=seed)
-    robot = build_robot_graph(sim, settings=settings, use_sim_time=use_sim_time)
-    if no_sim:
-        # the robot and the clock are made and taken off again: the e-stop, the roles and the
-        # admin pages are made on them (the robot's node serves /simbridge/access)
-        _strip_simulation(robot.graph, {ROBOT_NODE, SIM_NODE})
+    robot = build_robot_graph(
+        sim, settings=settings, use_sim_time=use_sim_time, simulate=not no_sim
+    )
     return sim, robot
+
+
+def _steps(
+    robot: RobotGraph,
+    hooks: list[Hook],
+    *,
+    clock: Callable[[], float],
+    realtime: bool,
+    loop_hooks: list[Hook] | None = None,
+) -> Steps:
+    """Make the step sequence; ``/sim/step`` is its single step (server and headless alike)."""
+    steps = Steps(robot, hooks, clock=clock, loop_hooks=loop_hooks, realtime=realtime)
+    if robot.simclock is not None:
+        robot.simclock.stepper = steps.step
+    return steps
 
 
 def build_headless(
@@ -210,8 +205,7 @@ def build_headless(
         from simbridge.tools.bag import BagWriter
 
         grader.recorder = lambda path: BagWriter(path, graph.registry)
-    steps = Steps(robot, [*robot.hooks, grader.tick], clock=lambda: sim.time, realtime=False)
-    robot.simclock.stepper = steps.step  # /sim/step: one step, as the server's
+    steps = _steps(robot, [*robot.hooks, grader.tick], clock=lambda: sim.time, realtime=False)
     core = Core(sim, robot, grader, steps)
     robot.publish_static(0.0)
     return core
@@ -294,7 +288,8 @@ def build(
 
         zenoh_link = ZenohLink(graph, zenoh, simulator=not no_sim, settings=settings)
         graph.topics.taps.append(zenoh_link.on_deliver)  # what it forwards to ROS 2
-        robot.bridge.elsewhere.append(zenoh_link)  # the other processes' robots
+        if robot.bridge is not None:  # the other processes' robots
+            robot.bridge.elsewhere.append(zenoh_link)
         graph.topics.flushers.append(zenoh_link.flush_early)
         loop_hooks.append(zenoh_link.tick)
     dds_link = None
@@ -321,15 +316,8 @@ def build(
     if recorder is not None:  # after the front ends, as when the command added it at start
         loop_hooks.append(recorder.tick)
 
-    steps = Steps(
-        robot,
-        hooks,
-        clock=time.monotonic,  # the loop's clock (asyncio's is time.monotonic)
-        loop_hooks=loop_hooks,
-        realtime=True,
-        simulate=not no_sim,
-    )
-    robot.simclock.stepper = steps.step  # /sim/step: one step, as the headless API's
+    # the loop's clock (asyncio's is time.monotonic)
+    steps = _steps(robot, hooks, clock=time.monotonic, loop_hooks=loop_hooks, realtime=True)
     return Parts(
         Core(sim, robot, grader, steps),
         guard=guard,

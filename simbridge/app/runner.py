@@ -299,7 +299,8 @@ class App:
         while True:
             # one step per period of wall time: dt / real-time factor; a new period (factor or
             # sim.rate changed) restarts the deadlines from the last one
-            dt = self.world.dt / self.simclock.real_time_factor
+            simclock = self.simclock
+            dt = self.world.dt / (simclock.real_time_factor if simclock is not None else 1.0)
             if dt != period:
                 start, k, period = start + k * period, 0, dt
             k += 1

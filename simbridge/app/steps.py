@@ -52,7 +52,9 @@ class Steps:
             one of them).
         realtime: the server's loop (``now`` given, ``/sim/pause`` honoured, a failing step
             isolated) rather than a headless caller (sim time, every call steps).
-        simulate: False under ``--no-sim``: nothing to step, the rest of the tick still runs.
+
+    A world built without a simulation (``--no-sim``: no clock) is never stepped; the rest of
+    the tick still runs.
     """
 
     def __init__(
@@ -63,7 +65,6 @@ class Steps:
         clock: Callable[[], float],
         loop_hooks: list[Hook] | None = None,
         realtime: bool,
-        simulate: bool = True,
     ) -> None:
         self.robot = robot
         self.world = robot.world
@@ -73,7 +74,6 @@ class Steps:
         self.loop_hooks = loop_hooks if loop_hooks is not None else []
         self.clock = clock
         self.realtime = realtime
-        self.simulate = simulate
         self._timeouts = robot.graph.tick
         #: Parts of ticks that raised (each part is isolated: the others still ran).
         self.failures = 0
@@ -104,7 +104,8 @@ class Steps:
             if now is None:
                 msg = "a real-time tick needs the loop's now"
                 raise ValueError(msg)
-            if self.simulate and not self.robot.simclock.paused:
+            simclock = self.robot.simclock
+            if simclock is not None and not simclock.paused:
                 self._advance(now)
         else:
             now = self._advance(None)

@@ -7,7 +7,10 @@ services, tf2_web_republisher, and the ROS tutorial nodes when the settings (``-
 or the world file (``demo_nodes: true``) ask for them. The application's builder
 (:func:`simbridge.app.build.build`) calls it for the server and for
 :class:`~simbridge.headless.Simulation` alike, so the two cannot offer different graphs; the
-step sequence that drives it is :class:`simbridge.app.steps.Steps`.
+step sequence that drives it is :class:`simbridge.app.steps.Steps`. Without a simulation
+(``--no-sim``, ``simulate=False``) it makes none of the nodes that simulate. It also wires the
+nodes to each other and to the graph's peers (:meth:`Graph.watch
+<simbridge.graph.graph.Graph.watch>`): no node adds itself from its constructor.
 
 Client access control (:class:`~simbridge.app.guard.Guard`) is not part of it: it sits between
 the sockets and the graph, and the headless API has no clients.
@@ -43,27 +46,32 @@ __all__ = ["RobotGraph", "build_robot_graph"]
 
 @dataclass(eq=False)
 class RobotGraph:
-    """The parts of a robot world's graph."""
+    """The parts of a robot world's graph.
+
+    Without a simulation (``simulate=False``, ``--no-sim``) the parts that simulate are None:
+    the robots' interface, the clock, the e-stops, the roles, ``/walls``, the watchdog and the
+    instructor's controls; the graph keeps rosapi, tf2_web_republisher and the tutorial nodes.
+    """
 
     #: The simulation.
     world: World
     #: Topics, services, parameters, actions.
     graph: Graph
-    #: The robots' ROS interface.
-    bridge: RobotBridge
-    #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
-    simclock: SimClock
-    #: The latching emergency stops, each with a scope (/estop, /NAME/estop, their resets and
-    #: state topics).
-    estop: EStop
-    #: What each connection may do (/simbridge/access), for pages.
-    roles: Roles
-    #: The walls as a latched /walls marker.
-    walls: WallsPublisher
     #: tf2_web_republisher (/republish_tfs, /tf2_web_republisher).
     tf_republisher: TfRepublisher
+    #: The robots' ROS interface.
+    bridge: RobotBridge | None = None
+    #: Sim time: /clock, pause, single step, real-time factor, sim-time stamps.
+    simclock: SimClock | None = None
+    #: The latching emergency stops, each with a scope (/estop, /NAME/estop, their resets and
+    #: state topics).
+    estop: EStop | None = None
+    #: What each connection may do (/simbridge/access), for pages.
+    roles: Roles | None = None
+    #: The walls as a latched /walls marker.
+    walls: WallsPublisher | None = None
     #: The /cmd_vel watchdog and stop-on-disconnect.
-    safety: Safety
+    safety: Safety | None = None
     #: Its nodes' parts of a tick, in order, run after each step's publishing (TF, the
     #: watchdog, the tutorial nodes).
     hooks: tuple[Callable[[float], None], ...] = ()
@@ -74,13 +82,17 @@ class RobotGraph:
 
     def publish_static(self, now: float) -> None:
         """Publish what is latched once at start: ``/tf_static`` and ``/walls``."""
-        self.bridge.publish_static(now)
-        self.walls.publish(now)
+        if self.bridge is not None:
+            self.bridge.publish_static(now)
+        if self.walls is not None:
+            self.walls.publish(now)
 
     def publish(self, now: float) -> None:
         """Publish the last step: /odom, /tf, /scan (when due), /clock."""
-        self.bridge.publish(now)
-        self.simclock.publish(now)
+        if self.bridge is not None:
+            self.bridge.publish(now)
+        if self.simclock is not None:
+            self.simclock.publish(now)
 
 
 def build_robot_graph(
@@ -88,6 +100,7 @@ def build_robot_graph(
     *,
     settings: ServerSettings | None = None,
     use_sim_time: bool = False,
+    simulate: bool = True,
 ) -> RobotGraph:
     """Build the ROS graph of ``world``.
 
@@ -95,42 +108,56 @@ def build_robot_graph(
         world: the simulation the graph exposes.
         settings: server limits and timeouts (default: the defaults).
         use_sim_time: stamp headers with sim time instead of the wall clock.
+        simulate: False for ``--no-sim``: none of the robot's and the clock's topics and
+            services, no e-stop, no roles, no ``/walls``; a rosbridge (with Zenoh or DDS, in
+            front of the ROS 2 graph, whose robots have all of those) with rosapi,
+            tf2_web_republisher and, when asked for, the tutorial nodes.
     """
     s = settings or ServerSettings()
     graph = Graph(service_timeout=s.service_timeout, max_parameter_names=s.max_parameter_names)
     install_rosapi(graph)
-    bridge = RobotBridge(graph, world)
-    controls = WorldControls(graph, world)
-    simclock = SimClock(graph, world, use_sim_time=use_sim_time)
-    estop = EStop(graph, world, s)
-    bridge.on_robot_added.append(estop.add_robot)
-    bridge.on_robot_removed.append(estop.remove_robot)
-    roles = Roles(graph, world, estop, bridge.elsewhere)
-    walls = WallsPublisher(graph, world)
+    bridge: RobotBridge | None = None
+    simclock: SimClock | None = None
+    estop: EStop | None = None
+    roles: Roles | None = None
+    walls: WallsPublisher | None = None
+    controls: WorldControls | None = None
+    safety: Safety | None = None
+    if simulate:
+        bridge = RobotBridge(graph, world)
+        controls = WorldControls(graph, world)
+        simclock = SimClock(graph, world, use_sim_time=use_sim_time)
+        estop = EStop(graph, world, s)
+        bridge.on_robot_added.append(estop.add_robot)
+        bridge.on_robot_removed.append(estop.remove_robot)
+        roles = Roles(graph, world, estop, bridge.elsewhere)
+        walls = WallsPublisher(graph, world)
     tf_republisher = install_tf_republisher(graph, lambda: world.params.sim.rate, s)
-    safety = Safety(graph, world)
-    bridge.on_robot_removed.append(safety.forget)
-    hooks: list[Callable[[float], None]] = [tf_republisher.tick, safety.tick]
-    tutorials = None
-    if world_spec(world).demo_nodes or (settings is not None and settings.demo_nodes):
-        # imported only when asked for (off by default): an idle server need not hold them
-        from simbridge.robot.tutorials import install_tutorials
-
-        tutorials = install_tutorials(graph)
-        hooks.append(tutorials.tick)
-    # who hears of the peers of every front end, in this order (no node adds itself)
-    graph.watch(estop, tf_republisher, safety, *([tutorials] if tutorials is not None else []))
-    return RobotGraph(
+    hooks: list[Callable[[float], None]] = [tf_republisher.tick]
+    if bridge is not None:
+        safety = Safety(graph, world)
+        bridge.on_robot_removed.append(safety.forget)
+        hooks.append(safety.tick)
+    robot = RobotGraph(
         world=world,
         graph=graph,
+        tf_republisher=tf_republisher,
         bridge=bridge,
         simclock=simclock,
         estop=estop,
         roles=roles,
         walls=walls,
-        tf_republisher=tf_republisher,
         safety=safety,
-        hooks=tuple(hooks),
-        tutorials=tutorials,
         controls=controls,
     )
+    if world_spec(world).demo_nodes or (settings is not None and settings.demo_nodes):
+        # imported only when asked for (off by default): an idle server need not hold them
+        from simbridge.robot.tutorials import install_tutorials
+
+        robot.tutorials = install_tutorials(graph)
+        hooks.append(robot.tutorials.tick)
+    robot.hooks = tuple(hooks)
+    # who hears of the peers of every front end, in this order (no node adds itself)
+    watching = (estop, tf_republisher, safety, robot.tutorials)
+    graph.watch(*(part for part in watching if part is not None))
+    return robot

@@ -48,6 +48,7 @@ from simbridge.app.settings import ServerSettings
 from simbridge.errors import ServiceError, SimbridgeError
 from simbridge.graph import Graph
 from simbridge.graph.access import ANY_SCOPE, Access
+from simbridge.graph.params import ParamNode
 from simbridge.robot.bridge import ROBOT_NODE
 from simbridge.robot.controls import (
     MOTION_MODELS,
@@ -179,14 +180,18 @@ def _body(request: HttpRequest) -> dict[str, Any]:
     return value
 
 
+#: The robot's parameters without a simulation (``--no-sim``): none.
+_NO_ROBOT = ParamNode(ROBOT_NODE, read=dict, write=lambda values: None)
+
+
 class _Admin:
     def __init__(
         self,
         graph: Graph,
         world: World,
         clients: Callable[[], Iterable[ClientView]],
-        estop: EStop,
-        roles: Roles,
+        estop: EStop | None,
+        roles: Roles | None,
     ) -> None:
         self.graph = graph
         self.world = world
@@ -201,7 +206,7 @@ class _Admin:
         subscriptions once, grouped by client; the clients once, grouped by robot), so the cost
         grows with the size of the answer, never with clients x topics x subscriptions.
         """
-        params = self.graph.params.node(ROBOT_NODE)
+        params = self.graph.params.nodes.get(ROBOT_NODE, _NO_ROBOT)
         subscribed: dict[object, set[str]] = {}
         for topic in self.graph.topics.topics.values():
             for sink in topic.sinks.values():
@@ -211,7 +216,7 @@ class _Admin:
         drivers: dict[str, list[str]] = {}
         for c in sorted(self.clients(), key=lambda c: c.id):
             peer = c.peer
-            robots = self.roles.robots_of(peer)
+            robots = self.roles.robots_of(peer) if self.roles is not None else []
             any_robot = connection_rights(peer)[0] == "*"
             name = describe_peer(peer)
             clients.append(
@@ -252,7 +257,9 @@ class _Admin:
             "motion_model": self.world.motion.name,
             "motion_models": sorted(MOTION_MODELS),
             "estopped": self.world.estopped,
-            "estops": [latch.summary() for latch in self.estops.latches.values()],
+            "estops": [latch.summary() for latch in self.estops.latches.values()]
+            if self.estops is not None
+            else [],
             "sim_time_s": round(self.world.time, 3),
         }
 
@@ -271,6 +278,9 @@ class _Admin:
 
     def estop(self, body: dict[str, Any]) -> dict[str, Any]:
         estop = self.estops
+        if estop is None:
+            msg = "this server has no e-stop (it runs without a simulation)"
+            raise ServiceError(msg)
         action = body.get("action")
         if action == "latch":
             latch = estop.latch_global(INSTRUCTOR)
@@ -376,8 +386,8 @@ def install_admin(
     world: World,
     clients: Callable[[], Iterable[ClientView]],
     settings: ServerSettings,
-    estop: EStop,
-    roles: Roles,
+    estop: EStop | None,
+    roles: Roles | None,
 ) -> None:
     """Add the ``/api/admin/*`` routes (and ``/api/access``) to ``web``; set its ``privileged``.
 
@@ -390,8 +400,9 @@ def install_admin(
         world: what is reset and whose motion model is switched.
         clients: the connected WebSocket clients, when asked (plain records).
         settings: whose ``admin_token`` every request must present.
-        estop: the e-stops the console lists, latches and releases.
-        roles: what each client may drive (the clients' list names their robots).
+        estop: the e-stops the console lists, latches and releases (None: ``--no-sim``).
+        roles: what each client may drive (the clients' list names their robots; None:
+            ``--no-sim``, no robot here).
     """
     admin = _Admin(graph, world, clients, estop, roles)
     web.routes["/api/access"] = lambda request: connection_check(settings, clients, request)

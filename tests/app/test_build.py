@@ -35,11 +35,20 @@ def test_the_hooks_run_in_one_list_made_once_in_the_builders_order() -> None:
     assert core.steps.loop_hooks == []  # no front end but rosbridge, no recorder
 
 
-def test_no_sim_leaves_no_robot_and_no_clock() -> None:
-    graph = build(_settings(), health=_health, no_sim=True).core.graph
+def test_no_sim_builds_no_robot_no_clock_no_estop_and_no_roles() -> None:
+    """--no-sim builds the world's graph without what simulates; nothing is taken off after."""
+    core = build(_settings(), health=_health, no_sim=True).core
+    graph, robot = core.graph, core.robot
     assert "/virtual_robot" not in graph.nodes and "/sim" not in graph.nodes
-    assert not {"/reset", "/sim/step", "/spawn"} & set(graph.services.services)
-    assert "/clock" not in graph.topics.topics or not graph.topics.topics["/clock"].publishers
+    services = set(graph.services.services)
+    assert not {"/reset", "/sim/step", "/spawn", "/estop", "/simbridge/access"} & services
+    assert {"/republish_tfs", "/rosapi/topics", "/simbridge/grade/start"} <= services
+    assert not {"/clock", "/tf", "/odom", "/walls", "/estop/state"} & set(graph.topics.topics)
+    assert (robot.bridge, robot.simclock, robot.estop, robot.roles, robot.safety) == (None,) * 5
+    assert graph.params.nodes == {}
+    before = core.world.steps
+    core.steps.tick(1.0)  # nothing to step; the rest of the tick runs
+    assert core.world.steps == before
 
 
 def test_an_existing_record_directory_is_refused_before_any_port(tmp_path: Path) -> None:

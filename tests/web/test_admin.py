@@ -6,11 +6,13 @@ import urllib.request
 from typing import Any
 
 import pytest
+from websockets.asyncio.client import connect
 
 from simbridge.app.runner import App
+from simbridge.app.settings import ServerSettings
 from simbridge.web.admin import AdminRefused, check_admin_token, token_from_headers
 from tests.conftest import AppFactory
-from tests.helpers import ROOT, http_url
+from tests.helpers import ROOT, http_url, wait_for, ws_url
 
 
 def test_check_admin_token_refuses_without_configured_token_missing_or_wrong() -> None:
@@ -175,3 +177,25 @@ async def test_admin_gives_one_robot_a_realism_profile_of_its_own(make_app: AppF
     assert (
         app.world.robots["r3"].realism_own["slip"] == 0.2 and not app.world.robots["r3"].overrides
     )
+
+
+async def test_admin_without_a_simulation_lists_the_clients_and_refuses_the_world_by_name() -> None:
+    """--no-sim: the console's state (its clients, no robot), the world's changes refused."""
+    settings = ServerSettings(host="127.0.0.1", port=0, http_port=0, admin_token="s3cret")
+    app = App(settings, no_sim=True)
+    await app.start()
+    try:
+        async with connect(ws_url(app)):
+            await wait_for(lambda: len(app.server.clients) == 1)
+            status, state = await _aio(request, app, "/api/admin/state", None, "s3cret")
+        assert status == 200, state
+        assert [c["robots"] for c in state["clients"]] == [[]]
+        assert state["robots"] == {} and state["params"] == {} and state["estops"] == []
+        status, body = await _aio(request, app, "/api/admin/estop", {"action": "latch"}, "s3cret")
+        assert status == 400 and body["error"] == (
+            "this server has no e-stop (it runs without a simulation)"
+        )
+        status, body = await _aio(request, app, "/api/admin/reset", {}, "s3cret")
+        assert status == 400 and "no /reset" in body["error"]
+    finally:
+        await app.stop()
