@@ -126,7 +126,9 @@ def build_robot_graph(
     if simulate:
         bridge = RobotBridge(graph, world)
         controls = WorldControls(graph, world)
-        simclock = SimClock(graph, world, use_sim_time=use_sim_time)
+        simclock = SimClock(graph, world)
+        if use_sim_time:  # every header of the graph stamped with sim time
+            graph.wall_clock_ns = simclock.time_ns
         estop = EStop(graph, world, s)
         bridge.on_robot_added.append(estop.add_robot)
         bridge.on_robot_removed.append(estop.remove_robot)

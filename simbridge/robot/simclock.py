@@ -47,23 +47,17 @@ class SimClock:
     Args:
         graph: where ``/clock`` and the services live.
         world: whose ``time`` is the sim time.
-        use_sim_time: stamp every header of ``graph`` with sim time instead of the wall clock.
+
+    With ``use_sim_time`` the builder makes :meth:`time_ns` the graph's clock for header stamps
+    (:func:`simbridge.robot.assembly.build_robot_graph`).
     """
 
-    def __init__(
-        self,
-        graph: Graph,
-        world: World,
-        *,
-        use_sim_time: bool = False,
-    ) -> None:
+    def __init__(self, graph: Graph, world: World) -> None:
         self.graph = graph
         self.world = world
         #: One step of the world and what depends on it, for ``/sim/step``: the application's
         #: :meth:`simbridge.app.steps.Steps.step` (the builder sets it; None: not stepped).
         self.stepper: Callable[[], None] | None = None
-        #: Headers carry sim time.
-        self.use_sim_time = use_sim_time
         #: No step happens until resumed (``/sim/pause``) except single steps.
         self.paused = False
         #: Simulated seconds per real second (the real-time loop's speed).
@@ -80,8 +74,6 @@ class SimClock:
             SIM_NODE,
             self._set_rtf,
         )
-        if use_sim_time:
-            graph.wall_clock_ns = self.time_ns
 
     def time_ns(self) -> int:
         """Return the sim time in nanoseconds."""
