@@ -46,8 +46,8 @@ from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.server import BridgeServer, Client
 from simbridge.sim import World
 from simbridge.web import WebApp
-from simbridge.web.admin import ClientView, install_admin
-from simbridge.web.grading import install_grading_admin
+from simbridge.web.admin import ClientView, admin_credentials, admin_routes
+from simbridge.web.grading import grading_routes
 
 
 if TYPE_CHECKING:
@@ -267,16 +267,18 @@ def build(
     )
     web = WebApp(static_dir or resource_dir("static"), health)
     server = BridgeServer(rosbridge, settings, web.handle_websocket_port)
-    install_admin(
-        web,
-        graph=graph,
-        world=sim,
-        clients=lambda: [_client_view(c) for c in server.clients],
-        settings=settings,
-        estop=robot.estop,
-        roles=robot.roles,
+    web.routes.update(
+        admin_routes(
+            graph=graph,
+            world=sim,
+            clients=lambda: [_client_view(c) for c in server.clients],
+            settings=settings,
+            estop=robot.estop,
+            roles=robot.roles,
+        )
     )
-    install_grading_admin(web, grader, settings)
+    web.routes.update(grading_routes(grader, settings))
+    web.privileged = admin_credentials(settings)  # the instructor always finds room
     recorder = None
     if record is not None:
         from simbridge.tools.recorder import GraphRecorder

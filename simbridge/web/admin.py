@@ -61,7 +61,7 @@ from simbridge.robot.estop import INSTRUCTOR, EStop, connection_rights, describe
 from simbridge.robot.roles import Roles
 from simbridge.sim import World
 from simbridge.sim.world import PER_ROBOT_PARAMS
-from simbridge.web.http import HttpRequest, HttpResponse, WebApp
+from simbridge.web.http import HttpRequest, HttpResponse, Route
 
 
 if TYPE_CHECKING:
@@ -72,8 +72,9 @@ __all__ = [
     "MOTION_MODELS",
     "AdminRefused",
     "ClientView",
+    "admin_credentials",
+    "admin_routes",
     "check_admin_token",
-    "install_admin",
     "token_from_headers",
 ]
 
@@ -379,8 +380,7 @@ def connection_check(
     return response
 
 
-def install_admin(
-    web: WebApp,
+def admin_routes(
     *,
     graph: Graph,
     world: World,
@@ -388,14 +388,13 @@ def install_admin(
     settings: ServerSettings,
     estop: EStop | None,
     roles: Roles | None,
-) -> None:
-    """Add the ``/api/admin/*`` routes (and ``/api/access``) to ``web``; set its ``privileged``.
+) -> dict[str, Route]:
+    """Return the ``/api/admin/*`` routes (and ``/api/access``), by path.
 
-    A request whose headers carry the admin token is the instructor's: the HTTP server makes
-    room for it whatever fills its pool (:mod:`simbridge.web.pool`).
+    The builder adds them to the page's :class:`~simbridge.web.http.WebApp`, with
+    :func:`admin_credentials` as its ``privileged``.
 
     Args:
-        web: where the routes go.
         graph: whose ``/virtual_robot`` parameters and clients the page shows.
         world: what is reset and whose motion model is switched.
         clients: the connected WebSocket clients, when asked (plain records).
@@ -405,7 +404,6 @@ def install_admin(
             ``--no-sim``, no robot here).
     """
     admin = _Admin(graph, world, clients, estop, roles)
-    web.routes["/api/access"] = lambda request: connection_check(settings, clients, request)
     posts: dict[str, Callable[[dict[str, Any]], dict[str, Any]]] = {
         "/api/admin/params": admin.params,
         "/api/admin/motion": admin.motion,
@@ -413,15 +411,6 @@ def install_admin(
         "/api/admin/estop": admin.estop,
         "/api/admin/robot": admin.robot,
     }
-
-    def privileged(headers: Mapping[str, str]) -> bool:
-        """Whether the headers carry the admin token (then the HTTP pool always has room)."""
-        token, expected = token_from_headers(headers), settings.admin_token
-        if not expected or not token:
-            return False
-        return hmac.compare_digest(expected.encode(), token.encode())
-
-    web.privileged = privileged
 
     def route(request: HttpRequest) -> HttpResponse:
         path = request.path.rstrip("/")
@@ -440,5 +429,22 @@ def install_admin(
         except ServiceError as err:
             return HttpResponse.json({"error": str(err)}, 400)
 
-    for path in ("/api/admin/state", *posts):
-        web.routes[path] = route
+    routes: dict[str, Route] = dict.fromkeys(("/api/admin/state", *posts), route)
+    routes["/api/access"] = lambda request: connection_check(settings, clients, request)
+    return routes
+
+
+def admin_credentials(settings: ServerSettings) -> Callable[[Mapping[str, str]], bool]:
+    """Return whether a request's headers carry the admin token (``WebApp.privileged``).
+
+    A request whose headers carry it is the instructor's: the HTTP server makes room for it
+    whatever fills its pool (:mod:`simbridge.web.pool`).
+    """
+
+    def privileged(headers: Mapping[str, str]) -> bool:
+        token, expected = token_from_headers(headers), settings.admin_token
+        if not expected or not token:
+            return False
+        return hmac.compare_digest(expected.encode(), token.encode())
+
+    return privileged

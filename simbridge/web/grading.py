@@ -33,10 +33,10 @@ from simbridge.grading.grader import Grader
 from simbridge.grading.report import report_html
 from simbridge.grading.task import METRICS
 from simbridge.web.admin import AdminRefused, check_admin_token, token_from_headers
-from simbridge.web.http import HttpRequest, HttpResponse, WebApp
+from simbridge.web.http import HttpRequest, HttpResponse, Route
 
 
-__all__ = ["attempts_csv", "install_grading_admin"]
+__all__ = ["attempts_csv", "grading_routes"]
 
 #: The CSV's columns before the metrics.
 CSV_COLUMNS = (
@@ -137,8 +137,11 @@ def _cancel(grader: Grader, body: dict[str, Any]) -> dict[str, Any]:
     return grader.summary(grader.cancel(robot, "cancelled by the instructor"))
 
 
-def install_grading_admin(web: WebApp, grader: Grader, settings: ServerSettings) -> None:
-    """Add the grading routes of ``/admin`` (the module docstring) to ``web``."""
+def grading_routes(grader: Grader, settings: ServerSettings) -> dict[str, Route]:
+    """Return the grading routes of ``/admin`` (the module docstring), by path.
+
+    The builder adds them to the page's :class:`~simbridge.web.http.WebApp`.
+    """
     gets: dict[str, Callable[[HttpRequest], HttpResponse]] = {
         "/api/admin/grading": lambda r: HttpResponse.json(_state(grader)),
         "/api/admin/grading/attempt": lambda r: HttpResponse.json(_attempt(grader, r)),
@@ -167,8 +170,7 @@ def install_grading_admin(web: WebApp, grader: Grader, settings: ServerSettings)
         except ServiceError as err:
             return HttpResponse.json({"error": str(err)}, 400)
 
-    for path in (*gets, *posts):
-        web.routes[path] = route
+    return dict.fromkeys((*gets, *posts), route)
 
 
 def _html(text: str) -> HttpResponse:

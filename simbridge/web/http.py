@@ -159,7 +159,7 @@ class WebApp:
         #: Exact-path routes, checked before static files.
         self.routes: dict[str, Route] = {"/healthz": self._healthz}
         #: Whether a request's headers (lower-case names) carry the administrator's credentials
-        #: (:func:`simbridge.web.admin.install_admin` sets it): such a request is never refused
+        #: (the builder sets :func:`simbridge.web.admin.admin_credentials`): it is never refused
         #: for want of room in the HTTP server's pool.
         self.privileged: Callable[[Mapping[str, str]], bool] = lambda headers: False
 
