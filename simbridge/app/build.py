@@ -267,6 +267,7 @@ def build(
     )
     web = WebApp(static_dir or resource_dir("static"), health)
     server = BridgeServer(rosbridge, settings, web.handle_websocket_port)
+    rosbridge.subscribers.send_many = server.send_many  # one broadcast per shared frame
     web.routes.update(
         admin_routes(
             graph=graph,

@@ -130,7 +130,7 @@ class Client:
         #: Frames written (directly or by the writer task).
         self.frames_sent = 0
         #: Framed messages for the socket, written together at the end of this turn of the
-        #: event loop (see :meth:`BridgeServer._send_many`).
+        #: event loop (see :meth:`BridgeServer.send_many`).
         self.corked: list[bytes] = []
         #: The client was told that frames were dropped for it.
         self.told_dropped = False
@@ -253,17 +253,17 @@ class BridgeServer:
         #: Clients with corked frames, and the callback that writes them.
         self._corked: list[Client] = []
         self._uncork_handle: asyncio.Handle | None = None
-        front.subscribers.send_many = self._send_many
         self._interfaces_warming = False
 
-    def _send_many(self, frame: Frame, entries: SendEntries) -> None:
+    def send_many(self, frame: Frame, entries: SendEntries) -> None:
         """Write ``frame`` to many subscribers that keep up, framed once for all.
 
         The same rule as :meth:`Client.send`, applied to a whole group at once; a client with
         queued frames or a full socket buffer gets the frame through its queue. The frames a
         client gets in one turn of the event loop (a tick's /odom and /scan, a batch of samples
         from Zenoh) are corked and written together at its end: one ``send`` system call for
-        the server and one read for the client instead of one per message.
+        the server and one read for the client instead of one per message. The builder makes
+        it the rosbridge front end's ``subscribers.send_many`` (:mod:`simbridge.app.build`).
         """
         wire = b""
         corked = self._corked

@@ -142,8 +142,9 @@ class Subscribers:
         self.topics = topics
         #: Per-subscription bound of pending frames when a client asked for queue_length 0.
         self.default_queue_length = default_queue_length
-        #: Sends one frame to many subscribers at once, ``(frame, [(peer, key, limit)])`` (set by
-        #: the server: one ``websockets.broadcast`` per frame instead of one call per client).
+        #: Sends one frame to many subscribers at once, ``(frame, [(peer, key, limit)])`` (the
+        #: builder sets the server's: one ``websockets.broadcast`` per frame instead of one call
+        #: per client).
         self.send_many: Callable[[Frame, SendEntries], None] | None = None
         #: Bumped by every subscription change: the delivery plans are rebuilt.
         self.generation = 0

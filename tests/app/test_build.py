@@ -35,6 +35,15 @@ def test_the_hooks_run_in_one_list_made_once_in_the_builders_order() -> None:
     assert core.steps.loop_hooks == []  # no front end but rosbridge, no recorder
 
 
+def test_the_builder_wires_the_parts_to_each_other() -> None:
+    """What no part does to another itself: the server's broadcast, the guard, the peers."""
+    parts = build(_settings(), health=_health)
+    graph, robot = parts.core.graph, parts.core.robot
+    assert parts.rosbridge.subscribers.send_many == parts.server.send_many
+    assert graph.access.guarded and parts.guard.peer_connected in graph.on_connect
+    assert robot.safety is not None and robot.safety.peer_lost in graph.on_lost
+
+
 def test_no_sim_builds_no_robot_no_clock_no_estop_and_no_roles() -> None:
     """--no-sim builds the world's graph without what simulates; nothing is taken off after."""
     core = build(_settings(), health=_health, no_sim=True).core

@@ -108,7 +108,7 @@ SERVICE_TIMEOUT = 10.0
 CALL_INBOX_LIMIT = 1_000
 #: Samples of the ring channels handed to the graph per poll callback at most. The frames
 #: they make for the clients are written when the callback ends (the server corks them:
-#: :meth:`simbridge.rosbridge.server.BridgeServer._send_many`). With 32 a callback, the clients
+#: :meth:`simbridge.rosbridge.server.BridgeServer.send_many`). With 32 a callback, the clients
 #: got the
 #: start of a tick's burst sooner (bench.zenoh classroom 2 x 300: latency p50 19.9-21.5 ->
 #: 17.2-19.5 ms) but a client's /odom and /scan went out together less often (23 -> 29 reads
