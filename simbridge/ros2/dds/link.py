@@ -43,7 +43,7 @@ from simbridge.graph.topics import DEFAULT_TOPIC_QOS, LATCHED_TOPIC_QOS, Peer, T
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.message import Outgoing
 from simbridge.ros2.dds.options import DdsOptions
-from simbridge.ros2.dds.types import IdlTypes
+from simbridge.ros2.dds.types import IdlTypes, old_binding
 from simbridge.ros2.dds.wire import (
     DISCOVERY_TOPIC,
     DISCOVERY_TYPE,
@@ -948,7 +948,11 @@ def _write_raw(writer: Any, data: bytes) -> None:
 
 def _take_raw(reader: Any, limit: int) -> list[tuple[bytes, bool]]:
     """Take up to ``limit`` samples of a Cyclone reader as their serialized bytes."""
-    ret = _clayer().ddspy_take(reader._ref, _ANY, limit)
+    clayer = _clayer()
+    if _TAKES_MASK:
+        ret = clayer.ddspy_take(reader._ref, _ANY, limit)
+    else:  # the binding 0.10 takes every state, with no mask argument
+        ret = clayer.ddspy_take(reader._ref, limit)
     if isinstance(ret, int):
         msg = f"dds_take returned {ret}"
         raise RuntimeError(msg)
@@ -956,15 +960,18 @@ def _take_raw(reader: Any, limit: int) -> list[tuple[bytes, bool]]:
 
 
 _CLAYER: Any = None
+#: Whether the binding's ``ddspy_take`` takes a state mask (from 11 on; 0.10's takes none).
+_TAKES_MASK = True
 #: Any sample, view and instance state (Cyclone's DDS_ANY_STATE mask).
 _ANY = 0x7F
 
 
 def _clayer() -> Any:
     """Cyclone's C layer (imported once: it sits on the path of every sample)."""
-    global _CLAYER
+    global _CLAYER, _TAKES_MASK
     if _CLAYER is None:
         _CLAYER = importlib.import_module("cyclonedds._clayer")
+        _TAKES_MASK = not old_binding()
     return _CLAYER
 
 

@@ -11,18 +11,40 @@ on the hot path.
 from __future__ import annotations
 
 import importlib
+import importlib.metadata
 from typing import Any
 
 from simbridge.msgs.registry import TypeRegistry
 
 
-__all__ = ["IdlTypes"]
+__all__ = ["IdlTypes", "old_binding"]
 
 _PLACEHOLDER = "structure_needs_at_least_one_member"
 
 
 def _cyclone(module: str) -> Any:
     return importlib.import_module(module)
+
+
+def old_binding() -> bool:
+    """Whether the Cyclone binding is 0.10, the one Debian's C library (0.10.2) takes.
+
+    PyPI has wheels of the binding 11 for x86_64 only: on aarch64 (the Raspberry Pi image) it is
+    built from the 0.10.2 sdist against Debian's ``libddsc``.
+    """
+    return importlib.metadata.version("cyclonedds").startswith("0.")
+
+
+def _final(made: Any, *, type_information: bool) -> Any:
+    final = _cyclone("cyclonedds.idl.annotations").final(made)
+    if not type_information:
+        # Cyclone 0.10.2 crashes (SIGSEGV in its discovery thread, after "ddsi_xt_type_init_impl
+        # with invalid type object") matching a remote endpoint against the XTypes type
+        # information the binding 0.10 makes of these types: send none. Peers then match on
+        # the type name, as Fast DDS 2.x (rmw_fastrtps) always does.
+        idl = final.__idl__
+        idl.fill_type_data = idl.populate
+    return final
 
 
 def _dds_name(ros_name: str) -> str:
@@ -38,9 +60,11 @@ class IdlTypes:
 
         self.registry = registry
         self._made: dict[str, Any] = {}
+        self._type_information = not old_binding()
         self._primitives: dict[str, Any] = {
             "bool": bool,
-            "byte": t.byte,
+            # Cyclone's Python binding 0.10 (the one Debian's C library takes) has no byte
+            "byte": getattr(t, "byte", t.uint8),
             "char": t.uint8,
             "int8": t.int8,
             "uint8": t.uint8,
@@ -82,8 +106,9 @@ class IdlTypes:
             fields[f.name] = base
         if not fields:
             fields[_PLACEHOLDER] = t.uint8
-        made = _cyclone("cyclonedds.idl.annotations").final(
-            idl.make_idl_struct(spec.name.replace("/", "_"), _dds_name(spec.name), fields)
+        made = _final(
+            idl.make_idl_struct(spec.name.replace("/", "_"), _dds_name(spec.name), fields),
+            type_information=self._type_information,
         )
         self._made[spec.name] = made
         return made
@@ -111,6 +136,6 @@ class IdlTypes:
         if found is None:
             class_name = dds_name.replace(":", "_")
             made = _cyclone("cyclonedds.idl").make_idl_struct(class_name, dds_name, fields)
-            found = _cyclone("cyclonedds.idl.annotations").final(made)
+            found = _final(made, type_information=self._type_information)
             self._made[dds_name] = found
         return found
