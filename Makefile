@@ -47,8 +47,9 @@ pytest:
 
 test: deps lint typecheck pytest
 
-# The arm64 (Raspberry Pi 4B/5) image built and its compose stack run under qemu-user emulation
-# (root: registers qemu-aarch64 with binfmt_misc; the first run makes the arm64 base and images,
+# The arm64 (Raspberry Pi 4B/5) image, with the dds extra, built and its compose stack and
+# `simbridge --dds` run under qemu-user emulation (root: registers qemu-aarch64 with binfmt_misc;
+# the first run makes the arm64 base and images, the Cyclone DDS binding compiled among them,
 # about 20 minutes on a busy 2-core machine; later runs reuse them: 0.5-2 minutes). Also part of
 # `make test`.
 test-arm64: deps

@@ -289,7 +289,9 @@ def build_images(arch: str = "amd64") -> str:
     """Build the project image (always; layers cached) and the nginx image (once), in parallel.
 
     ``arch="arm64"``: both for linux/arm64, from the arm64 base (Docker's classic builder, no
-    buildx: each RUN step runs under qemu). Returns the project image's tag.
+    buildx: each RUN step runs under qemu), the project image with the ``dds`` extra (the Pi
+    image; its Cyclone DDS binding compiled in the Dockerfile's first stage, once, cached).
+    Returns the project image's tag.
     """
     tag = project_image_tag(arch)
     base, nginx = (
@@ -303,6 +305,7 @@ def build_images(arch: str = "amd64") -> str:
     build = ["docker", "build", "--network", "host", "--build-arg", f"BASE_IMAGE={base}"]
     if arch == "arm64":
         build += ["--platform", "linux/arm64"]
+    project = ["--build-arg", "SIMBRIDGE_EXTRAS=dds"] if arch == "arm64" else []
     jobs: list[tuple[str, subprocess.Popen[bytes], tempfile._TemporaryFileWrapper[bytes]]] = []
     started = time.monotonic()
 
@@ -321,7 +324,7 @@ def build_images(arch: str = "amd64") -> str:
         if not image_exists(nginx):
             # a Dockerfile on stdin: no build context at all
             spawn("nginx image", [*build, "-t", nginx, "-"], NGINX_DOCKERFILE.read_bytes())
-        spawn("project image", [*build, "--label", TEST_LABEL, "-t", tag, str(ROOT)])
+        spawn("project image", [*build, *project, "--label", TEST_LABEL, "-t", tag, str(ROOT)])
         failures = []
         for name, proc, out in jobs:
             try:

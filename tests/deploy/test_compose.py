@@ -10,6 +10,7 @@ import os
 import re
 import shutil
 import subprocess
+import tomllib
 from typing import Any
 
 import pytest
@@ -34,11 +35,21 @@ def instructions() -> list[tuple[str, str]]:
     return [(ln.split(None, 1)[0].upper(), ln.split(None, 1)[1]) for ln in lines]
 
 
+def final_stage() -> list[tuple[str, str]]:
+    """The instructions of the image's own stage (after the last FROM)."""
+    steps = instructions()
+    last = max(i for i, (op, _) in enumerate(steps) if op == "FROM")
+    return steps[last:]
+
+
 def test_dockerfile_base_is_an_argument_defaulting_to_python_slim() -> None:
-    """`ARG BASE_IMAGE=python:3.12-slim-bookworm` then `FROM ${BASE_IMAGE}`."""
+    """`ARG BASE_IMAGE=python:3.12-slim-bookworm`; every stage is `FROM ${BASE_IMAGE}`."""
     steps = instructions()
     assert steps[0] == ("ARG", "BASE_IMAGE=python:3.12-slim-bookworm")
-    assert steps[1] == ("FROM", "${BASE_IMAGE}")
+    assert [arg for op, arg in steps if op == "FROM"] == [
+        "${BASE_IMAGE} AS dds-binding",
+        "${BASE_IMAGE}",
+    ]
 
 
 def test_dockerfile_runs_simbridge_unprivileged_in_exec_form_with_a_healthcheck() -> None:
@@ -50,13 +61,40 @@ def test_dockerfile_runs_simbridge_unprivileged_in_exec_form_with_a_healthcheck(
 
 
 def test_dockerfile_installs_wheels_only_without_a_cache() -> None:
-    """Every pip install is --no-cache-dir --only-binary=:all:; no compiler is installed."""
-    runs = [arg for op, arg in instructions() if op == "RUN"]
+    """The image's pip installs are --no-cache-dir --only-binary=:all:; it has no compiler.
+
+    Its one Debian package is Cyclone DDS's runtime library, for the binding that the first
+    stage compiles on aarch64 only.
+    """
+    runs = [arg for op, arg in final_stage() if op == "RUN"]
     installs = [part for arg in runs for part in arg.split("&&") if "pip install" in part]
     assert installs
     for part in installs:
         assert "--no-cache-dir" in part and "--only-binary=:all:" in part, part
-    assert not any(re.search(r"\b(gcc|build-essential|apt-get)\b", arg) for arg in runs)
+    assert not any(re.search(r"\b(gcc|build-essential|-dev)\b", arg) for arg in runs)
+    packages = [
+        part.split("--no-install-recommends")[1].split()
+        for arg in runs
+        for part in arg.split("&&")
+        if "apt-get install" in part
+    ]
+    assert packages == [["libddsc0debian"]]
+
+
+def test_dockerfile_builds_the_aarch64_dds_binding_pyproject_pins() -> None:
+    """The first stage compiles the dds extra's aarch64 pin, for aarch64 with dds only."""
+    pyproject = tomllib.loads((ROOT / "pyproject.toml").read_text())
+    pins = [
+        req.split(";")[0].strip()
+        for req in pyproject["project"]["optional-dependencies"]["dds"]
+        if "platform_machine == 'aarch64'" in req
+    ]
+    stage = instructions()[: len(instructions()) - len(final_stage())]
+    args = dict(arg.split("=", 1) for op, arg in stage if op == "ARG")
+    assert [args["CYCLONEDDS_AARCH64"]] == pins == ["cyclonedds==0.10.2"]
+    (build,) = [arg for op, arg in stage if op == "RUN"]
+    assert "*,dds,*aarch64) ;; *) exit 0 ;;" in build
+    assert '--no-binary cyclonedds -w /wheels "${CYCLONEDDS_AARCH64}"' in build
 
 
 def test_dockerignore_admits_only_what_the_image_needs() -> None:

@@ -5,7 +5,9 @@ Iron on, ``ROS_AUTOMATIC_DISCOVERY_RANGE`` (``SUBNET``, the default: multicast d
 host's network; ``LOCALHOST``: this host only; ``OFF``: no discovery at all;
 ``SYSTEM_DEFAULT``: the DDS library's own). simbridge reads them the same way and says them
 to Cyclone DDS as rmw_cyclonedds does (``rmw_init.cpp``: localhost means the loopback interface,
-no multicast and the local participant indices as unicast peers).
+no multicast and the local participant indices as unicast peers). ``CYCLONEDDS_URI`` (Cyclone's
+own configuration: files or XML, comma-separated) comes after simbridge's part, as
+rmw_cyclonedds puts it after its own, so that where both set something the user's wins.
 """
 
 from __future__ import annotations
@@ -34,17 +36,19 @@ class DdsOptions:
         distro: whose middlewares to match: ``humble`` (24-byte GIDs, no type hashes),
             ``jazzy`` or ``kilted`` (16-byte GIDs, RIHS01 type hashes in USER_DATA).
         discovery: the automatic discovery range (see the module's docstring).
+        cyclone_uri: ``CYCLONEDDS_URI``, Cyclone's configuration of the user ("" when unset).
     """
 
     domain: int = 0
     distro: str = "jazzy"
     discovery: DiscoveryRange = "SUBNET"
+    cyclone_uri: str = ""
 
     @classmethod
     def from_env(
         cls, env: Mapping[str, str] | None = None, *, distro: str | None = None
     ) -> DdsOptions:
-        """Read ``ROS_DOMAIN_ID``, ``ROS_DISTRO``, ``ROS_LOCALHOST_ONLY`` and the range.
+        """Read the ROS 2 variables (domain, distribution, discovery range) and CYCLONEDDS_URI.
 
         Raises:
             ConfigError: a value is not valid (the message names the variable).
@@ -75,7 +79,8 @@ class DdsOptions:
             discovery = text
         elif env.get("ROS_LOCALHOST_ONLY", "").strip() == "1":
             discovery = "LOCALHOST"  # Humble's variable (Jazzy still reads it when unset)
-        return cls(domain=domain, distro=chosen, discovery=discovery)
+        uri = env.get("CYCLONEDDS_URI", "").strip()
+        return cls(domain=domain, distro=chosen, discovery=discovery, cyclone_uri=uri)
 
     def cyclone_config(self) -> str:
         """Return the Cyclone DDS configuration (XML) of these options."""
@@ -97,4 +102,5 @@ class DdsOptions:
                 "<AllowMulticast>false</AllowMulticast></General>"
                 "<Discovery><ParticipantIndex>none</ParticipantIndex></Discovery>"
             )
-        return f'<CycloneDDS><Domain id="{self.domain}">{"".join(parts)}</Domain></CycloneDDS>'
+        own = f'<CycloneDDS><Domain id="{self.domain}">{"".join(parts)}</Domain></CycloneDDS>'
+        return f"{own},{self.cyclone_uri}" if self.cyclone_uri else own

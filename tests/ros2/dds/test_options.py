@@ -33,6 +33,16 @@ def test_localhost_only_keeps_discovery_on_the_loopback_interface() -> None:
     assert DdsOptions.from_env(env).discovery == "SUBNET"
 
 
+def test_cyclonedds_uri_comes_after_simbridges_part_as_rmw_cyclonedds_puts_it() -> None:
+    """The user's CYCLONEDDS_URI (files or XML) follows simbridge's own: where both set, it wins."""
+    assert DdsOptions.from_env({}).cyclone_config().count("<CycloneDDS>") == 1
+    user = "<CycloneDDS><Domain><General><AllowMulticast>false</AllowMulticast></General>"
+    options = DdsOptions.from_env({"CYCLONEDDS_URI": f" {user} ", "ROS_LOCALHOST_ONLY": "1"})
+    own, _, rest = options.cyclone_config().partition(",")
+    assert '<Peer address="localhost"/>' in own
+    assert rest == user
+
+
 @pytest.mark.parametrize(
     ("env", "named"),
     [
