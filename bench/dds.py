@@ -28,7 +28,6 @@ from __future__ import annotations
 import asyncio
 import json
 import os
-import statistics
 import subprocess
 import sys
 import tempfile
@@ -37,8 +36,7 @@ import time
 from pathlib import Path
 from typing import Any
 
-from websockets.asyncio.client import connect
-
+from bench import ros2outward
 from bench.procs import ROOT, collect, cpu_seconds, load_average, percentile, start_loadgens
 from bench.zenoh import _simbridge, _wait_topic, _world
 
@@ -204,103 +202,32 @@ def outward(seconds: float) -> bool:
     n = 30
     rounds = int(os.environ.get("ROUNDS", "3"))
     os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
+    topics = ros2outward.robot_topics(n)
     with tempfile.TemporaryDirectory() as tmp:
         world = _world(Path(tmp), "r", n, "outward")
-        topics = [(f"/r{k + 1}/odom", "nav_msgs/msg/Odometry") for k in range(n)]
-        topics += [(f"/r{k + 1}/scan", "sensor_msgs/msg/LaserScan") for k in range(n)]
-        topics += [("/tf", "tf2_msgs/msg/TFMessage")]
         with _simbridge("", "--world", str(world), "--dds", zenoh=False) as (proc, port):
             time.sleep(3)
-            t0, c0 = time.monotonic(), cpu_seconds(proc)
-            time.sleep(seconds)
-            idle = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
-
-            async def rosbridge() -> tuple[float, int]:
-                count = 0
-                async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
-                    for name, _ in topics:
-                        await ws.send(json.dumps({"op": "subscribe", "topic": name}))
-                    await asyncio.sleep(2)
-                    t0, c0 = time.monotonic(), cpu_seconds(proc)
-                    end = t0 + seconds
-                    while time.monotonic() < end:
-                        await ws.recv()
-                        count += 1
-                    share = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
-                return share, count
-
-            def dds() -> tuple[float, int]:
-                sub = _dds_subscriber(topics, seconds)
-                assert sub.stdout is not None
-                sub.stdout.readline()  # "start": matched (the server writes) and counting
-                t0, c0 = time.monotonic(), cpu_seconds(proc)
-                line = sub.stdout.readline()
-                share = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
-                sub.wait(timeout=30)
-                return share, int(json.loads(line)["messages"])
-
-            results: list[tuple[tuple[float, int], tuple[float, int]]] = []
-            for k in range(rounds):
-                if k % 2 == 0:
-                    first = asyncio.run(rosbridge())
-                    time.sleep(2)
-                    results.append((first, dds()))
-                else:
-                    second = dds()
-                    time.sleep(2)
-                    results.append((asyncio.run(rosbridge()), second))
-                time.sleep(2)
-    ratios = [d[0] / max(rb[0], 1e-9) for rb, d in results]
-    print(
-        f"dds outward: {n} robots' /odom, /scan and /tf, {rounds} alternating rounds of"
-        f" {seconds:g} s, {load_average()}"
-    )
-    print(f"nobody subscribed: server CPU {100 * idle:.1f} %")
-    print(
-        f"{'round':7}{'rosbridge CPU %':>16}{'messages':>10}{'DDS CPU %':>11}{'messages':>10}"
-        f"{'ratio':>8}"
-    )
-    for k, ((rb, rb_count), (d, d_count)) in enumerate(results):
-        print(
-            f"{k + 1:<7}{100 * rb:>16.1f}{rb_count:>10}{100 * d:>11.1f}{d_count:>10}"
-            f"{ratios[k]:>7.2f}x"
-        )
-    ratio = statistics.median(ratios)
-    ok = ratio <= 1.0
-    print(
-        f"DDS / rosbridge server CPU, median of {rounds} rounds: {ratio:.2f}x"
-        f" (rounds {min(ratios):.2f}-{max(ratios):.2f}x); target <= 1.0x: "
-        f"{'met' if ok else 'NOT met'}"
-    )
-    return ok
+            idle = ros2outward.cpu_share(proc, seconds)
+            results = ros2outward.compare_outward(
+                proc, port, topics, seconds, rounds, lambda: _dds_subscriber(topics, seconds)
+            )
+    title = f"dds outward: {n} robots' /odom, /scan and /tf, {rounds} alternating rounds of"
+    title += f" {seconds:g} s"
+    return ros2outward.report_outward(title, idle, results, label="DDS", target=1.0)
 
 
 def latency(seconds: float) -> bool:
     os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
     with _simbridge("", "--dds", zenoh=False) as (_proc, port):
         rosbridge: list[float] = []
-
-        async def client() -> None:
-            async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
-                await ws.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
-                end = time.monotonic() + seconds + 3
-                while time.monotonic() < end:
-                    msg = json.loads(await ws.recv())
-                    if msg.get("topic") == "/odom" and time.monotonic() > end - seconds:
-                        stamp = msg["msg"]["header"]["stamp"]
-                        rosbridge.append(time.time() - (stamp["sec"] + stamp["nanosec"] * 1e-9))
-
         sub = _dds_subscriber([("/odom", "nav_msgs/msg/Odometry")], seconds, stamps=True)
-        asyncio.run(client())
+        asyncio.run(ros2outward.rosbridge_latencies(port, "/odom", seconds, rosbridge, warmup=3))
         assert sub.stdout is not None
         sub.stdout.readline()
         dds = json.loads(sub.stdout.readline())["latencies"]
         sub.wait(timeout=30)
     print(f"dds latency: /odom of one robot, {seconds:g} s, {load_average()}")
-    print(f"{'':22}{'messages':>10}{'p50 ms':>10}{'p99 ms':>10}")
-    for label, values in (("rosbridge client", rosbridge), ("DDS subscriber", dds)):
-        p50, p99 = percentile(values, 0.5) * 1e3, percentile(values, 0.99) * 1e3
-        print(f"{label:22}{len(values):>10}{p50:>10.2f}{p99:>10.2f}")
+    ros2outward.print_latencies([("rosbridge client", rosbridge), ("DDS subscriber", dds)], 22)
     ratio = percentile(dds, 0.99) / max(percentile(rosbridge, 0.99), 1e-9)
     ok = ratio <= 1.0
     print(f"DDS / rosbridge p99: {ratio:.2f}x; target <= 1.0x: {'met' if ok else 'NOT met'}")

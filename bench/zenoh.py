@@ -67,6 +67,7 @@ import psutil
 import yaml
 from websockets.asyncio.client import connect
 
+from bench import ros2outward
 from bench.procs import (
     ROOT,
     collect,
@@ -146,22 +147,6 @@ def _simbridge(
         stop(proc)
 
 
-async def _latencies(port: int, topic: str, seconds: float, out: list[float]) -> None:
-    async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
-        await ws.send(json.dumps({"op": "subscribe", "topic": topic}))
-        end = time.monotonic() + seconds
-        while time.monotonic() < end:
-            try:
-                raw = await asyncio.wait_for(ws.recv(), 2)
-            except TimeoutError:
-                continue
-            msg = json.loads(raw)
-            if msg.get("topic") != topic:
-                continue
-            stamp = msg["msg"]["header"]["stamp"]
-            out.append(time.time() - (stamp["sec"] + stamp["nanosec"] * 1e-9))
-
-
 def _wait_topic(port: int, topic: str, timeout: float = 30.0) -> None:
     async def probe() -> None:
         deadline = time.monotonic() + timeout
@@ -193,17 +178,14 @@ def hop(seconds: float) -> bool:
 
             async def both() -> None:
                 await asyncio.gather(
-                    _latencies(port_a, "/hop1/odom", seconds, same),
-                    _latencies(port_b, "/hop1/odom", seconds, via),
+                    ros2outward.rosbridge_latencies(port_a, "/hop1/odom", seconds, same),
+                    ros2outward.rosbridge_latencies(port_b, "/hop1/odom", seconds, via),
                 )
 
             asyncio.run(both())
     rows = [("same process (A)", same), ("via B through the router", via)]
     print(f"zenoh hop: /odom latency of a rosbridge client, {seconds:g} s, {load_average()}")
-    print(f"{'':28}{'messages':>10}{'p50 ms':>10}{'p99 ms':>10}")
-    for label, values in rows:
-        p50, p99 = percentile(values, 0.5) * 1e3, percentile(values, 0.99) * 1e3
-        print(f"{label:28}{len(values):>10}{p50:>10.2f}{p99:>10.2f}")
+    ros2outward.print_latencies(rows)
     added = (percentile(via, 0.99) - percentile(same, 0.99)) * 1e3
     ratio = percentile(via, 0.99) / max(percentile(same, 0.99), 1e-9)
     ok = added <= 2.0
@@ -252,76 +234,23 @@ os._exit(0)  # without waiting for Zenoh's threads
 def outward(seconds: float) -> bool:
     n = 30
     rounds = int(os.environ.get("ROUNDS", "3"))
+    topics = ros2outward.robot_topics(n)
     with tempfile.TemporaryDirectory() as tmp, _router() as router:
         world = _world(Path(tmp), "r", n, "outward")
-        topics = [(f"/r{k + 1}/odom", "nav_msgs/msg/Odometry") for k in range(n)]
-        topics += [(f"/r{k + 1}/scan", "sensor_msgs/msg/LaserScan") for k in range(n)]
-        topics += [("/tf", "tf2_msgs/msg/TFMessage")]
         with _simbridge(router, "--world", str(world)) as (proc, port):
             time.sleep(3)
-            t0, c0 = time.monotonic(), cpu_seconds(proc)
-            time.sleep(seconds)
-            idle = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
-
-            async def rosbridge() -> tuple[float, int]:
-                count = 0
-                async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
-                    for name, _ in topics:
-                        await ws.send(json.dumps({"op": "subscribe", "topic": name}))
-                    await asyncio.sleep(2)
-                    t0, c0 = time.monotonic(), cpu_seconds(proc)
-                    end = t0 + seconds
-                    while time.monotonic() < end:
-                        await ws.recv()
-                        count += 1
-                    share = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
-                return share, count
-
-            def ros2() -> tuple[float, int]:
-                sub = _ros2_subscriber(router, topics, seconds)
-                assert sub.stdout is not None
-                sub.stdout.readline()  # "start": its subscribers declared and counting
-                t0, c0 = time.monotonic(), cpu_seconds(proc)
-                line = sub.stdout.readline()
-                share = (cpu_seconds(proc) - c0) / (time.monotonic() - t0)
-                sub.wait(timeout=30)
-                return share, int(json.loads(line)["messages"])
-
-            # alternating, so that a drift of the machine's load falls on both alike
-            results: list[tuple[tuple[float, int], tuple[float, int]]] = []
-            for k in range(rounds):
-                if k % 2 == 0:
-                    first = asyncio.run(rosbridge())
-                    time.sleep(2)
-                    results.append((first, ros2()))
-                else:
-                    second = ros2()
-                    time.sleep(2)
-                    results.append((asyncio.run(rosbridge()), second))
-                time.sleep(2)
-    ratios = [r2[0] / max(rb[0], 1e-9) for rb, r2 in results]
-    print(
-        f"zenoh outward: {n} robots' /odom, /scan and /tf, {rounds} alternating rounds of"
-        f" {seconds:g} s, {load_average()}"
-    )
-    print(f"nobody subscribed: server CPU {100 * idle:.1f} %")
-    print(
-        f"{'round':7}{'rosbridge CPU %':>16}{'messages':>10}"
-        f"{'ROS 2 CPU %':>13}{'messages':>10}{'ratio':>8}"
-    )
-    for k, ((rb, rb_count), (r2, r2_count)) in enumerate(results):
-        print(
-            f"{k + 1:<7}{100 * rb:>16.1f}{rb_count:>10}{100 * r2:>13.1f}{r2_count:>10}"
-            f"{ratios[k]:>7.2f}x"
-        )
-    ratio = statistics.median(ratios)
-    ok = ratio <= 1.3
-    print(
-        f"ROS 2 / rosbridge server CPU, median of {rounds} rounds: {ratio:.2f}x"
-        f" (rounds {min(ratios):.2f}-{max(ratios):.2f}x); target <= 1.3x: "
-        f"{'met' if ok else 'NOT met'}"
-    )
-    return ok
+            idle = ros2outward.cpu_share(proc, seconds)
+            results = ros2outward.compare_outward(
+                proc,
+                port,
+                topics,
+                seconds,
+                rounds,
+                lambda: _ros2_subscriber(router, topics, seconds),
+            )
+    title = f"zenoh outward: {n} robots' /odom, /scan and /tf, {rounds} alternating rounds of"
+    title += f" {seconds:g} s"
+    return ros2outward.report_outward(title, idle, results, label="ROS 2", target=1.3)
 
 
 def classroom(seconds: float) -> bool:
