@@ -11,7 +11,6 @@ import json
 from typing import TYPE_CHECKING, Any
 
 from simbridge.errors import ConversionError, ServiceError, TypeNotFoundError
-from simbridge.graph.paramservices import install_parameter_services
 from simbridge.graph.topics import BRIDGE_NODE
 from simbridge.msgs import normalize_type, positional_args, typedefs
 
@@ -66,7 +65,10 @@ def _string(req: dict[str, Any], key: str, service: str) -> str:
 
 
 def install_rosapi(graph: Graph) -> None:
-    """Register the rosapi services on ``graph``, and rcl_interfaces parameter services.
+    """Register the rosapi services on ``graph``.
+
+    The parameter nodes' rcl_interfaces services are
+    :func:`~simbridge.graph.paramservices.install_parameter_services`, which the builder calls.
 
     Every service of ``rosapi_msgs`` that rosbridge 2.x offers is answered (protocol reference
     section 4), plus the later ``interfaces``, ``action_type`` and ``action_*_details``.
@@ -250,7 +252,6 @@ def install_rosapi(graph: Graph) -> None:
     for name, (type_name, handler) in handlers.items():
         graph.add_service(f"/rosapi/{name}", f"rosapi_msgs/srv/{type_name}", ROSAPI_NODE, handler)
     _install_params(graph)
-    install_parameter_services(graph)
 
 
 def _install_params(graph: Graph) -> None:

@@ -25,6 +25,7 @@ from typing import TYPE_CHECKING
 from simbridge.app.config import world_spec
 from simbridge.app.settings import ServerSettings
 from simbridge.graph.graph import Graph
+from simbridge.graph.paramservices import install_parameter_services
 from simbridge.graph.rosapi import install_rosapi
 from simbridge.robot.bridge import RobotBridge
 from simbridge.robot.controls import WorldControls
@@ -116,6 +117,7 @@ def build_robot_graph(
     s = settings or ServerSettings()
     graph = Graph(service_timeout=s.service_timeout, max_parameter_names=s.max_parameter_names)
     install_rosapi(graph)
+    install_parameter_services(graph)  # every parameter node's, present and future
     bridge: RobotBridge | None = None
     simclock: SimClock | None = None
     estop: EStop | None = None

@@ -7,6 +7,7 @@ import pytest
 
 from simbridge.app.config import Params, load_world
 from simbridge.graph import Graph
+from simbridge.graph.paramservices import install_parameter_services
 from simbridge.graph.rosapi import install_rosapi
 from simbridge.robot.bridge import RobotBridge
 from simbridge.sim import World
@@ -17,6 +18,7 @@ from tests.helpers import RecordingPeer, rosbridge_of
 def graph() -> Graph:
     g = Graph()
     install_rosapi(g)
+    install_parameter_services(g)
     RobotBridge(g, World(load_world(None), Params()))
     return g
 

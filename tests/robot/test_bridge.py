@@ -9,6 +9,7 @@ import pytest
 
 from simbridge.app.config import Params, WorldSpec, load_world
 from simbridge.graph import Graph
+from simbridge.graph.paramservices import install_parameter_services
 from simbridge.graph.rosapi import install_rosapi
 from simbridge.robot.bridge import RobotBridge
 from simbridge.sim import World
@@ -213,6 +214,7 @@ def test_ground_truth_is_odom_by_default_and_odom_drifts_from_it_under_a_profile
     """/ground_truth beside /odom; the profile is ROS 2 parameters of /virtual_robot."""
     graph, world, bridge = setup
     install_rosapi(graph)
+    install_parameter_services(graph)
     peer = RecordingPeer(graph)
     for topic in ("/odom", "/ground_truth", "/tf"):
         sub(peer, graph, topic)
