@@ -30,6 +30,7 @@ import asyncio
 import contextlib
 import importlib
 import logging
+import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -43,6 +44,7 @@ from simbridge.graph.topics import DEFAULT_TOPIC_QOS, LATCHED_TOPIC_QOS, Peer, T
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.message import Outgoing
 from simbridge.ros2.dds.options import DdsOptions
+from simbridge.ros2.dds.trace import CycloneTrace, RefusedSample
 from simbridge.ros2.dds.types import IdlTypes, old_binding
 from simbridge.ros2.dds.wire import (
     DISCOVERY_TOPIC,
@@ -99,6 +101,13 @@ SERVICE_TIMEOUT = 10.0
 #: Bytes of rmw_cyclonedds's request header, after the CDR header: the client's id (the last
 #: 8 bytes of its GUID) and the request's sequence number, both 64-bit.
 REQUEST_HEADER = 16
+#: Refused samples held for the next reconcile's log lines at most (the others are counted).
+REFUSALS_HELD = 100
+#: Seconds a refused sample's log line waits for its participant's ros_discovery_info (to name
+#: the node) at most.
+NAMED_WITHIN = 5.0
+#: The entity id of a participant (after its 12-byte GUID prefix).
+PARTICIPANT_ENTITY = b"\x00\x00\x01\xc1"
 
 
 def import_cyclonedds(what: str = "--dds") -> Any:
@@ -205,6 +214,9 @@ class DdsLink:
         self.error: str | None = None
         self.participant: Any = None
         self._domain: Any = None
+        self._trace: CycloneTrace | None = None
+        #: Samples Cyclone refused, to be said at the next reconcile.
+        self._refused_samples: list[tuple[float, RefusedSample]] = []
         self.guid = b""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._writers: dict[str, _Endpoint] = {}
@@ -279,8 +291,14 @@ class DdsLink:
         dds = self.dds
         core = importlib.import_module("cyclonedds.core")
         builtin = importlib.import_module("cyclonedds.builtin")
-        # kept: the domain (and its configuration) lives as long as this object
-        self._domain = dds.Domain(self.options.domain, self.options.cyclone_config())
+        # Cyclone's warnings come back through a pipe: the samples it refuses are said there
+        assert self._loop is not None
+        self._trace = trace = CycloneTrace(self._loop, self._on_refused)
+        try:
+            # kept: the domain (and its configuration) lives as long as this object
+            self._domain = dds.Domain(self.options.domain, self.options.cyclone_config(trace.path))
+        finally:
+            trace.opened()
         qos = core.Qos(core.Policy.Userdata(ENCLAVE_USER_DATA))
         self.participant = dds.DomainParticipant(self.options.domain, qos=qos)
         self.guid = self.participant.guid.bytes
@@ -351,6 +369,9 @@ class DdsLink:
         domain, self._domain = self._domain, None
         with contextlib.suppress(Exception):
             domain.__del__()
+        if self._trace is not None:
+            self._trace.close()
+            self._trace = None
 
     def health(self) -> dict[str, Any]:
         """Return the ``dds`` part of ``/healthz``."""
@@ -390,6 +411,8 @@ class DdsLink:
             self._read_discovery()
         except Exception as err:  # a discovery sample Cyclone or we cannot read
             self._log("discovery", f"DDS: discovery not read: {err}")
+        if self._refused_samples:
+            self._say_refused()
         self._import_remote()
         self._export_local()
         self._announce()
@@ -847,6 +870,50 @@ class DdsLink:
             self._log(f"refused {name}", f"DDS: {name}: refused here: {err}")
         finally:
             self._forwarding = False
+
+    def _on_refused(self, refused: list[RefusedSample], missed: int) -> None:
+        """Samples Cyclone refused (not CDR of the reader's type): count them now.
+
+        Whose they are is said at the next reconcile, once discovery was read (the writer may
+        be newer than the last read).
+        """
+        self.stats["bad_payloads"] += len(refused) + missed
+        self.stats["refused_by_cyclone"] += len(refused) + missed
+        room = REFUSALS_HELD - len(self._refused_samples)
+        now = time.monotonic()
+        self._refused_samples.extend((now, sample) for sample in refused[:room])
+
+    def _say_refused(self) -> None:
+        """Log (rate-limited) the samples Cyclone refused since the last reconcile."""
+        refused, self._refused_samples = self._refused_samples, []
+        now = time.monotonic()
+        for when, sample in refused:
+            participant_key = sample.writer[:12] + PARTICIPANT_ENTITY
+            if participant_key not in self._infos and now - when < NAMED_WITHIN:
+                # its ros_discovery_info may come a little after its endpoints: wait for it
+                self._refused_samples.append((when, sample))
+                continue
+            parsed = ros_name(sample.topic)
+            name = parsed[1] if parsed is not None else sample.topic
+            try:
+                type_name = ros_type(sample.type)
+            except ValueError:
+                type_name = sample.type
+            remote = self._remote_writers.get(sample.writer)
+            participant = participant_key.hex()
+            owner = (
+                f"{self._owner(sample.writer, remote)} (participant {participant})"
+                if remote is not None
+                else f"participant {participant}"
+            )
+            what = {"rq": f"a request to {name}", "rr": f"a reply on {name}"}.get(
+                parsed[0] if parsed is not None else "", f"{name}: a sample"
+            )
+            self._log(
+                f"bad {name}",
+                f"DDS: {what} from {owner} is not CDR of {type_name}: Cyclone DDS refused it "
+                f"({sample.reason}); {self.stats['refused_by_cyclone']} refused so far",
+            )
 
     # -- calls from DDS (rmw_cyclonedds's wire) ----------------------------------------------
 

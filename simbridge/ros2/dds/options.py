@@ -82,10 +82,16 @@ class DdsOptions:
         uri = env.get("CYCLONEDDS_URI", "").strip()
         return cls(domain=domain, distro=chosen, discovery=discovery, cyclone_uri=uri)
 
-    def cyclone_config(self) -> str:
-        """Return the Cyclone DDS configuration (XML) of these options."""
+    def cyclone_config(self, trace: str = "stderr") -> str:
+        """Return the Cyclone DDS configuration (XML) of these options.
+
+        ``trace``: where Cyclone writes its warnings and errors (a path, or ``stderr``); the
+        DDS link reads them from a pipe (a sample Cyclone refuses is said there only).
+        """
         # Cyclone's own problems to stderr, not to a cyclonedds.log in the working directory
-        parts = ["<Tracing><Verbosity>severe</Verbosity><OutputFile>stderr</OutputFile></Tracing>"]
+        verbosity = "severe" if trace == "stderr" else "warning"
+        parts = [f"<Tracing><Verbosity>{verbosity}</Verbosity><OutputFile>{trace}</OutputFile>"]
+        parts.append("</Tracing>")
         if self.discovery == "LOCALHOST":
             # the loopback interface only; multicast on it where lo has it (a Fast DDS node's
             # default discovery), and the local participant indices as unicast peers

@@ -1,14 +1,15 @@
 """Bad input from DDS: a call simbridge cannot answer, bytes that are not CDR, a peer that goes.
 
 Cyclone DDS checks each sample against the reader's type and drops what does not fit before
-simbridge sees it (with a line of its own on stderr); what simbridge's own checks refuse is
-counted and said in one rate-limited log line (and on /rosout). The robot, the loop and the
-other peers carry on.
+simbridge could read it; simbridge reads those refusals back from Cyclone's log, and they, like
+what simbridge's own checks refuse, are counted and said in one rate-limited log line naming
+the topic and the node (also on /rosout). The robot, the loop and the other peers carry on.
 """
 
 from __future__ import annotations
 
 import asyncio
+import logging
 from typing import Any
 
 import pytest
@@ -24,13 +25,19 @@ __all__ = ["dds_app"]
 
 
 async def test_bad_input_from_dds_is_logged_and_counted_and_the_robot_runs_on(
-    dds_app: App, ddspeer: Any
+    dds_app: App, ddspeer: Any, caplog: pytest.LogCaptureFixture
 ) -> None:
     app = dds_app
     link = app.dds
     assert link is not None
-    # an rmw_fastrtps client's /reset: it carries no rmw_cyclonedds request header
-    client = await ddspeer("--call-reset", "--chatter", node="student", distro="jazzy")
+    # an rmw_fastrtps client's /reset: it carries no rmw_cyclonedds request header; and 5
+    # bytes on /cmd_vel under Twist's name (a Fast DDS writer sends no type information, so it
+    # matches by the name alone), where a Twist has 48
+    bad = "/cmd_vel=geometry_msgs/msg/Twist:0001000001"
+    caplog.set_level(logging.WARNING)
+    client = await ddspeer(
+        "--call-reset", "--chatter", "--raw", bad, node="student", distro="jazzy"
+    )
     await client.wait_for(
         lambda e: e.get("event") == "matched" and e["topic"] == "rr/resetReply" and e["count"],
         what="its /reset reply reader matched",
@@ -40,19 +47,21 @@ async def test_bad_input_from_dds_is_logged_and_counted_and_the_robot_runs_on(
     # Cyclone checks each sample against the reader's type before simbridge sees it: the
     # request (no header: 5 bytes for a 21-byte type) is dropped there, never answered
     await client.wait_for(lambda e: e.get("event") == "called", what="the request sent")
-    # bytes on /cmd_vel that are not a Twist: dropped too; the robot runs on, undriven
-    peer = asyncio.create_task(
-        _peer(
-            link.options.domain,
-            "--seconds",
-            "2",
-            "--unknown-type",
-            "--raw",
-            "/cmd_vel",
-            "geometry_msgs/msg/Twist",
-            "0001000001",
-        )
-    )
+
+    # the bytes on /cmd_vel that are not a Twist: Cyclone refuses them, simbridge counts them
+    # and says so once, naming the topic and the node; the robot runs on, undriven
+    def said() -> list[str]:
+        lines = [r.getMessage() for r in caplog.records if "Cyclone DDS refused" in r.getMessage()]
+        return [text for text in lines if "/cmd_vel" in text]
+
+    await wait_for(lambda: said(), 15)
+    (line,) = said()
+    guid = next(e["guid"] for e in client.events if e.get("event") == "ready")
+    assert line.startswith("DDS: /cmd_vel: a sample from ")  # the node, once it was announced
+    assert f"(participant {guid})" in line
+    assert "is not CDR of geometry_msgs/msg/Twist" in line
+    assert link.stats["bad_payloads"] >= link.stats["refused_by_cyclone"]
+    peer = asyncio.create_task(_peer(link.options.domain, "--seconds", "2", "--unknown-type"))
     # a type the registry does not know: listed with its type (rosapi), counted, not bridged
     topics = app.graph.topics.topics
     await wait_for(lambda: "/mystery" in topics, 10)

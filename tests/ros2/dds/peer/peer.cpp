@@ -211,6 +211,14 @@ struct EchoSpec
     std::string qos;       // default | sensor | latched
 };
 
+// --raw: bytes written as they are, under a ROS type's DDS name (bad input for the tests)
+struct RawSpec
+{
+    std::string topic;               // ROS name, e.g. /cmd_vel
+    std::string type;                // ROS type, e.g. geometry_msgs/msg/Twist
+    std::vector<unsigned char> data;  // the whole payload, its encapsulation header included
+};
+
 struct Options
 {
     int domain = -1;
@@ -230,6 +238,7 @@ struct Options
     bool call_reset = false;
     double duration = 0.0;
     std::map<std::string, std::string> type_hashes;  // ROS type -> RIHS01_...
+    std::vector<RawSpec> raws;
 };
 
 const char* kUsage =
@@ -250,7 +259,79 @@ const char* kUsage =
     "  --call-reset          a client of /reset: stdin `call_reset` sends a request\n"
     "  --type-hash pkg/msg/Type=RIHS01_<hex>   endpoint USER_DATA typehash= of that type\n"
     "                        (Iron and later, so not with --distro humble)\n"
+    "  --raw TOPIC=pkg/msg/Type:HEX   write these bytes (CDR header included) as they are\n"
+    "                        on TOPIC at 10 Hz, under the type's DDS name (no other option of\n"
+    "                        this peer may use that type)\n"
     "  --duration S          exit after S seconds (default: until stdin ends)\n";
+
+RawSpec parse_raw(const std::string& arg)
+{
+    RawSpec spec;
+    auto eq = arg.find('=');
+    auto colon = arg.rfind(':');
+    if (eq == std::string::npos || colon == std::string::npos || colon < eq) {
+        fail("--raw wants TOPIC=pkg/msg/Type:HEX");
+    }
+    spec.topic = arg.substr(0, eq);
+    spec.type = arg.substr(eq + 1, colon - eq - 1);
+    std::string hex = arg.substr(colon + 1);
+    if (hex.size() < 8 || hex.size() % 2) {
+        fail("--raw " + arg + ": HEX must hold whole bytes, the 4-byte CDR header first");
+    }
+    for (size_t k = 0; k < hex.size(); k += 2) {
+        spec.data.push_back(static_cast<unsigned char>(std::stoi(hex.substr(k, 2), nullptr, 16)));
+    }
+    return spec;
+}
+
+// The DDS name of a ROS type: geometry_msgs/msg/Twist -> geometry_msgs::msg::dds_::Twist_
+std::string dds_type_of(const std::string& ros_type)
+{
+    auto last = ros_type.rfind('/');
+    std::string out = ros_type.substr(0, last);
+    for (auto p = out.find('/'); p != std::string::npos; p = out.find('/')) {
+        out.replace(p, 1, "::");
+    }
+    return out + "::dds_::" + ros_type.substr(last + 1) + "_";
+}
+
+// A type whose samples are bytes written as they are (std::vector<unsigned char>).
+class RawType : public TopicDataType
+{
+public:
+    explicit RawType(const std::string& name)
+    {
+        setName(name.c_str());
+        m_typeSize = 1 << 16;
+        m_isGetKeyDefined = false;
+    }
+
+    bool serialize(void* data, rtps::SerializedPayload_t* payload) override
+    {
+        auto* bytes = static_cast<std::vector<unsigned char>*>(data);
+        if (bytes->size() > payload->max_size) {
+            return false;
+        }
+        std::copy(bytes->begin(), bytes->end(), payload->data);
+        payload->length = static_cast<uint32_t>(bytes->size());
+        payload->encapsulation = (*bytes)[1] == 1 ? CDR_LE : CDR_BE;
+        return true;
+    }
+
+    bool deserialize(rtps::SerializedPayload_t*, void*) override { return false; }
+
+    std::function<uint32_t()> getSerializedSizeProvider(void* data) override
+    {
+        auto size = static_cast<uint32_t>(static_cast<std::vector<unsigned char>*>(data)->size());
+        return [size] { return size; };
+    }
+
+    void* createData() override { return new std::vector<unsigned char>(); }
+
+    void deleteData(void* data) override { delete static_cast<std::vector<unsigned char>*>(data); }
+
+    bool getKey(void*, rtps::InstanceHandle_t*, bool) override { return false; }
+};
 
 EchoSpec parse_echo(const std::string& arg)
 {
@@ -354,6 +435,8 @@ Options parse(int argc, char** argv)
                 fail("--type-hash wants pkg/msg/Type=RIHS01_<64 hex>");
             }
             o.type_hashes[v.substr(0, eq)] = v.substr(eq + 1);
+        } else if (a == "--raw") {
+            o.raws.push_back(parse_raw(value(i)));
         } else if (a == "--duration") {
             o.duration = std::stod(value(i));
         } else {
@@ -560,6 +643,15 @@ public:
         if (o_.chatter) {
             chatter_writer_ = writer<stdm::String_PubSubType>(dds_topic("/peer_chatter"), false, 10);
         }
+        for (const auto& raw : o_.raws) {
+            Topic* t = topic_of(dds_topic(raw.topic), TypeSupport(new RawType(dds_type_of(raw.type))));
+            DataWriter* w = publisher_->create_datawriter(t, writer_qos(false, 10), &writer_listener_);
+            if (!w) {
+                fail("could not create a writer on " + dds_topic(raw.topic));
+            }
+            writer_gids_.push_back(w->guid());
+            raw_writers_.push_back(w);
+        }
         if (o_.robot) {
             robot_setup();
         }
@@ -582,6 +674,7 @@ public:
         double start = now_seconds();
         double period = 1.0 / o_.rate;
         double next_cmd = start, next_chatter = start, next_odom = start, next_scan = start;
+        double next_raw = start;
         int chatter_count = 0;
         double last = start;
         while (!g_stop) {
@@ -598,6 +691,13 @@ public:
                 }
                 cmd_vel_writer_->write(&m);
                 next_cmd += period;
+            }
+            if (!raw_writers_.empty() && t >= next_raw) {
+                for (size_t k = 0; k < raw_writers_.size(); ++k) {
+                    std::vector<unsigned char> bytes = o_.raws[k].data;
+                    raw_writers_[k]->write(&bytes);
+                }
+                next_raw += 0.1;
             }
             if (chatter_writer_ && t >= next_chatter) {
                 stdm::String_ m;
@@ -1026,6 +1126,7 @@ private:
     std::vector<rtps::GUID_t> reader_gids_, writer_gids_;
     DataWriter* cmd_vel_writer_ = nullptr;
     DataWriter* chatter_writer_ = nullptr;
+    std::vector<DataWriter*> raw_writers_;
     DataWriter* odom_writer_ = nullptr;
     DataWriter* scan_writer_ = nullptr;
     DataWriter* tf_writer_ = nullptr;
