@@ -9,6 +9,8 @@ event loop, in the same shape for every transport:
 * :class:`Logbook`: one rate-limited warning per problem (also on ``/rosout``: a rosbridge
   client sees why a topic stays silent), and notes said once;
 * :class:`Refusals`: the ROS 2 peers' role (``--ros2-role``) per name, cached;
+* :class:`StandIns`: the remote subscriptions, in the graph as in-process subscribers that do
+  nothing (the simulation publishes what only ROS 2 listens to, rosapi lists them);
 * :func:`local_owner`, :func:`outward_topics`, :func:`outward_services`: which local node an
   owner in the graph stands for, and the graph's topics and services a link mirrors outward
   (a node of another process, a :class:`ForeignNode`, is never mirrored back).
@@ -22,9 +24,10 @@ import logging
 import threading
 import time
 from collections import Counter, deque
-from collections.abc import Callable, Collection, Iterable, Iterator
-from typing import TYPE_CHECKING
+from collections.abc import Callable, Collection, Iterable, Iterator, Mapping
+from typing import TYPE_CHECKING, Any, TypeVar
 
+from simbridge.errors import SimbridgeError
 from simbridge.graph import BRIDGE_NODE, Graph, Topic
 from simbridge.graph.access import Access
 
@@ -44,6 +47,7 @@ __all__ = [
     "Logbook",
     "Refusals",
     "Ros2Peer",
+    "StandIns",
     "Take",
     "local_owner",
     "local_publisher",
@@ -67,6 +71,8 @@ DRAIN_BYTES = 1_000_000
 #: graph's topics and the remote endpoints, both bounded, so a clear is rare).
 REFUSALS_KEPT = 100_000
 
+#: A transport's node of another process.
+NodeT = TypeVar("NodeT", bound="ForeignNode")
 #: Who takes a sample on the event loop: ``take(name, payload)``.
 Take = Callable[[str, bytes], None]
 
@@ -373,3 +379,53 @@ class Inbox:
                 f"bytes on {name} dropped: over {self.setting}_max_sample_bytes "
                 f"({self.max_sample}); {self.stats[self.oversized_key]} dropped so far",
             )
+
+
+class StandIns:
+    """Remote subscriptions, in the graph as in-process subscribers that do nothing.
+
+    So that the simulation publishes what only ROS 2 listens to (the link's delivery tap sends
+    it out) and rosapi lists them under their nodes; the outward walk leaves them out
+    (:attr:`ids`).
+    """
+
+    def __init__(self, graph: Graph, logbook: Logbook) -> None:
+        self.graph = graph
+        self.logbook = logbook
+        #: topic -> remote node -> its stand-in's callback.
+        self.by_topic: dict[str, dict[ForeignNode, Callable[[Any, Any], None]]] = {}
+        #: The stand-ins' callbacks' ids.
+        self.ids: set[int] = set()
+
+    def update(self, name: str, subs: Mapping[NodeT, str]) -> None:
+        """Make the graph hold exactly these remote subscriptions of ``name`` (node -> type).
+
+        One of a type the registry does not know is left out; one the graph refuses (another
+        type on that name) is counted and said (``name_clashes``).
+        """
+        topics = self.graph.topics
+        markers = self.by_topic.get(name, {})
+        for owner in [o for o in markers if o not in subs]:
+            callback = markers.pop(owner)
+            self.ids.discard(id(callback))
+            topics.unsubscribe_internal(name, callback)
+        for owner, type_name in subs.items():
+            if owner in markers or not self.graph.registry.known(type_name):
+                continue
+
+            def marker(msg: Any, source: Any) -> None:
+                """A ROS 2 subscription: the message goes out through the delivery tap."""
+
+            try:
+                topics.subscribe_internal(name, type_name, owner, marker)
+            except SimbridgeError as err:
+                self.logbook.warn(
+                    f"clash {name}", f"{self.logbook.label}: {name} of {owner} not bridged: {err}"
+                )
+                self.logbook.stats["name_clashes"] += 1
+                continue
+            markers = self.by_topic.setdefault(name, markers)
+            markers[owner] = marker
+            self.ids.add(id(marker))
+        if not markers:
+            self.by_topic.pop(name, None)

@@ -32,7 +32,6 @@ import importlib
 import logging
 import time
 from collections import Counter
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -68,6 +67,7 @@ from simbridge.ros2.link import (
     Logbook,
     Refusals,
     Ros2Peer,
+    StandIns,
     Take,
     local_publisher,
     outward_services,
@@ -234,9 +234,9 @@ class DdsLink:
         self._remote_readers: dict[bytes, _Remote] = {}
         #: Inward: topic owners added to the graph, remote subscriptions' markers, nodes.
         self._imported: dict[str, dict[DdsNode, str]] = {}
-        self._markers: dict[str, dict[DdsNode, Callable[[Any, Any], None]]] = {}
-        self._marker_ids: set[int] = set()
         self._remote_nodes: set[str] = set()
+        #: Remote readers, in the graph as in-process subscribers that do nothing.
+        self.stand_ins = StandIns(graph, self.logbook)
         # whatever comes from DDS is admitted as one peer of the ROS 2 peers' role
         scope, admin = ros2_access(settings)
         self._access = Access(scope, admin, guarded=True, peer_id=graph.next_peer_id())
@@ -516,7 +516,7 @@ class DdsLink:
             subs.setdefault(remote.name, {})[self._owner(guid, remote)] = remote.type
         for name in {*pubs, *self._imported}:
             self._import_publishers(name, pubs.get(name, {}))
-        for name in {*subs, *self._markers}:
+        for name in {*subs, *self.stand_ins.by_topic}:
             self._import_subscriptions(name, subs.get(name, {}))
         self._import_nodes()
 
@@ -560,30 +560,7 @@ class DdsLink:
             self._imported.pop(name, None)
 
     def _import_subscriptions(self, name: str, subs: dict[DdsNode, str]) -> None:
-        topics = self.graph.topics
-        markers = self._markers.get(name, {})
-        for owner in [o for o in markers if o not in subs]:
-            callback = markers.pop(owner)
-            self._marker_ids.discard(id(callback))
-            topics.unsubscribe_internal(name, callback)
-        for owner, type_name in subs.items():
-            if owner in markers or not self.graph.registry.known(type_name):
-                continue
-
-            def marker(msg: Any, source: Any) -> None:
-                """A DDS reader: the message goes out through the delivery tap."""
-
-            try:
-                topics.subscribe_internal(name, type_name, owner, marker)
-            except SimbridgeError as err:
-                self._log(f"clash {name}", f"DDS: {name} of {owner} not bridged: {err}")
-                self.stats["name_clashes"] += 1
-                continue
-            markers = self._markers.setdefault(name, markers)
-            markers[owner] = marker
-            self._marker_ids.add(id(marker))
-        if not markers:
-            self._markers.pop(name, None)
+        self.stand_ins.update(name, subs)
 
     def _import_nodes(self) -> None:
         """List the nodes of other participants in the graph (rosapi) while they exist."""
@@ -615,7 +592,7 @@ class DdsLink:
         """Return the local writers (name -> node, type, latched) and readers (name -> ...)."""
         writers: dict[str, tuple[str, str, bool]] = {}
         readers: dict[str, tuple[str, str]] = {}
-        for topic, publishers, subscribers in outward_topics(self.graph, self._marker_ids):
+        for topic, publishers, subscribers in outward_topics(self.graph, self.stand_ins.ids):
             type_name = topic.type or ""
             # one writer and one reader a topic, under the first node that has it
             if publishers:

@@ -62,6 +62,7 @@ from simbridge.ros2.link import (
     Logbook,
     Refusals,
     Ros2Peer,
+    StandIns,
     Take,
     local_owner,
     local_publisher,
@@ -286,8 +287,7 @@ class ZenohLink:
         self._remote_nodes: set[str] = set()
         #: Remote subscriptions stand in the graph as in-process subscribers that do nothing
         #: (so that the simulation publishes what only ROS 2 listens to, and rosapi lists them).
-        self._markers: dict[str, dict[RemoteNode, Callable[[Any, Any], None]]] = {}
-        self._marker_ids: set[int] = set()
+        self.stand_ins = StandIns(graph, self.logbook)
         #: Inward data subscribers by topic name, then key expression.
         self._subscribers: dict[str, dict[str, Any]] = {}
         #: Their ring channels (all but latched topics') by (topic, key expression), polled by
@@ -494,7 +494,7 @@ class ZenohLink:
         for node in self.graph.nodes:
             if node not in self._remote_nodes:
                 want[("NN", node, "")] = ("NN", "", DEFAULT_QOS)
-        for topic, publishers, subscribers in outward_topics(self.graph, self._marker_ids):
+        for topic, publishers, subscribers in outward_topics(self.graph, self.stand_ins.ids):
             type_name = topic.type or ""
             # the graph's offer in rmw_zenoh's tokens (its default depth is elided from them)
             qos = LATCHED_QOS if topic.qos.transient_local else DEFAULT_QOS
@@ -1022,7 +1022,7 @@ class ZenohLink:
     def _import_remote(self) -> None:
         """Make the graph hold exactly the remote publishers and services the tokens show."""
         self.actions.import_remote(self._allowed_action_parts())
-        names = {*self._by_name, *self._imported_pubs, *self._markers, *self._providers}
+        names = {*self._by_name, *self._imported_pubs, *self.stand_ins.by_topic, *self._providers}
         self._import_names(names, {*self._remote_node_tokens, *self._remote_nodes})
 
     def _import_names(self, names: Iterable[str], nodes: Iterable[str]) -> None:
@@ -1131,31 +1131,8 @@ class ZenohLink:
             self._remote_nodes.add(name)
 
     def _import_subscriptions(self, name: str, entities: Iterable[Entity]) -> None:
-        topics = self.graph.topics
         subs = {RemoteNode(e.node_fqn, e.zid): e.type for e in entities if e.kind == "MS"}
-        markers = self._markers.get(name, {})
-        for owner in [o for o in markers if o not in subs]:
-            callback = markers.pop(owner)
-            self._marker_ids.discard(id(callback))
-            topics.unsubscribe_internal(name, callback)
-        for owner, type_name in subs.items():
-            if owner in markers or not self.graph.registry.known(type_name):
-                continue
-
-            def marker(msg: Any, source: Any) -> None:
-                """A ROS 2 subscription: the message goes out through the delivery tap."""
-
-            try:
-                topics.subscribe_internal(name, type_name, owner, marker)
-            except SimbridgeError as err:
-                self._log(f"clash {name}", f"Zenoh: {name} of {owner} not bridged: {err}")
-                self.stats["name_clashes"] += 1
-                continue
-            markers = self._markers.setdefault(name, markers)
-            markers[owner] = marker
-            self._marker_ids.add(id(marker))
-        if not markers:
-            self._markers.pop(name, None)
+        self.stand_ins.update(name, subs)
 
     def _update_subscribers(self, only: Collection[str] | None = None) -> None:
         """Subscribe to remote data exactly while something here listens to it.
@@ -1180,7 +1157,7 @@ class ZenohLink:
             if self.refusal(name) is not None:
                 continue  # ROS 2 may not publish it here: its samples are not even asked for
             # a rosbridge client's subscription only while ROS 2 publishes the topic
-            local = any(id(cb) not in self._marker_ids for _n, cb in topic.internal)
+            local = any(id(cb) not in self.stand_ins.ids for _n, cb in topic.internal)
             if local or (topic.sinks and name in remote):
                 wanted[name] = (topic.type, topic.latch, local)
         published: dict[str, set[str]] = {}
