@@ -9,6 +9,7 @@ event loop, in the same shape for every transport:
 * :class:`Logbook`: one rate-limited warning per problem (also on ``/rosout``: a rosbridge
   client sees why a topic stays silent), and notes said once;
 * :class:`Refusals`: the ROS 2 peers' role (``--ros2-role``) per name, cached;
+* :class:`Imports`: the remote publishers, in the graph as owners of their topics;
 * :class:`StandIns`: the remote subscriptions, in the graph as in-process subscribers that do
   nothing (the simulation publishes what only ROS 2 listens to, rosapi lists them);
 * :func:`local_owner`, :func:`outward_topics`, :func:`outward_services`: which local node an
@@ -43,6 +44,7 @@ __all__ = [
     "LOG_EVERY",
     "SHARED_TOPICS",
     "ForeignNode",
+    "Imports",
     "Inbox",
     "Logbook",
     "Refusals",
@@ -428,4 +430,72 @@ class StandIns:
             markers[owner] = marker
             self.ids.add(id(marker))
         if not markers:
+            self.by_topic.pop(name, None)
+
+
+class Imports:
+    """Remote publishers, in the graph as owners of their topics (rosapi lists them).
+
+    Not those the ROS 2 peers' role may not publish (:class:`Refusals`); one of a type the
+    registry does not know is listed without being bridged (``unknown_types``); one of a name
+    a local node publishes already (but :data:`SHARED_TOPICS`) goes to ``clash``.
+    """
+
+    def __init__(
+        self,
+        graph: Graph,
+        refusals: Refusals,
+        clash: Callable[[str, ForeignNode, str], None],
+        *,
+        clients_clash: bool,
+    ) -> None:
+        self.graph = graph
+        self.refusals = refusals
+        self.logbook = refusals.logbook
+        #: Says (and counts) that ``(name, node, local)``: ``local`` publishes ``name`` here.
+        self.clash = clash
+        #: Whether a rosbridge client publishing a name keeps remote publishers of it out.
+        self.clients_clash = clients_clash
+        #: topic -> remote node -> its type.
+        self.by_topic: dict[str, dict[ForeignNode, str]] = {}
+
+    def update(self, name: str, pubs: Mapping[NodeT, tuple[str, bool]]) -> None:
+        """Make the graph hold exactly these remote publishers of ``name``.
+
+        ``pubs``: remote node -> (type, latched).
+        """
+        topics = self.graph.topics
+        logbook = self.logbook
+        label = logbook.label
+        if pubs and self.refusals.refused(name, f"{next(iter(pubs))}:", count=False):
+            pubs = {}  # the ROS 2 peers' role may not publish it here
+        imported = self.by_topic.get(name, {})
+        for owner in [o for o in imported if o not in pubs]:
+            del imported[owner]
+            topics.unadvertise(name, owner, None)
+        for owner, (type_name, latched) in pubs.items():
+            if owner in imported:
+                continue
+            if not self.graph.registry.known(type_name):
+                logbook.warn(
+                    f"type {type_name}",
+                    f"{label}: {name} from {owner} has type {type_name}, unknown here: listed, "
+                    "its messages are not bridged",
+                )
+                logbook.stats["unknown_types"] += 1
+                if "/" not in type_name:
+                    continue  # not even a ROS type name: not listed
+            local = local_publisher(topics.topics.get(name), clients=self.clients_clash)
+            if local is not None and name not in SHARED_TOPICS:
+                self.clash(name, owner, local)
+                continue
+            try:
+                topics.advertise(name, type_name, owner, latch=latched)
+            except SimbridgeError as err:
+                logbook.warn(f"clash {name}", f"{label}: {name} from {owner} not bridged: {err}")
+                logbook.stats["name_clashes"] += 1
+                continue
+            imported = self.by_topic.setdefault(name, imported)
+            imported[owner] = type_name
+        if not imported:
             self.by_topic.pop(name, None)

@@ -61,15 +61,14 @@ from simbridge.ros2.dds.wire import (
     typehash_user_data,
 )
 from simbridge.ros2.link import (
-    SHARED_TOPICS,
     ForeignNode,
+    Imports,
     Inbox,
     Logbook,
     Refusals,
     Ros2Peer,
     StandIns,
     Take,
-    local_publisher,
     outward_services,
     outward_topics,
 )
@@ -233,7 +232,6 @@ class DdsLink:
         self._remote_writers: dict[bytes, _Remote] = {}
         self._remote_readers: dict[bytes, _Remote] = {}
         #: Inward: topic owners added to the graph, remote subscriptions' markers, nodes.
-        self._imported: dict[str, dict[DdsNode, str]] = {}
         self._remote_nodes: set[str] = set()
         #: Remote readers, in the graph as in-process subscribers that do nothing.
         self.stand_ins = StandIns(graph, self.logbook)
@@ -244,6 +242,7 @@ class DdsLink:
         #: Why DDS peers may not publish on a name (None: they may), by name.
         self.refusals = Refusals(graph, self._access, self.logbook)
         self._refused = self.refusals.refused
+        self.imports = Imports(graph, self.refusals, self._local_clash, clients_clash=True)
         self._servers: dict[str, _Server] = {}
         #: Calls from DDS waiting for a provider that is not in process, at most
         #: ``max_pending_calls`` (the budget of one rosbridge client: the DDS peers are one).
@@ -514,50 +513,17 @@ class DdsLink:
         subs: dict[str, dict[DdsNode, str]] = {}
         for guid, remote in self._remote_readers.items():
             subs.setdefault(remote.name, {})[self._owner(guid, remote)] = remote.type
-        for name in {*pubs, *self._imported}:
-            self._import_publishers(name, pubs.get(name, {}))
+        for name in {*pubs, *self.imports.by_topic}:
+            self.imports.update(name, pubs.get(name, {}))
         for name in {*subs, *self.stand_ins.by_topic}:
             self._import_subscriptions(name, subs.get(name, {}))
         self._import_nodes()
 
-    def _import_publishers(self, name: str, pubs: dict[DdsNode, tuple[str, bool]]) -> None:
-        topics = self.graph.topics
-        if pubs and self._refused(name, f"{next(iter(pubs))}:", count=False):
-            pubs = {}  # the ROS 2 peers' role may not publish it here
-        imported = self._imported.get(name, {})
-        for owner in [o for o in imported if o not in pubs]:
-            del imported[owner]
-            topics.unadvertise(name, owner, None)
-        for owner, (type_name, latched) in pubs.items():
-            if owner in imported:
-                continue
-            if not self.graph.registry.known(type_name):
-                self._log(
-                    f"type {type_name}",
-                    f"DDS: {name} from {owner} has type {type_name}, unknown here: listed, "
-                    "its messages are not bridged",
-                )
-                self.stats["unknown_types"] += 1
-                if "/" not in type_name:
-                    continue  # not even a ROS type name: not listed
-            local = local_publisher(topics.topics.get(name))
-            if local is not None and name not in SHARED_TOPICS:
-                self._log(
-                    f"clash {name}",
-                    f"DDS: {name} of {owner} not bridged: {local} here publishes it already",
-                )
-                self.stats["name_clashes"] += 1
-                continue
-            try:
-                topics.advertise(name, type_name, owner, latch=latched)
-            except SimbridgeError as err:
-                self._log(f"clash {name}", f"DDS: {name} from {owner} not bridged: {err}")
-                self.stats["name_clashes"] += 1
-                continue
-            imported = self._imported.setdefault(name, imported)
-            imported[owner] = type_name
-        if not imported:
-            self._imported.pop(name, None)
+    def _local_clash(self, name: str, node: ForeignNode, local: str) -> None:
+        self._log(
+            f"clash {name}", f"DDS: {name} of {node} not bridged: {local} here publishes it already"
+        )
+        self.stats["name_clashes"] += 1
 
     def _import_subscriptions(self, name: str, subs: dict[DdsNode, str]) -> None:
         self.stand_ins.update(name, subs)

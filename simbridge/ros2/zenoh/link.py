@@ -56,8 +56,8 @@ from simbridge.robot.simclock import SIM_NODE
 from simbridge.ros2.link import (
     DRAIN_BATCH,
     DRAIN_BYTES,
-    SHARED_TOPICS,
     ForeignNode,
+    Imports,
     Inbox,
     Logbook,
     Refusals,
@@ -65,7 +65,6 @@ from simbridge.ros2.link import (
     StandIns,
     Take,
     local_owner,
-    local_publisher,
     outward_services,
     outward_topics,
 )
@@ -281,7 +280,6 @@ class ZenohLink:
         #: Remote subscriptions per topic name (publish only while there is one).
         self._remote_subs: Counter[str] = Counter()
         #: Inward: topic owners and services simbridge added to the graph for remote entities.
-        self._imported_pubs: dict[str, dict[RemoteNode, str]] = {}  # topic -> owner -> type
         self._providers: dict[str, _Provider] = {}
         #: Nodes of other processes listed in the graph (rosapi's nodes), by name.
         self._remote_nodes: set[str] = set()
@@ -316,6 +314,7 @@ class ZenohLink:
         #: Why ROS 2 peers may not publish on a name (None: they may), by name.
         self.refusals = Refusals(graph, access, self.logbook)
         self._refused = self.refusals.refused
+        self.imports = Imports(graph, self.refusals, self._local_clash, clients_clash=False)
         self._call_ids = itertools.count(1)
         self._forwarding = False
         self._next_reconcile = 0.0
@@ -1022,7 +1021,7 @@ class ZenohLink:
     def _import_remote(self) -> None:
         """Make the graph hold exactly the remote publishers and services the tokens show."""
         self.actions.import_remote(self._allowed_action_parts())
-        names = {*self._by_name, *self._imported_pubs, *self.stand_ins.by_topic, *self._providers}
+        names = {*self._by_name, *self.imports.by_topic, *self.stand_ins.by_topic, *self._providers}
         self._import_names(names, {*self._remote_node_tokens, *self._remote_nodes})
 
     def _import_names(self, names: Iterable[str], nodes: Iterable[str]) -> None:
@@ -1036,48 +1035,19 @@ class ZenohLink:
             self._import_service(name, entities)
 
     def _import_publishers(self, name: str, entities: Iterable[Entity]) -> None:
-        registry = self.graph.registry
-        topics = self.graph.topics
-        pubs: dict[RemoteNode, tuple[str, bool]] = {}
-        for entity in entities:
-            if entity.kind == "MP":
-                owner = RemoteNode(entity.node_fqn, entity.zid)
-                pubs[owner] = (entity.type, entity.qos.transient_local)
-        if pubs and self._refused(name, f"{next(iter(pubs))}:", count=False):
-            pubs = {}  # the ROS 2 peers' role may not publish it here
-        imported = self._imported_pubs.get(name, {})
-        for owner in [o for o in imported if o not in pubs]:
-            del imported[owner]
-            topics.unadvertise(name, owner, None)
-        for node, (type_name, latched) in pubs.items():
-            if node in imported:
-                continue
-            if not registry.known(type_name):
-                # listed (rosapi shows it with its type, without a definition), not bridged
-                self._log(
-                    f"type {type_name}",
-                    f"Zenoh: {name} from {node} has type {type_name}, unknown here: listed, "
-                    "its messages are not bridged",
-                )
-                self.stats["unknown_types"] += 1
-            local = local_publisher(topics.topics.get(name), clients=False)
-            if local is not None and name not in SHARED_TOPICS:
-                self._note(
-                    f"clash {name}",
-                    f"Zenoh: {name} of {node} (session {node.zid}) not bridged: {local} here "
-                    "publishes it already (robot names must be unique across the classroom)",
-                )
-                continue
-            try:
-                topics.advertise(name, type_name, node, latch=latched)
-            except SimbridgeError as err:
-                self._log(f"clash {name}", f"Zenoh: {name} from {node} not bridged: {err}")
-                self.stats["name_clashes"] += 1
-                continue
-            imported = self._imported_pubs.setdefault(name, imported)
-            imported[node] = type_name
-        if not imported:
-            self._imported_pubs.pop(name, None)
+        pubs = {
+            RemoteNode(e.node_fqn, e.zid): (e.type, e.qos.transient_local)
+            for e in entities
+            if e.kind == "MP"
+        }
+        self.imports.update(name, pubs)
+
+    def _local_clash(self, name: str, node: ForeignNode, local: str) -> None:
+        self._note(
+            f"clash {name}",
+            f"Zenoh: {name} of {node} (session {node.origin}) not bridged: {local} here "
+            "publishes it already (robot names must be unique across the classroom)",
+        )
 
     def _import_service(self, name: str, entities: Iterable[Entity]) -> None:
         registry = self.graph.registry
@@ -1148,7 +1118,7 @@ class ZenohLink:
         discovery runs). Latched topics keep one advanced subscriber on the wildcard.
         """
         wanted: dict[str, tuple[str, bool, bool]] = {}
-        remote = self._imported_pubs
+        remote = self.imports.by_topic
         table = self.graph.topics.topics
         for name in table if only is None else [n for n in only if n in table]:
             topic = table[name]
