@@ -63,7 +63,10 @@ class RosbridgeClient:
             ClientError: the server cannot be reached within ``timeout``.
         """
         try:
-            conn = await asyncio.wait_for(connect(url, max_size=None, open_timeout=None), timeout)
+            # asyncio.timeout, not wait_for: Python 3.11's wait_for can lose a cancellation (a
+            # Ctrl-C) that comes as the connection opens, and the tool then runs on
+            async with asyncio.timeout(timeout):
+                conn = await connect(url, max_size=None, open_timeout=None)
         except (OSError, TimeoutError, ValueError) as err:
             text = str(err) or type(err).__name__
             msg = f"cannot connect to rosbridge at {url}: {text}"
@@ -80,10 +83,16 @@ class RosbridgeClient:
     async def close(self) -> None:
         """Close the connection."""
         self._reader.cancel()
-        with contextlib.suppress(asyncio.CancelledError):
+        interrupted = False
+        try:
             await self._reader
+        except asyncio.CancelledError:
+            task = asyncio.current_task()  # the reader's cancellation, or also this task's own
+            interrupted = task is not None and task.cancelling() > 0
         await self._conn.close()
         self.closed.set()
+        if interrupted:  # a Ctrl-C while closing still ends the tool
+            raise asyncio.CancelledError
 
     async def _send(self, body: dict[str, Any]) -> None:
         try:
