@@ -55,3 +55,12 @@ def test_cyclonedds_uri_comes_after_simbridges_part_as_rmw_cyclonedds_puts_it() 
 def test_a_bad_value_is_refused_naming_the_variable(env: dict[str, str], named: str) -> None:
     with pytest.raises(ConfigError, match=named):
         DdsOptions.from_env(env)
+
+
+def test_writers_heartbeat_every_second_unless_the_users_configuration_says_otherwise() -> None:
+    config = DdsOptions.from_env({}).cyclone_config()
+    assert "<HeartbeatInterval>1s</HeartbeatInterval>" in config
+    user = "<CycloneDDS><Domain><Internal><HeartbeatInterval>100ms</HeartbeatInterval>"
+    user += "</Internal></Domain></CycloneDDS>"
+    config = DdsOptions.from_env({"CYCLONEDDS_URI": user}).cyclone_config()
+    assert config.index("1s") < config.index("100ms")  # Cyclone reads the user's last
