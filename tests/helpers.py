@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import asyncio
 import base64
+import contextlib
 import json
 import os
+import signal
 import socket
 import weakref
 from collections.abc import Callable
@@ -36,9 +38,18 @@ async def finish_process(
     try:
         out, err = await asyncio.wait_for(proc.communicate(), timeout * TIMEOUT_FACTOR)
     except TimeoutError:
-        proc.kill()
-        await proc.wait()
-        raise
+        # a Python child started with faulthandler on (PYTHONFAULTHANDLER) prints where each of
+        # its threads is; what it wrote from now on goes into the report
+        with contextlib.suppress(ProcessLookupError):
+            proc.send_signal(signal.SIGABRT)
+        try:
+            out, err = await asyncio.wait_for(proc.communicate(), 5)
+        except TimeoutError:
+            proc.kill()
+            out, err = await proc.communicate()
+        msg = f"the process did not end within {timeout * TIMEOUT_FACTOR:g} s; then it wrote:\n"
+        msg += f"stdout: {out.decode()[-2000:]}\nstderr: {err.decode()[-6000:]}"
+        raise TimeoutError(msg) from None
     assert proc.returncode is not None
     return proc.returncode, out.decode(), err.decode()
 

@@ -38,6 +38,11 @@ class ClientError(SimbridgeError):
     """A rosbridge request failed: no connection, a failed service call, a timeout."""
 
 
+#: Seconds a closing connection waits for the server's close frame (websockets' default is 10):
+#: a Ctrl-C ends a tool at once even when the server is slow to answer.
+CLOSE_TIMEOUT = 2.0
+
+
 class RosbridgeClient:
     """One connection to a rosbridge server (create with :meth:`connect`)."""
 
@@ -66,7 +71,9 @@ class RosbridgeClient:
             # asyncio.timeout, not wait_for: Python 3.11's wait_for can lose a cancellation (a
             # Ctrl-C) that comes as the connection opens, and the tool then runs on
             async with asyncio.timeout(timeout):
-                conn = await connect(url, max_size=None, open_timeout=None)
+                conn = await connect(
+                    url, max_size=None, open_timeout=None, close_timeout=CLOSE_TIMEOUT
+                )
         except (OSError, TimeoutError, ValueError) as err:
             text = str(err) or type(err).__name__
             msg = f"cannot connect to rosbridge at {url}: {text}"
