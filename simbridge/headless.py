@@ -68,6 +68,7 @@ class Simulation:
         params: parameters or file (default: the bundled platform parameters).
         seed: noise seed; equal seeds and calls give equal runs.
         use_sim_time: stamp headers with sim time (default) or the wall clock.
+        stamp_origin_ns: with sim time, the header stamp of sim time 0 (default 0).
         bags: the grader records each run into a bag in this directory (default: none).
     """
 
@@ -78,9 +79,17 @@ class Simulation:
         *,
         seed: int = 0,
         use_sim_time: bool = True,
+        stamp_origin_ns: int = 0,
         bags: Path | None = None,
     ) -> None:
-        core = build_headless(world, params, seed=seed, use_sim_time=use_sim_time, bags=bags)
+        core = build_headless(
+            world,
+            params,
+            seed=seed,
+            use_sim_time=use_sim_time,
+            stamp_origin_ns=stamp_origin_ns,
+            bags=bags,
+        )
         #: The simulated world (robots, walls, time).
         self.world = core.world
         #: The robot world's ROS graph, built as the server builds it.

@@ -157,6 +157,7 @@ def _world(
     seed: int,
     no_sim: bool,
     use_sim_time: bool,
+    stamp_origin_ns: int = 0,
 ) -> tuple[World, RobotGraph]:
     spec = world if isinstance(world, WorldSpec) else load_world(world)
     if no_sim:
@@ -164,7 +165,11 @@ def _world(
     prm = params if isinstance(params, Params) else load_params(params)
     sim = World(spec, prm, seed=seed)
     robot = build_robot_graph(
-        sim, settings=settings, use_sim_time=use_sim_time, simulate=not no_sim
+        sim,
+        settings=settings,
+        use_sim_time=use_sim_time,
+        stamp_origin_ns=stamp_origin_ns,
+        simulate=not no_sim,
     )
     return sim, robot
 
@@ -190,6 +195,7 @@ def build_headless(
     *,
     seed: int = 0,
     use_sim_time: bool = True,
+    stamp_origin_ns: int = 0,
     bags: Path | None = None,
 ) -> Core:
     """Make the parts without sockets, stepped by the caller on sim time.
@@ -197,8 +203,17 @@ def build_headless(
     ``/sim/step`` runs :meth:`Steps.step` on sim time, as the server's does on its clock. The
     grader has no tasks and no results file of its own (``simbridge grade --headless`` hands
     it the task to run); with ``bags``, it records each run into a bag in that directory.
+    ``stamp_origin_ns``: the header stamp of sim time 0.
     """
-    sim, robot = _world(None, world, params, seed=seed, no_sim=False, use_sim_time=use_sim_time)
+    sim, robot = _world(
+        None,
+        world,
+        params,
+        seed=seed,
+        no_sim=False,
+        use_sim_time=use_sim_time,
+        stamp_origin_ns=stamp_origin_ns,
+    )
     graph = robot.graph
     grader = Grader(graph, sim, ResultsLog(None), {}, bags=bags)
     if bags is not None:

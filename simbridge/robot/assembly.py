@@ -96,11 +96,17 @@ class RobotGraph:
             self.simclock.publish(now)
 
 
+def _shifted(clock: Callable[[], int], origin_ns: int) -> Callable[[], int]:
+    """``clock`` read ``origin_ns`` later (itself when 0)."""
+    return clock if not origin_ns else lambda: origin_ns + clock()
+
+
 def build_robot_graph(
     world: World,
     *,
     settings: ServerSettings | None = None,
     use_sim_time: bool = False,
+    stamp_origin_ns: int = 0,
     simulate: bool = True,
 ) -> RobotGraph:
     """Build the ROS graph of ``world``.
@@ -109,6 +115,8 @@ def build_robot_graph(
         world: the simulation the graph exposes.
         settings: server limits and timeouts (default: the defaults).
         use_sim_time: stamp headers with sim time instead of the wall clock.
+        stamp_origin_ns: with ``use_sim_time``, the header stamp of sim time 0 (a replay
+            stamps on its bag's time line); ``/clock`` stays the sim time.
         simulate: False for ``--no-sim``: none of the robot's and the clock's topics and
             services, no e-stop, no roles, no ``/walls``; a rosbridge (with Zenoh or DDS, in
             front of the ROS 2 graph, whose robots have all of those) with rosapi,
@@ -130,7 +138,7 @@ def build_robot_graph(
         controls = WorldControls(graph, world)
         simclock = SimClock(graph, world)
         if use_sim_time:  # every header of the graph stamped with sim time
-            graph.wall_clock_ns = simclock.time_ns
+            graph.wall_clock_ns = _shifted(simclock.time_ns, stamp_origin_ns)
         estop = EStop(graph, world, s)
         bridge.on_robot_added.append(estop.add_robot)
         bridge.on_robot_removed.append(estop.remove_robot)

@@ -237,10 +237,9 @@ def replay_headless(
     from simbridge.headless import Simulation  # the server-less path only
 
     commands = _commands(bag, topic)
-    sim = Simulation(world, params)
-    writer = BagWriter(out, sim.graph.registry, segment_seconds=1e9)
     base = commands[0][0]
-    sim.graph.wall_clock_ns = lambda: base + round(sim.time * 1e9)  # headers = log times
+    sim = Simulation(world, params, stamp_origin_ns=base)  # headers = log times
+    writer = BagWriter(out, sim.graph.registry, segment_seconds=1e9)
 
     def recorder(name: str, type_name: str) -> Any:
         def on_msg(msg: Any, source: object) -> None:

@@ -121,6 +121,8 @@ def test_headless_replay_simulates_the_commands(tmp_path: Path) -> None:
     odom = [(s, m) for t, _ty, s, m in read_messages(tmp_path / "sim") if t == "/odom"]
     first_cmd = next(s for t, _ty, s, _m in read_messages(tmp_path / "real") if t == "/cmd_vel")
     assert odom[0][0] > first_cmd  # on the source bag's time line
+    stamps = [m["header"]["stamp"] for _s, m in odom]
+    assert [s["sec"] * 10**9 + s["nanosec"] for s in stamps] == [s for s, _m in odom]
     assert odom[-1][1]["pose"]["pose"]["position"]["x"] == pytest.approx(0.4, abs=0.011)
 
 
