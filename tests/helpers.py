@@ -38,6 +38,7 @@ async def finish_process(
     try:
         out, err = await asyncio.wait_for(proc.communicate(), timeout * TIMEOUT_FACTOR)
     except TimeoutError:
+        signals = _signal_state(proc.pid)
         # a Python child started with faulthandler on (PYTHONFAULTHANDLER) prints where each of
         # its threads is; what it wrote from now on goes into the report
         with contextlib.suppress(ProcessLookupError):
@@ -47,11 +48,27 @@ async def finish_process(
         except TimeoutError:
             proc.kill()
             out, err = await proc.communicate()
-        msg = f"the process did not end within {timeout * TIMEOUT_FACTOR:g} s; then it wrote:\n"
+        msg = f"the process did not end within {timeout * TIMEOUT_FACTOR:g} s ({signals}); "
+        msg += "then it wrote:\n"
         msg += f"stdout: {out.decode()[-2000:]}\nstderr: {err.decode()[-6000:]}"
         raise TimeoutError(msg) from None
     assert proc.returncode is not None
     return proc.returncode, out.decode(), err.decode()
+
+
+def _signal_state(pid: int) -> str:
+    """A live process's signal masks and threads, from ``/proc`` (for a report)."""
+    try:
+        status = Path(f"/proc/{pid}/status").read_text()
+        threads = {}
+        for task in Path(f"/proc/{pid}/task").iterdir():
+            lines = (task / "status").read_text().splitlines()
+            threads[task.name] = " ".join(x for x in lines if x.startswith(("SigBlk", "SigPnd")))
+    except OSError as err:
+        return f"no /proc state: {err}"
+    keep = ("Threads", "SigQ", "ShdPnd", "SigIgn", "SigCgt")
+    lines = [x for x in status.splitlines() if x.startswith(keep)]
+    return "; ".join([*lines, *(f"task {k}: {v}" for k, v in threads.items())])
 
 
 def cmd_vel_bag(path: Path, commands: list[tuple[float, float, float]]) -> None:
