@@ -5,6 +5,7 @@ from __future__ import annotations
 import asyncio
 import json
 import shutil
+import signal
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
@@ -15,6 +16,19 @@ from websockets.asyncio.client import ClientConnection, connect
 from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
 from tests.helpers import JS_DIR, ROOT, ROSLIBPY_RUN, TIMEOUT_FACTOR, ws_url
+
+
+def pytest_configure(config: pytest.Config) -> None:
+    """Start every child as from a terminal, however the run itself was started.
+
+    A shell starts a background job (``make test &`` in a script, CI runners that do so) with
+    SIGINT and SIGQUIT ignored, and every child would inherit that: a test's Ctrl-C (SIGINT)
+    to a server or a tool would then test nothing it means to.
+    """
+    if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+        signal.signal(signal.SIGINT, signal.default_int_handler)
+    if signal.getsignal(signal.SIGQUIT) is signal.SIG_IGN:
+        signal.signal(signal.SIGQUIT, signal.SIG_DFL)
 
 
 AppFactory = Callable[..., Awaitable[App]]

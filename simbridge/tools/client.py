@@ -20,8 +20,9 @@ import contextlib
 import itertools
 import json
 import logging
-from collections.abc import AsyncIterator
-from typing import Any
+import signal
+from collections.abc import AsyncIterator, Coroutine
+from typing import Any, TypeVar
 
 from websockets.asyncio.client import ClientConnection, connect
 from websockets.exceptions import ConnectionClosed
@@ -29,9 +30,37 @@ from websockets.exceptions import ConnectionClosed
 from simbridge.errors import SimbridgeError
 
 
-__all__ = ["ClientError", "RosbridgeClient"]
+__all__ = ["ClientError", "RosbridgeClient", "run_tool"]
 
 logger = logging.getLogger(__name__)
+
+T = TypeVar("T")
+
+
+def run_tool(main: Coroutine[Any, Any, T]) -> T:
+    """Run a tool's ``main``; SIGINT (Ctrl-C) or SIGTERM cancels it.
+
+    ``asyncio.run`` listens for SIGINT only where it finds Python's own handler. A tool started
+    in the background of a script (``simbridge topic pub ... &``) inherits SIGINT ignored and
+    would never end on ``kill -INT``; a SIGTERM would end it without closing its connection.
+    Like the server, a tool listens to both and closes cleanly.
+
+    Raises:
+        KeyboardInterrupt: a signal ended ``main``.
+    """
+
+    async def guarded() -> T:
+        task = asyncio.current_task()
+        assert task is not None
+        loop = asyncio.get_running_loop()
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            loop.add_signal_handler(sig, task.cancel)
+        return await main
+
+    try:
+        return asyncio.run(guarded())
+    except asyncio.CancelledError:
+        raise KeyboardInterrupt from None
 
 
 class ClientError(SimbridgeError):

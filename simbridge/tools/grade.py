@@ -41,7 +41,7 @@ import orjson
 from simbridge.errors import ConfigError, SimbridgeError
 from simbridge.grading.report import report_html
 from simbridge.grading.task import load_task
-from simbridge.tools.client import ClientError, RosbridgeClient
+from simbridge.tools.client import ClientError, RosbridgeClient, run_tool
 from simbridge.tools.rostool import DEFAULT_URL
 
 
@@ -269,7 +269,7 @@ def grade_main(argv: Sequence[str]) -> int:
                 bags=out / "bags",
             )
         else:
-            record = asyncio.run(
+            record = run_tool(
                 grade_remote(
                     args.url,
                     Path(args.task),

@@ -31,7 +31,7 @@ from simbridge.errors import SimbridgeError
 from simbridge.msgs import Converter, TypeRegistry
 from simbridge.robot.cmdvel import command_type, convert_twist
 from simbridge.tools.bag import BagError, BagWriter, read_messages
-from simbridge.tools.client import ClientError, RosbridgeClient
+from simbridge.tools.client import ClientError, RosbridgeClient, run_tool
 from simbridge.tools.rostool import DEFAULT_URL
 
 
@@ -301,7 +301,7 @@ def replay_main(argv: Sequence[str]) -> int:
             return 0
         if args.rate <= 0:
             parser.error("--rate must be positive")
-        count = asyncio.run(replay(args.url, args.bag, args.topic, args.rate, args.timeout))
+        count = run_tool(replay(args.url, args.bag, args.topic, args.rate, args.timeout))
     except SimbridgeError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 1

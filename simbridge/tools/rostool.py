@@ -32,7 +32,7 @@ from typing import Any
 
 import yaml
 
-from simbridge.tools.client import ClientError, RosbridgeClient
+from simbridge.tools.client import ClientError, RosbridgeClient, run_tool
 
 
 __all__ = ["DEFAULT_URL", "param_main", "parse_yaml", "service_main", "topic_main"]
@@ -88,7 +88,7 @@ def _run(
             return await work(ros, args)
 
     try:
-        return asyncio.run(main())
+        return run_tool(main())
     except ClientError as err:
         print(f"simbridge: {err}", file=sys.stderr)
         return 1

@@ -65,6 +65,10 @@ class Harness:
                     message_burst=10**6,
                     publish_rate=1e6,
                     publish_burst=10**6,
+                    # no keepalive pings, here or from the clients: websockets draws a ping's
+                    # payload from Python's global random, and Hypothesis fails a draw during
+                    # which another thread changed that state (HypothesisDeprecationWarning)
+                    ping_interval=None,
                 )
             )
             await self.app.start()
@@ -97,7 +101,7 @@ class Harness:
         self.loop.close()
 
     def _observe(self) -> None:
-        with connect(self.url, max_size=None) as ws:
+        with connect(self.url, max_size=None, ping_interval=None) as ws:
             ws.send(json.dumps({"op": "subscribe", "topic": "/odom"}))
             while not self.stop.is_set():
                 try:
@@ -112,7 +116,9 @@ class Harness:
 
     def _connection(self) -> ClientConnection:
         if self.hostile is None:
-            self.hostile = connect(self.url, max_size=None, close_timeout=1, legacy=True)
+            self.hostile = connect(
+                self.url, max_size=None, close_timeout=1, ping_interval=None, legacy=True
+            )
         return self.hostile
 
     def _note(self, data: str | bytes) -> None:

@@ -2,6 +2,7 @@ from __future__ import annotations
 
 import asyncio
 import contextlib
+import signal
 import sys
 
 import pytest
@@ -99,6 +100,32 @@ async def test_topic_pub_at_a_rate_a_number_of_times(app: App) -> None:
         code, _out, err = await task
     assert code == 0, err
     assert [m["msg"]["data"] for m in got] == ["hello"] * 5
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+async def test_topic_pub_ends_cleanly_on_a_signal_even_with_sigint_ignored(
+    app: App, sig: signal.Signals
+) -> None:
+    """``topic pub`` ends on ``kill -INT`` and on ``kill``: exit 0, no trace.
+
+    It is started as a script's background job is (``cmd &``: SIGINT and SIGQUIT ignored).
+    """
+    script = 'trap "" INT QUIT; exec "$@"'
+    proc = await asyncio.create_subprocess_exec(
+        *("sh", "-c", script, "sh", sys.executable, "-m", "simbridge", "topic", "pub"),
+        *("/chatter", "std_msgs/msg/String", "data: hi", "-r", "20", "--url", ws_url(app)),
+        stdout=asyncio.subprocess.PIPE,
+        stderr=asyncio.subprocess.PIPE,
+        cwd=ROOT,
+    )
+    assert proc.stdout is not None
+    line = b""
+    while not line.startswith(b"publishing #1"):
+        line = await asyncio.wait_for(proc.stdout.readline(), 15)
+        assert line, "topic pub ended before publishing"
+    proc.send_signal(sig)
+    code, _out, err = await finish_process(proc, 10)
+    assert (code, err) == (0, "")
 
 
 async def test_topic_pub_bad_message_exits_1_with_the_reason(app: App) -> None:
