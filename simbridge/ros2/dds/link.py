@@ -43,7 +43,7 @@ from simbridge.graph.topics import DEFAULT_TOPIC_QOS, LATCHED_TOPIC_QOS, Peer, T
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.message import Outgoing
 from simbridge.ros2.dds.options import DdsOptions
-from simbridge.ros2.dds.trace import CycloneTrace, RefusedSample
+from simbridge.ros2.dds.trace import KINDS, CycloneTrace, RefusedSample
 from simbridge.ros2.dds.types import IdlTypes, old_binding
 from simbridge.ros2.dds.wire import (
     DISCOVERY_TOPIC,
@@ -216,6 +216,8 @@ class DdsLink:
         self._trace: CycloneTrace | None = None
         #: Samples Cyclone refused, to be said at the next reconcile.
         self._refused_samples: list[tuple[float, RefusedSample]] = []
+        #: Lines of Cyclone's log other than refusals, by kind (``KINDS`` kinds at most).
+        self._cyclone_kinds: Counter[str] = Counter()
         self.guid = b""
         self._loop: asyncio.AbstractEventLoop | None = None
         self._writers: dict[str, _Endpoint] = {}
@@ -290,12 +292,15 @@ class DdsLink:
         dds = self.dds
         core = importlib.import_module("cyclonedds.core")
         builtin = importlib.import_module("cyclonedds.builtin")
-        # Cyclone's warnings come back through a pipe: the samples it refuses are said there
+        # the domain's log comes back through a pipe, not on stderr: the samples Cyclone
+        # refuses are said there, one line for many, and so is the rest of what it says
         assert self._loop is not None
-        self._trace = trace = CycloneTrace(self._loop, self._on_refused)
+        ddsc = importlib.import_module("cyclonedds.internal").load_cyclonedds()
+        self._trace = trace = CycloneTrace(self._loop, self._on_cyclone, ddsc)
         try:
-            # kept: the domain (and its configuration) lives as long as this object
-            self._domain = dds.Domain(self.options.domain, self.options.cyclone_config(trace.path))
+            with trace.domain_log():
+                # kept: the domain (and its configuration) lives as long as this object
+                self._domain = dds.Domain(self.options.domain, self.options.cyclone_config())
         finally:
             trace.opened()
         qos = core.Qos(core.Policy.Userdata(ENCLAVE_USER_DATA))
@@ -353,23 +358,23 @@ class DdsLink:
         """Leave the domain (every endpoint goes with the participant)."""
         participant, self.participant = self.participant, None
         self._loop = self.inbox.loop = None  # Cyclone's threads hand nothing more to the loop
-        if participant is None:
-            return
-        self.state = "closed"
-        self._writers.clear()
-        self._readers.clear()
-        self._servers.clear()
-        self._builtin.clear()
-        self._topics.clear()
-        self._discovery_writer = self._discovery_reader = None
-        # deleting the participant deletes its entities and waits for its listeners
-        with contextlib.suppress(Exception):
-            participant.__del__()
+        if participant is not None:
+            self.state = "closed"
+            self._writers.clear()
+            self._readers.clear()
+            self._servers.clear()
+            self._builtin.clear()
+            self._topics.clear()
+            self._discovery_writer = self._discovery_reader = None
+            # deleting the participant deletes its entities and waits for its listeners
+            with contextlib.suppress(Exception):
+                participant.__del__()
         domain, self._domain = self._domain, None
-        with contextlib.suppress(Exception):
-            domain.__del__()
-        if self._trace is not None:
-            self._trace.close()
+        if domain is not None:
+            with contextlib.suppress(Exception):
+                domain.__del__()
+        if self._trace is not None:  # once the domain is gone (or never was)
+            self._trace.close(domain._ref if domain is not None else None)
             self._trace = None
 
     def health(self) -> dict[str, Any]:
@@ -814,17 +819,31 @@ class DdsLink:
         finally:
             self._forwarding = False
 
-    def _on_refused(self, refused: list[RefusedSample], missed: int) -> None:
-        """Samples Cyclone refused (not CDR of the reader's type): count them now.
+    def _on_cyclone(
+        self, refused: list[RefusedSample], lines: dict[str, tuple[int, str]], missed: int
+    ) -> None:
+        """What Cyclone's log said: samples it refused, and its other lines (by kind).
 
-        Whose they are is said at the next reconcile, once discovery was read (the writer may
-        be newer than the last read).
+        A refused sample (not CDR of the reader's type) is counted now; whose it was is said at
+        the next reconcile, once discovery was read (the writer may be newer than the last
+        read). Each other kind of line (an error or warning of Cyclone's) is counted and said
+        once per ``LOG_EVERY`` seconds, with its count.
         """
-        self.stats["bad_payloads"] += len(refused) + missed
-        self.stats["refused_by_cyclone"] += len(refused) + missed
-        room = REFUSALS_HELD - len(self._refused_samples)
-        now = time.monotonic()
-        self._refused_samples.extend((now, sample) for sample in refused[:room])
+        if refused or missed:
+            self.stats["bad_payloads"] += len(refused) + missed
+            self.stats["refused_by_cyclone"] += len(refused) + missed
+            room = REFUSALS_HELD - len(self._refused_samples)
+            now = time.monotonic()
+            self._refused_samples.extend((now, sample) for sample in refused[:room])
+        for said, (count, text) in lines.items():
+            self.stats["cyclone_log_lines"] += count
+            kinds = self._cyclone_kinds
+            kind = said if said in kinds or len(kinds) < KINDS else "other"
+            self._cyclone_kinds[kind] += count
+            self._log(
+                f"cyclone {kind}",
+                f"DDS: Cyclone DDS says: {text} ({self._cyclone_kinds[kind]} such lines so far)",
+            )
 
     def _say_refused(self) -> None:
         """Log (rate-limited) the samples Cyclone refused since the last reconcile."""

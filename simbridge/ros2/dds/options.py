@@ -82,16 +82,14 @@ class DdsOptions:
         uri = env.get("CYCLONEDDS_URI", "").strip()
         return cls(domain=domain, distro=chosen, discovery=discovery, cyclone_uri=uri)
 
-    def cyclone_config(self, trace: str = "stderr") -> str:
+    def cyclone_config(self) -> str:
         """Return the Cyclone DDS configuration (XML) of these options.
 
-        ``trace``: where Cyclone writes its warnings and errors (a path, or ``stderr``); the
-        DDS link reads them from a pipe (a sample Cyclone refuses is said there only).
+        No ``Tracing`` of its own: Cyclone traces nothing by default (and makes no
+        ``cyclonedds.log``); the DDS link reads the domain's log (errors, warnings, each sample
+        Cyclone refuses) from a pipe (``trace.py``).
         """
-        # Cyclone's own problems to stderr, not to a cyclonedds.log in the working directory
-        verbosity = "severe" if trace == "stderr" else "warning"
-        parts = [f"<Tracing><Verbosity>{verbosity}</Verbosity><OutputFile>{trace}</OutputFile>"]
-        parts.append("</Tracing>")
+        parts: list[str] = []
         # a writer's heartbeats every second (Fast DDS's default period is 3 s), not Cyclone's
         # 100 ms: with 100 ms every /scan (10 Hz, so 100 ms after its last write) asked each
         # reader for an acknowledgement and every /odom writer sent 10 heartbeats a second, all

@@ -10,12 +10,15 @@ from __future__ import annotations
 
 import asyncio
 import logging
+import socket
+import sys
 from typing import Any
 
 import pytest
 
 from simbridge.app.runner import App
 from tests.helpers import wait_for
+from tests.ros2.dds.harness import SPDP_GROUP, NetNamespace, spdp_port
 from tests.ros2.dds.test_link import _peer, dds_app
 
 
@@ -25,11 +28,38 @@ __all__ = ["dds_app"]
 
 
 async def test_bad_input_from_dds_is_logged_and_counted_and_the_robot_runs_on(
-    dds_app: App, ddspeer: Any, caplog: pytest.LogCaptureFixture
+    dds_app: App,
+    netns: NetNamespace,
+    ddspeer: Any,
+    caplog: pytest.LogCaptureFixture,
+    capfd: pytest.CaptureFixture[str],
 ) -> None:
     app = dds_app
     link = app.dds
     assert link is not None
+    # the server's stderr (file descriptor 2, where Cyclone's C code writes) with simbridge's
+    # log lines on it, as the command line has them
+    stderr = logging.StreamHandler(sys.stderr)
+    stderr.setFormatter(logging.Formatter("%(levelname)s %(name)s: %(message)s"))
+    logging.getLogger().addHandler(stderr)
+    try:
+        await _bad_input(app, link, netns, ddspeer, caplog)
+    finally:
+        logging.getLogger().removeHandler(stderr)
+    # one line of simbridge's for the samples Cyclone refused (10 a second) and one for the
+    # malformed packets, none of Cyclone's own for each of them: its domain's log comes to
+    # simbridge, not to stderr
+    err = capfd.readouterr().err
+    assert link.stats["refused_by_cyclone"] >= 3
+    assert err.count("DDS: /cmd_vel: a sample from /student") == 1, err[-2000:]
+    assert "deserialization rt/cmd_vel" not in err and "deserialization rq/" not in err
+    (malformed,) = [line for line in err.splitlines() if "malformed packet" in line]
+    assert "DDS: Cyclone DDS says: malformed packet received from vendor 1.15" in malformed
+
+
+async def _bad_input(
+    app: App, link: Any, netns: NetNamespace, ddspeer: Any, caplog: pytest.LogCaptureFixture
+) -> None:
     # an rmw_fastrtps client's /reset: it carries no rmw_cyclonedds request header; and 5
     # bytes on /cmd_vel under Twist's name (a Fast DDS writer sends no type information, so it
     # matches by the name alone), where a Twist has 48
@@ -61,6 +91,12 @@ async def test_bad_input_from_dds_is_logged_and_counted_and_the_robot_runs_on(
     assert f"(participant {guid})" in line
     assert "is not CDR of geometry_msgs/msg/Twist" in line
     assert link.stats["bad_payloads"] >= link.stats["refused_by_cyclone"]
+    # RTPS that is not: a DATA submessage longer than its packet, to the discovery group (the
+    # Fast DDS peer shares its port: a unicast datagram reaches one of them only)
+    with netns.entered():
+        _send_malformed(link.options.domain, times=5)
+    # Cyclone drops them, simbridge says so once (Cyclone's line, counted: rate-limited by kind)
+    await wait_for(lambda: link.stats["cyclone_log_lines"] >= 5, 10)
     peer = asyncio.create_task(_peer(link.options.domain, "--seconds", "2", "--unknown-type"))
     # a type the registry does not know: listed with its type (rosapi), counted, not bridged
     topics = app.graph.topics.topics
@@ -77,3 +113,11 @@ async def test_bad_input_from_dds_is_logged_and_counted_and_the_robot_runs_on(
     await client.stop()
     await wait_for(lambda: "/student" not in app.graph.nodes and not chatter.publishers, 15)
     assert link.state == "running"
+
+
+def _send_malformed(domain: int, *, times: int) -> None:
+    header = b"RTPS\x02\x03\x01\x0f" + bytes(range(1, 13))
+    data = b"\x15\x01\x00\x01" + bytes(8)  # DATA, little-endian, 256 bytes said, 8 there
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        for _ in range(times):
+            sock.sendto(header + data, (SPDP_GROUP, spdp_port(domain)))
