@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import time
 from collections.abc import Callable
 from typing import Any
@@ -17,6 +18,7 @@ from websockets.asyncio.client import connect
 from simbridge.app.runner import App
 from simbridge.ros2.names import Entity
 from simbridge.ros2.typehash import TypeHasher
+from simbridge.ros2.zenoh.link import TX_THREADS, calm_transmit_threads
 from tests.helpers import TIMEOUT_FACTOR, recv_until, send_json, wait_for, ws_url
 from tests.ros2.zenoh.conftest import Router, eventually
 
@@ -429,6 +431,20 @@ async def test_health_reports_the_zenoh_session(zapp: App) -> None:
     health = zapp.health()["zenoh"]
     assert health["routers"] == 1 and health["domain"] == 0 and health["ros_distro"] == "jazzy"
     assert json.dumps(health)  # JSON-able for /healthz
+
+
+async def test_zenohs_transmit_threads_are_batch_scheduled_once_linked(zapp: App) -> None:
+    # so that a tick's puts are not preempted by the thread that sends them (see
+    # calm_transmit_threads); the threads exist once the session has a link
+    await wait_for(lambda: zapp.health()["zenoh"]["state"] == "connected", 8)
+    tx = []
+    for tid in os.listdir("/proc/self/task"):
+        with open(f"/proc/self/task/{tid}/comm") as f:
+            if f.read().startswith(TX_THREADS):
+                tx.append(int(tid))
+    assert tx
+    assert all(os.sched_getscheduler(tid) == os.SCHED_BATCH for tid in tx)
+    assert calm_transmit_threads() == len(tx)
 
 
 def test_token_of_sdk_parses(router: Router) -> None:
