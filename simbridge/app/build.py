@@ -316,6 +316,7 @@ def build(
 
         dds_link = DdsLink(graph, dds, simulator=not no_sim, settings=settings)
         graph.topics.taps.append(dds_link.on_deliver)
+        graph.topics.flushers.append(dds_link.flush_early)
         loop_hooks.append(dds_link.tick)
     foxglove = None
     if settings.foxglove_port is not None:

@@ -43,6 +43,7 @@ from simbridge.graph.topics import DEFAULT_TOPIC_QOS, LATCHED_TOPIC_QOS, Peer, T
 from simbridge.msgs.cdr import CdrReader, CdrWriter
 from simbridge.msgs.message import Outgoing
 from simbridge.ros2.dds.options import DdsOptions
+from simbridge.ros2.dds.pack import SharedPack
 from simbridge.ros2.dds.trace import KINDS, CycloneTrace, RefusedSample
 from simbridge.ros2.dds.types import IdlTypes, old_binding
 from simbridge.ros2.dds.wire import (
@@ -224,6 +225,9 @@ class DdsLink:
         self._readers: dict[str, _Endpoint] = {}
         self._topics: dict[tuple[str, str], Any] = {}  # (DDS name, DDS type) -> Topic
         self._discovery_writer: Any = None
+        #: The transmit pack the writers share (None: each writer sends its own samples).
+        self._pack: SharedPack | None = None
+        self._flush_pending = False
         self._discovery_reader: Any = None
         self._builtin: list[tuple[str, Any]] = []
         self._announced: bytes | None = None
@@ -337,6 +341,11 @@ class DdsLink:
                 policy.History.KeepLast(1),
             ),
         )
+        # a step's samples go out together, in as few datagrams as they fit (pack.py)
+        self._pack = SharedPack.create(self._discovery_writer)
+        if self._pack is not None and not self._pack.adopt(self._discovery_writer):
+            self._pack.close()
+            self._pack = None
         self._discovery_reader = sub.DataReader(
             self.participant,
             topic,
@@ -360,6 +369,10 @@ class DdsLink:
         self._loop = self.inbox.loop = None  # Cyclone's threads hand nothing more to the loop
         if participant is not None:
             self.state = "closed"
+            if self._pack is not None:
+                # each writer its own pack back first: deleting a writer frees the pack it holds
+                self._pack.close()
+                self._pack = None
             self._writers.clear()
             self._readers.clear()
             self._servers.clear()
@@ -388,6 +401,7 @@ class DdsLink:
             "writers": len(self._writers),
             "readers": len(self._readers),
             "services": len(self._servers),
+            "shared_pack": self._pack is not None,
             "remote_participants": len(self._participants),
             "remote_writers": len(self._remote_writers),
             "remote_readers": len(self._remote_readers),
@@ -575,7 +589,7 @@ class DdsLink:
     def _export_local(self) -> None:
         writers, readers = self._wanted()
         for name in [n for n in self._writers if n not in writers]:
-            _delete(self._writers.pop(name).handle)
+            self._drop_writer(self._writers.pop(name).handle)
         for name in [n for n in self._readers if n not in readers]:
             _delete(self._readers.pop(name).handle)
         for name, (node, type_name, latched) in writers.items():
@@ -584,7 +598,7 @@ class DdsLink:
                 entry.node = node
                 continue
             if entry is not None:
-                _delete(self._writers.pop(name).handle)
+                self._drop_writer(self._writers.pop(name).handle)
             try:
                 self._writers[name] = self._make_writer(name, node, type_name, latched)
             except Exception as err:  # a type Cyclone cannot describe, a refused QoS
@@ -624,7 +638,7 @@ class DdsLink:
         for name in [n for n in self._servers if n not in wanted]:
             gone = self._servers.pop(name)
             _delete(gone.reader)
-            _delete(gone.writer)
+            self._drop_writer(gone.writer)
         for name, (node, type_name) in wanted.items():
             server = self._servers.get(name)
             if server is not None and server.type == type_name:
@@ -666,6 +680,8 @@ class DdsLink:
             listener=core.Listener(on_data_available=available),
         )
         writer = pub.DataWriter(self.participant, topics[1], qos=core.Qos(*qos))
+        if self._pack is not None:
+            self._pack.adopt(writer)
         return _Server(
             name, type_name, node, reader, writer, (reader.guid.bytes, writer.guid.bytes)
         )
@@ -713,6 +729,8 @@ class DdsLink:
         )
         entry.handle = writer
         entry.gid = writer.guid.bytes
+        if self._pack is not None:
+            self._pack.adopt(writer)
         return entry
 
     def _make_reader(self, name: str, node: str, type_name: str) -> _Endpoint:
@@ -749,7 +767,7 @@ class DdsLink:
         if data == self._announced or self._discovery_writer is None:
             return
         try:
-            _write_raw(self._discovery_writer, data)
+            self._send(self._discovery_writer, data)
         except Exception as err:
             self._log("announce", f"DDS: {DISCOVERY_TOPIC} not written: {err}")
             return
@@ -774,11 +792,43 @@ class DdsLink:
             self._log(f"cdr {entry.name}", f"DDS: {entry.name} not sent: {err}")
             return
         try:
-            _write_raw(entry.handle, payload)
+            self._send(entry.handle, payload)
         except Exception as err:
             self._log(f"write {entry.name}", f"DDS: write on {entry.name}: {err}")
             return
         self.stats["published"] += 1
+
+    def _send(self, writer: Any, data: bytes) -> None:
+        """Write CDR bytes on one of the link's writers; the shared pack goes at the turn's end."""
+        _write_raw(writer, data)
+        if self._pack is None or self._flush_pending:
+            return
+        loop = self._loop
+        if loop is None:
+            self._pack.flush()
+            return
+        self._flush_pending = True
+        loop.call_soon(self._flush)
+
+    def _flush(self) -> None:
+        """Send the turn's samples (the shared pack; Cyclone sent any that filled it)."""
+        self._flush_pending = False
+        if self._pack is not None:
+            self._pack.flush()
+
+    def flush_early(self) -> None:
+        """Send what the shared pack holds now (the graph has more to compute).
+
+        A step's /odom and /tf then leave before its scans are cast.
+        """
+        if self._flush_pending and self._pack is not None:
+            self._pack.flush()
+
+    def _drop_writer(self, writer: Any) -> None:
+        """Delete a writer (its own pack back first: deleting it frees the pack it holds)."""
+        if self._pack is not None:
+            self._pack.release(writer)
+        _delete(writer)
 
     # -- samples from DDS -------------------------------------------------------------------
 
@@ -953,7 +1003,7 @@ class DdsLink:
             # complete and checked: an in-process handler may leave fields to their defaults
             msg = self.graph.converter.from_json(response_type, values)
             data = self.cdr.serialize(response_type, msg)
-            _write_raw(server.writer, data[:4] + header + data[4:])
+            self._send(server.writer, data[:4] + header + data[4:])
         except Exception as err:
             self.stats["calls_failed"] += 1
             self._log(f"reply {server.name}", f"DDS: no reply to a call of {server.name}: {err}")

@@ -9,6 +9,7 @@ Python (``cyclone_peer.py``, as rmw_cyclonedds's other library serializes).
 from __future__ import annotations
 
 import asyncio
+import importlib.metadata
 import json
 import os
 import subprocess
@@ -120,6 +121,8 @@ async def test_a_cyclone_node_lists_reads_drives_and_calls_the_robot_that_rosbri
     assert (value["type"], value["double_value"]) == (3, 0.5)
     health = app.health()["dds"]
     assert health["state"] == "running" and health["received"] > 0
+    # what it read came through the writers' shared pack (the binding 11.0.1's)
+    assert health["shared_pack"] is (importlib.metadata.version("cyclonedds") == "11.0.1")
 
 
 async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_robot(
