@@ -46,8 +46,9 @@ VERSIONS = ("11.0.1",)
 _PACK_GV = 96
 #: Bytes from ``m_xp`` to ``whc_batch`` (after ``m_wr`` and ``m_whc``).
 _BATCH_AFTER_PACK = 24
-#: How far into a ``struct dds_writer`` its ``m_topic`` is looked for (pointers).
-_SEARCH_WORDS = 256
+#: How far into a ``struct dds_writer`` its ``m_topic`` is looked for, in pointers (it is the
+#: 78th in 11.0.1, after the entity and endpoint parts).
+_SEARCH_WORDS = 128
 _WORD = ctypes.sizeof(ctypes.c_void_p)
 
 
@@ -166,10 +167,10 @@ def _pack_field(lib: Any, writer: Any, gv: int) -> int | None:
     topic = _entity(lib, writer.topic._ref)
     if not (entity and topic and gv):
         return None
+    # word by word, stopping at m_topic: nothing past the writer's fields is read
     words = (ctypes.c_size_t * _SEARCH_WORDS).from_address(entity)
-    try:
-        index = list(words).index(topic)
-    except ValueError:
+    index = next((k for k in range(_SEARCH_WORDS - 1) if words[k] == topic), None)
+    if index is None:
         return None
     field = entity + (index + 1) * _WORD
     pack = ctypes.c_void_p.from_address(field).value
