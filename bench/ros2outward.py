@@ -55,7 +55,9 @@ async def _rosbridge_share(
     async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
         for name, _ in topics:
             await ws.send(json.dumps({"op": "subscribe", "topic": name}))
-        await asyncio.sleep(2)
+        warm = time.monotonic() + 2
+        while time.monotonic() < warm:  # read, as the ROS 2 subscriber does: no backlog counted
+            await ws.recv()
         t0, c0 = time.monotonic(), cpu_seconds(proc)
         end = t0 + seconds
         while time.monotonic() < end:
