@@ -19,6 +19,7 @@ QUICK = {
     "headless": "headless simulation speed-up over real time",
     "simtime": "server loop real-time factor achieved vs requested (1x to 20x)",
     "cbor": "cbor frames of /scan and /odom: cbor2 + numpy hook vs the hand-written encoder",
+    "cdr": "/odom, /scan and a 30-transform /tf to CDR (the ROS 2 links) beside orjson JSON",
     "http": "page and /healthz requests/s: httptools server vs the hand-written one (+ h11 parse)",
     "publish": "a client publish through the graph: /cmd_vel to the robot, a topic to 10 clients",
 }
