@@ -6,6 +6,7 @@ import asyncio
 import json
 import shutil
 import signal
+import subprocess
 import sys
 from collections.abc import AsyncIterator, Awaitable, Callable
 from typing import Any
@@ -29,6 +30,39 @@ def pytest_configure(config: pytest.Config) -> None:
         signal.signal(signal.SIGINT, signal.default_int_handler)
     if signal.getsignal(signal.SIGQUIT) is signal.SIG_IGN:
         signal.signal(signal.SIGQUIT, signal.SIG_DFL)
+
+
+#: Deployment tests run last, the arm64 ones at the very end: their images are made meanwhile.
+_DEPLOY = ROOT / "tests" / "deploy"
+_PREPARE = pytest.StashKey[subprocess.Popen[bytes] | None]()
+
+
+def _deploy_rank(item: pytest.Item) -> int:
+    path = item.path
+    if not path.is_relative_to(_DEPLOY):
+        return 0
+    return 2 if path.name == "test_arm64.py" else 1
+
+
+def pytest_collection_modifyitems(config: pytest.Config, items: list[pytest.Item]) -> None:
+    """Order the deployment tests last and make their images in the background meanwhile.
+
+    The sort is stable: each module's (and each fixture parameter's) tests stay together.
+    """
+    items.sort(key=_deploy_rank)
+    if any(_deploy_rank(item) for item in items) and not config.option.collectonly:
+        from tests.deploy import prepare
+
+        config.stash[_PREPARE] = prepare.start()
+
+
+def pytest_unconfigure(config: pytest.Config) -> None:
+    """Stop the background image maker if the run ended before it did."""
+    proc = config.stash.get(_PREPARE, None)
+    if proc is not None:
+        from tests.deploy import prepare
+
+        prepare.stop(proc)
 
 
 AppFactory = Callable[..., Awaitable[App]]

@@ -11,8 +11,10 @@ The arm64 images (a Raspberry Pi 4B/5 with a 64-bit OS) are made the same way, w
 Debian's qemu-user-static, registered with the kernel's binfmt_misc (:func:`enable_arm64`).
 
 Several test runs may share this machine and its engine at once: image creation is serialised by
-a file lock, each run uses its own compose project and free 127.0.0.1 ports, and a run that died
-leaves containers that the next run removes (its project name carries its process id).
+file locks (one per architecture), each run uses its own compose project and free 127.0.0.1
+ports, and a run that died leaves containers that the next run removes (its project name carries
+its process id). On a fresh machine the images are made in the background while the rest of the
+suite runs (``tests/deploy/prepare.py``).
 """
 
 from __future__ import annotations
@@ -100,9 +102,14 @@ def run(
 
 
 @contextlib.contextmanager
-def machine_lock() -> Iterator[None]:
-    """Hold the machine-wide lock of the Docker test setup (engine start, base images)."""
-    with LOCK_PATH.open("a") as handle:
+def machine_lock(arch: str | None = None) -> Iterator[None]:
+    """Hold a machine-wide lock of the Docker test setup.
+
+    Without ``arch``, the engine's and binfmt_misc's; with it, that architecture's images' (an
+    arm64 build, minutes under emulation, does not hold up the amd64 tests meanwhile).
+    """
+    path = LOCK_PATH if arch is None else LOCK_PATH.with_suffix(f".{arch}.lock")
+    with path.open("a") as handle:
         fcntl.flock(handle, fcntl.LOCK_EX)
         try:
             yield
@@ -215,7 +222,7 @@ def ensure_base_image(arch: str = "amd64") -> None:
     tag = ARM64_BASE_IMAGE if arch == "arm64" else BASE_IMAGE
     if image_exists(tag):
         return
-    with machine_lock():
+    with machine_lock(arch):
         if image_exists(tag):
             return
         if shutil.which("debootstrap") is None:
@@ -320,7 +327,7 @@ def build_images(arch: str = "amd64") -> str:
         proc.stdin.close()
         jobs.append((name, proc, out))
 
-    with machine_lock():
+    with machine_lock(arch):
         if not image_exists(nginx):
             # a Dockerfile on stdin: no build context at all
             spawn("nginx image", [*build, "-t", nginx, "-"], NGINX_DOCKERFILE.read_bytes())

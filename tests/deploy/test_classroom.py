@@ -45,7 +45,7 @@ def zenoh_image() -> str:
     docker.ensure_base_image()
     docker.build_images()  # the tests' nginx image (the project image comes from cache)
     tag = "simbridge-test-zenoh:" + docker.project_image_tag().split(":")[1]
-    with docker.machine_lock():
+    with docker.machine_lock("amd64"):
         docker.run(
             [
                 "docker",

@@ -1,0 +1,89 @@
+"""Make the deployment tests' images in the background while the rest of the suite runs.
+
+On a fresh machine the images of ``tests/deploy`` take about ten minutes to make (the amd64 base
+by debootstrap, about a minute; the arm64 base under qemu-user emulation, several; the arm64
+project image, whose Cyclone DDS binding compiles under emulation, several more). Made one
+after another inside the deployment tests, that time adds to the suite's. So the suite's
+``conftest`` starts this module as a separate process when the run includes deployment tests
+(:func:`start`), and orders those tests last: by the time they run, their images exist or are
+nearly made.
+
+Nothing depends on this process: each deployment test's fixtures make what is missing
+themselves, under the same machine-wide lock (:func:`tests.deploy.stack.machine_lock`), so they
+wait for an image this process is making instead of making it twice, and a failure here only
+means the fixture makes the image (and reports the failure) itself. The process runs at a lower
+CPU priority (``nice`` 10) than the tests, logs to ``$TMPDIR/simbridge-test-prepare.log`` and is
+stopped when the run ends (:func:`stop`). ``SIMBRIDGE_TEST_PREPARE=0`` turns it off.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+from tests.deploy import stack as docker
+
+
+LOG_PATH = Path(tempfile.gettempdir()) / "simbridge-test-prepare.log"
+
+
+def start() -> subprocess.Popen[bytes] | None:
+    """Start ``python -m tests.deploy.prepare`` in the background, unless turned off."""
+    if os.environ.get("SIMBRIDGE_TEST_PREPARE", "1") == "0":
+        return None
+    with LOG_PATH.open("ab") as out:
+        return subprocess.Popen(
+            [sys.executable, "-m", "tests.deploy.prepare"],
+            cwd=docker.ROOT,
+            stdin=subprocess.DEVNULL,
+            stdout=out,
+            stderr=out,
+            start_new_session=True,  # its own group: stop() ends the docker clients with it
+        )
+
+
+def stop(proc: subprocess.Popen[bytes] | None) -> None:
+    """End the background process and its children if it still runs (the run ended first)."""
+    if proc is None or proc.poll() is not None:
+        return
+    try:
+        os.killpg(proc.pid, 15)
+        proc.wait(timeout=30)
+    except (ProcessLookupError, subprocess.TimeoutExpired):
+        os.killpg(proc.pid, 9)
+        proc.wait(timeout=30)
+
+
+def main() -> int:
+    """Make the amd64 images, then the arm64 ones (the longer), where the machine can."""
+    started = time.monotonic()
+
+    def step(text: str) -> None:
+        print(f"[prepare] {time.monotonic() - started:6.1f} s {text}", flush=True)
+
+    reason = docker.start_engine()  # before nice: a dockerd started here keeps normal priority
+    if reason is not None:
+        step(f"no Docker engine: {reason}")
+        return 0
+    os.nice(10)
+    docker.ensure_base_image()
+    step("amd64 base image")
+    docker.build_images()
+    step("amd64 images")
+    reason = docker.enable_arm64()
+    if reason is not None:
+        step(f"arm64 skipped: {reason}")
+        return 0
+    docker.ensure_base_image("arm64")
+    step("arm64 base image")
+    docker.build_images("arm64")
+    step("arm64 images")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
