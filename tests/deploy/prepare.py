@@ -9,11 +9,14 @@ after another inside the deployment tests, that time adds to the suite's. So the
 nearly made.
 
 Nothing depends on this process: each deployment test's fixtures make what is missing
-themselves, under the same machine-wide lock (:func:`tests.deploy.stack.machine_lock`), so they
+themselves, under the same machine-wide locks (:func:`tests.deploy.stack.machine_lock`), so they
 wait for an image this process is making instead of making it twice, and a failure here only
-means the fixture makes the image (and reports the failure) itself. The process runs at a lower
-CPU priority (``nice`` 10) than the tests, logs to ``$TMPDIR/simbridge-test-prepare.log`` and is
-stopped when the run ends (:func:`stop`). ``SIMBRIDGE_TEST_PREPARE=0`` turns it off.
+means the fixture makes the image (and reports the failure) itself. The process and its
+children (debootstrap, qemu) run in the idle scheduling class and the build steps in a cgroup
+of the least CPU weight (:func:`tests.deploy.stack.background_cgroup`): they take only the CPU
+the tests leave, so timing-sensitive tests see the machine as without it. It logs to
+``$TMPDIR/simbridge-test-prepare.log`` and is stopped when the run ends (:func:`stop`).
+``SIMBRIDGE_TEST_PREPARE=0`` turns it off.
 """
 
 from __future__ import annotations
@@ -65,14 +68,16 @@ def main() -> int:
     def step(text: str) -> None:
         print(f"[prepare] {time.monotonic() - started:6.1f} s {text}", flush=True)
 
-    reason = docker.start_engine()  # before nice: a dockerd started here keeps normal priority
+    reason = docker.start_engine()  # first: a dockerd started here keeps the normal class
     if reason is not None:
         step(f"no Docker engine: {reason}")
         return 0
-    os.nice(10)
+    os.sched_setscheduler(0, os.SCHED_IDLE, os.sched_param(0))  # debootstrap, qemu: children
+    cgroup = docker.background_cgroup()
+    step(f"build steps in cgroup {cgroup or '(the engine default: none could be made)'}")
     docker.ensure_base_image()
     step("amd64 base image")
-    docker.build_images()
+    docker.build_images(cgroup_parent=cgroup)
     step("amd64 images")
     reason = docker.enable_arm64()
     if reason is not None:
@@ -80,7 +85,7 @@ def main() -> int:
         return 0
     docker.ensure_base_image("arm64")
     step("arm64 base image")
-    docker.build_images("arm64")
+    docker.build_images("arm64", cgroup_parent=cgroup)
     step("arm64 images")
     return 0
 

@@ -292,13 +292,43 @@ def project_image_tag(arch: str = "amd64") -> str:
     return name + hashlib.sha1(str(ROOT).encode()).hexdigest()[:12]
 
 
-def build_images(arch: str = "amd64") -> str:
+def background_cgroup() -> str | None:
+    """Make a cgroup that gets CPU only when nothing else wants it; return its path, or None.
+
+    For ``docker build --cgroup-parent``: the build's steps run in containers of the engine, not
+    as children of the process that asks for the build, so a scheduling class or a nice value
+    does not reach them; a parent cgroup of the least CPU weight does (cgroup v1: ``cpu.shares``
+    2, v2: ``cpu.weight`` 1). Only with the engine's cgroupfs driver (a systemd-driven engine
+    wants a slice) and where this process may make cgroups; otherwise builds run as usual.
+    """
+    info = run(
+        ["docker", "info", "--format", "{{.CgroupDriver}} {{.CgroupVersion}}"], check=False
+    ).stdout.split()
+    name = "simbridge-test-background"
+    try:
+        if info == ["cgroupfs", "1"] and Path("/sys/fs/cgroup/cpu/cpu.shares").exists():
+            group = Path("/sys/fs/cgroup/cpu") / name
+            group.mkdir(exist_ok=True)
+            (group / "cpu.shares").write_text("2")
+        elif info == ["cgroupfs", "2"]:
+            group = Path("/sys/fs/cgroup") / name
+            group.mkdir(exist_ok=True)
+            (group / "cpu.weight").write_text("1")  # absent unless the root delegates cpu
+        else:
+            return None
+    except OSError:
+        return None
+    return f"/{name}"
+
+
+def build_images(arch: str = "amd64", *, cgroup_parent: str | None = None) -> str:
     """Build the project image (always; layers cached) and the nginx image (once), in parallel.
 
     ``arch="arm64"``: both for linux/arm64, from the arm64 base (Docker's classic builder, no
     buildx: each RUN step runs under qemu), the project image with the ``dds`` extra (the Pi
     image; its Cyclone DDS binding compiled in the Dockerfile's first stage, once, cached).
-    Returns the project image's tag.
+    ``cgroup_parent``: the build steps' parent cgroup (:func:`background_cgroup`). Returns the
+    project image's tag.
     """
     tag = project_image_tag(arch)
     base, nginx = (
@@ -312,6 +342,8 @@ def build_images(arch: str = "amd64") -> str:
     build = ["docker", "build", "--network", "host", "--build-arg", f"BASE_IMAGE={base}"]
     if arch == "arm64":
         build += ["--platform", "linux/arm64"]
+    if cgroup_parent is not None:
+        build += ["--cgroup-parent", cgroup_parent]
     project = ["--build-arg", "SIMBRIDGE_EXTRAS=dds"] if arch == "arm64" else []
     jobs: list[tuple[str, subprocess.Popen[bytes], tempfile._TemporaryFileWrapper[bytes]]] = []
     started = time.monotonic()
