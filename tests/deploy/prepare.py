@@ -5,8 +5,8 @@ by debootstrap, about a minute; the arm64 base under qemu-user emulation, severa
 project image, whose Cyclone DDS binding compiles under emulation, several more). Made one
 after another inside the deployment tests, that time adds to the suite's. So the suite's
 ``conftest`` starts this module as a separate process when the run includes deployment tests
-(:func:`start`), and orders those tests last: by the time they run, their images exist or are
-nearly made.
+(:func:`start`, once the Zenoh tests, run first, are done), and orders those tests last: by the
+time they run, their images exist or are nearly made.
 
 Nothing depends on this process: each deployment test's fixtures make what is missing
 themselves, under the same machine-wide locks (:func:`tests.deploy.stack.machine_lock`), so they

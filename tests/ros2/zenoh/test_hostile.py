@@ -287,17 +287,20 @@ async def test_a_token_flood_is_capped_and_comes_and_goes_without_stalling_the_l
             )
 
         liveliness = ros2.session.liveliness()
-        async with observed(app) as steady:
-            tokens = await asyncio.to_thread(
-                lambda: [liveliness.declare_token(token(n)) for n in range(2_000)]
-            )
-            await wait_for(lambda: link.stats["tokens_refused"] > 0, timeout=10)
-            await wait_for(lambda: not link._tokens, timeout=10)
-            await steady()
-        assert len(link._remote) <= 600
-        flood = [n for n in app.graph.topics.topics if n.startswith("/flood_")]
-        assert 0 < len(flood) <= 600
-        await asyncio.to_thread(lambda: [t.undeclare() for t in tokens])
+        tokens: list[Any] = []
+        try:
+            async with observed(app) as steady:
+                await asyncio.to_thread(
+                    lambda: tokens.extend(liveliness.declare_token(token(n)) for n in range(2_000))
+                )
+                await wait_for(lambda: link.stats["tokens_refused"] > 0, timeout=10)
+                await wait_for(lambda: not link._tokens, timeout=10)
+                await steady()
+            assert len(link._remote) <= 600
+            flood = [n for n in app.graph.topics.topics if n.startswith("/flood_")]
+            assert 0 < len(flood) <= 600
+        finally:  # the session is the module's: a failure here must not flood the next tests
+            await asyncio.to_thread(lambda: [t.undeclare() for t in tokens])
         await wait_for(
             lambda: not any(n.startswith("/flood_") for n in app.graph.topics.topics), timeout=10
         )
