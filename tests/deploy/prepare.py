@@ -13,8 +13,9 @@ themselves, under the same machine-wide locks (:func:`tests.deploy.stack.machine
 wait for an image this process is making instead of making it twice, and a failure here only
 means the fixture makes the image (and reports the failure) itself. The process and its
 children (debootstrap, qemu) run in the idle scheduling class and the build steps in a cgroup
-of the least CPU weight (:func:`tests.deploy.stack.background_cgroup`): they take only the CPU
-the tests leave, so timing-sensitive tests see the machine as without it. It logs to
+of the least CPU weight (:func:`tests.deploy.stack.background_cgroup`): they take mostly the
+CPU the tests leave (not all tests are indifferent even so: the Zenoh tests run before this
+starts, ``tests/conftest.py``). It logs to
 ``$TMPDIR/simbridge-test-prepare.log`` and is stopped when the run ends (:func:`stop`).
 ``SIMBRIDGE_TEST_PREPARE=0`` turns it off.
 """
@@ -23,6 +24,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import os
+import signal
 import subprocess
 import sys
 import tempfile
@@ -54,12 +56,15 @@ def stop(proc: subprocess.Popen[bytes] | None) -> None:
     """End the background process and its children if it still runs (the run ended first)."""
     if proc is None or proc.poll() is not None:
         return
-    try:
-        os.killpg(proc.pid, 15)
-        proc.wait(timeout=30)
-    except (ProcessLookupError, subprocess.TimeoutExpired):
-        os.killpg(proc.pid, 9)
-        proc.wait(timeout=30)
+    for sig in (signal.SIGTERM, signal.SIGKILL):
+        try:
+            os.killpg(proc.pid, sig)
+            proc.wait(timeout=30)
+            return
+        except ProcessLookupError:
+            return
+        except subprocess.TimeoutExpired:
+            continue
 
 
 def main() -> int:

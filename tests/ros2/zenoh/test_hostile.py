@@ -299,7 +299,7 @@ async def test_a_token_flood_is_capped_and_comes_and_goes_without_stalling_the_l
             assert len(link._remote) <= 600
             flood = [n for n in app.graph.topics.topics if n.startswith("/flood_")]
             assert 0 < len(flood) <= 600
-        finally:  # the session is the module's: a failure here must not flood the next tests
+        finally:  # the session is the whole run's: a failure must not flood the later tests
             await asyncio.to_thread(lambda: [t.undeclare() for t in tokens])
         await wait_for(
             lambda: not any(n.startswith("/flood_") for n in app.graph.topics.topics), timeout=10
