@@ -32,6 +32,7 @@ from __future__ import annotations
 
 import asyncio
 import json
+import os
 import socket
 import subprocess
 import sys
@@ -150,6 +151,16 @@ sys.exit(main(["--host", "127.0.0.1", "--port", str(port), "--http-port", sys.ar
 """
 
 
+def default_environment() -> dict[str, str]:
+    """This environment without the suite's own ``SIMBRIDGE_TEST_*`` knobs.
+
+    Any ``SIMBRIDGE_*`` variable makes the server read its variables with pydantic-settings, so
+    ``SIMBRIDGE_TEST_TIMEOUT_FACTOR=3 make test`` would otherwise load modules the default server
+    does not.
+    """
+    return {k: v for k, v in os.environ.items() if not k.startswith("SIMBRIDGE_TEST_")}
+
+
 def free_port() -> int:
     with socket.socket() as sock:
         sock.bind(("127.0.0.1", 0))
@@ -166,6 +177,7 @@ def idle_server() -> dict[str, Any]:
         text=True,
         timeout=timeout + 30,
         cwd=ROOT,
+        env=default_environment(),
         check=False,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
@@ -256,7 +268,13 @@ class ServerOnRequest:
         timeout = 120 * TIMEOUT_FACTOR
         args = [str(self.port), str(free_port()), str(self.work), str(timeout)]
         self.proc = await asyncio.create_subprocess_exec(
-            sys.executable, "-c", ON_REQUEST, *args, cwd=ROOT, stderr=asyncio.subprocess.PIPE
+            sys.executable,
+            "-c",
+            ON_REQUEST,
+            *args,
+            cwd=ROOT,
+            env=default_environment(),
+            stderr=asyncio.subprocess.PIPE,
         )
 
         async def answers() -> bool:
