@@ -144,8 +144,6 @@ class _Endpoint:
     latched: bool = False
     #: Readers matched (writers only; kept by Cyclone's listener thread).
     matched: int = 0
-    #: The binding's handle of the entity (``handle._ref``), as its C layer takes it.
-    ref: int = 0
 
 
 @dataclass(frozen=True, slots=True)
@@ -230,8 +228,6 @@ class DdsLink:
         #: The transmit pack the writers share (None: each writer sends its own samples).
         self._pack: SharedPack | None = None
         self._flush_pending = False
-        #: The binding's ``ddspy_write(handle, bytes) -> status`` (set by :meth:`_open`).
-        self._ddspy_write: Any = None
         self._discovery_reader: Any = None
         self._builtin: list[tuple[str, Any]] = []
         self._announced: bytes | None = None
@@ -314,7 +310,6 @@ class DdsLink:
         qos = core.Qos(core.Policy.Userdata(ENCLAVE_USER_DATA))
         self.participant = dds.DomainParticipant(self.options.domain, qos=qos)
         self.guid = self.participant.guid.bytes
-        self._ddspy_write = _clayer().ddspy_write
         policy = core.Policy
         t = importlib.import_module("cyclonedds.idl.types")
         gid = self.types.named(
@@ -733,7 +728,6 @@ class DdsLink:
             listener=core.Listener(on_publication_matched=matched),
         )
         entry.handle = writer
-        entry.ref = writer._ref
         entry.gid = writer.guid.bytes
         if self._pack is not None:
             self._pack.adopt(writer)
@@ -790,37 +784,25 @@ class DdsLink:
         self._write(entry, out)
 
     def _write(self, entry: _Endpoint, out: Outgoing) -> None:
-        # every sample the simulation sends to DDS comes this way: :meth:`_send`'s work is
-        # done here, without its calls (the binding's write is looked up once, in _open)
         try:
-            cdr = out.cdr
-            payload = cdr() if cdr is not None else self.cdr.serialize(entry.type, out.msg)
+            payload = out.cdr() if out.cdr is not None else None
+            if payload is None:
+                payload = self.cdr.serialize(entry.type, out.msg)
         except Exception as err:  # a message the CDR writer cannot encode: skip, say so
             self._log(f"cdr {entry.name}", f"DDS: {entry.name} not sent: {err}")
             return
         try:
-            ret = self._ddspy_write(entry.ref, payload)
+            self._send(entry.handle, payload)
         except Exception as err:
             self._log(f"write {entry.name}", f"DDS: write on {entry.name}: {err}")
             return
-        if ret < 0:
-            self._log(
-                f"write {entry.name}", f"DDS: write on {entry.name}: dds_write returned {ret}"
-            )
-            return
         self.stats["published"] += 1
-        if not self._flush_pending and self._pack is not None:
-            self._flush_soon()
 
     def _send(self, writer: Any, data: bytes) -> None:
         """Write CDR bytes on one of the link's writers; the shared pack goes at the turn's end."""
         _write_raw(writer, data)
-        if not self._flush_pending and self._pack is not None:
-            self._flush_soon()
-
-    def _flush_soon(self) -> None:
-        """Have the shared pack sent at the end of the loop's turn (now if there is no loop)."""
-        assert self._pack is not None
+        if self._pack is None or self._flush_pending:
+            return
         loop = self._loop
         if loop is None:
             self._pack.flush()
