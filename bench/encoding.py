@@ -49,23 +49,33 @@ def _plain(value: Any) -> Any:
     return value
 
 
-def _time(fn: Callable[[], object], repeat: int = 7, min_time: float = 0.05) -> float:
-    """Median seconds per call over ``repeat`` batches of at least ``min_time`` each."""
+def _time(
+    fn: Callable[[], object],
+    repeat: int = 7,
+    min_time: float = 0.05,
+    *,
+    clock: Callable[[], float] = time.perf_counter,
+    pick: Callable[[list[float]], float] = statistics.median,
+) -> float:
+    """Seconds per call (``pick`` of ``repeat`` batches of at least ``min_time`` each).
+
+    ``clock``: wall time by default; ``time.thread_time`` counts this thread's CPU only.
+    """
     n = 1
     while True:
-        t0 = time.perf_counter()
+        t0 = clock()
         for _ in range(n):
             fn()
-        if time.perf_counter() - t0 >= min_time:
+        if clock() - t0 >= min_time:
             break
         n *= 2
     samples = []
     for _ in range(repeat):
-        t0 = time.perf_counter()
+        t0 = clock()
         for _ in range(n):
             fn()
-        samples.append((time.perf_counter() - t0) / n)
-    return statistics.median(samples)
+        samples.append((clock() - t0) / n)
+    return pick(samples)
 
 
 def main() -> int:
