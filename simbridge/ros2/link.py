@@ -51,6 +51,7 @@ __all__ = [
     "Ros2Peer",
     "StandIns",
     "Take",
+    "graph_signature",
     "local_owner",
     "local_publisher",
     "outward_services",
@@ -165,6 +166,25 @@ def outward_topics(
         if topic.sinks:
             subscribers.append(BRIDGE_NODE)
         yield topic, publishers, subscribers
+
+
+def graph_signature(graph: Graph) -> int:
+    """A number that changes with what a link mirrors: topics, services, actions, nodes.
+
+    Cheap (no walk over topics or clients): every client's subscribe and advertise, every
+    in-process publisher and subscriber, every service goes through the graph's tables,
+    which count their changes; services and actions removed outside them change a length.
+    """
+    return hash(
+        (
+            graph.topics.changes,
+            len(graph.topics.topics),
+            graph.services.changes,
+            len(graph.services.services),
+            len(graph.actions.actions),
+            len(graph.nodes),
+        )
+    )
 
 
 def outward_services(graph: Graph) -> Iterator[tuple[Service, str]]:

@@ -65,6 +65,7 @@ from simbridge.ros2.link import (
     Ros2Peer,
     StandIns,
     Take,
+    graph_signature,
     local_owner,
     outward_services,
     outward_topics,
@@ -456,23 +457,7 @@ class ZenohLink:
             self._next_reconcile = now + RECONCILE_PERIOD
 
     def _signature(self) -> int:
-        """A number that changes with what the link mirrors: topics, services, actions, nodes.
-
-        Cheap (no walk over topics or clients): every client's subscribe and advertise, every
-        in-process publisher and subscriber, every service goes through the graph's tables,
-        which count their changes; services and actions removed outside them change a length.
-        """
-        graph = self.graph
-        return hash(
-            (
-                graph.topics.changes,
-                len(graph.topics.topics),
-                graph.services.changes,
-                len(graph.services.services),
-                len(graph.actions.actions),
-                len(graph.nodes),
-            )
-        )
+        return graph_signature(self.graph)
 
     def _due(self, now: float) -> bool:
         return now >= self._next_reconcile - RECONCILE_PERIOD + 0.05

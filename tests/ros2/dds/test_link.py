@@ -22,6 +22,7 @@ import pytest
 
 from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
+from simbridge.ros2.dds.link import RECONCILE_PERIOD
 from simbridge.ros2.dds.options import DdsOptions
 from tests.helpers import ROOT, TIMEOUT_FACTOR, wait_for, ws_url
 from tests.ros2.dds.harness import NetNamespace
@@ -123,6 +124,37 @@ async def test_a_cyclone_node_lists_reads_drives_and_calls_the_robot_that_rosbri
     assert health["state"] == "running" and health["received"] > 0
     # what it read came through the writers' shared pack (the binding 11.0.1's)
     assert health["shared_pack"] is (importlib.metadata.version("cyclonedds") == "11.0.1")
+
+
+async def test_an_idle_link_reconciles_only_when_the_graph_or_discovery_changes(
+    dds_app: App,
+) -> None:
+    link = dds_app.dds
+    assert link is not None
+    window = 4 * RECONCILE_PERIOD
+
+    async def settled() -> None:
+        """Wait (10 s at most) until no reconcile ran for four periods in a row."""
+        deadline = asyncio.get_running_loop().time() + 10 * TIMEOUT_FACTOR
+        while asyncio.get_running_loop().time() < deadline:
+            before = link.stats["reconciles"]
+            await asyncio.sleep(window)
+            if link.stats["reconciles"] == before:
+                return
+        raise AssertionError("the idle link went on reconciling every period")
+
+    # nothing changes: the robot runs, the link reads neither discovery nor the graph's tables
+    await settled()
+    # an in-process publisher of a new topic: a DDS writer for it, at the next tick
+    dds_app.graph.advertise("/idle_probe", "std_msgs/msg/String", "/sim")
+    await wait_for(lambda: "/idle_probe" in link._writers, 2 * RECONCILE_PERIOD)
+    await settled()
+    # another participant: discovery's readers say so, and its node and topic join the graph
+    peer = asyncio.create_task(_peer(link.options.domain, "--seconds", "2"))
+    await wait_for(lambda: "/talker" in dds_app.graph.nodes, 10)
+    await peer
+    # and it leaves: its node goes (its participant deleted, not waited out for 30 s)
+    await wait_for(lambda: "/talker" not in dds_app.graph.nodes, 10)
 
 
 async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_robot(
