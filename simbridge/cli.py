@@ -65,6 +65,16 @@ def _typed(declared: Declared) -> Callable[[str], Any]:
     return parse
 
 
+def _say_unknown_variables() -> None:
+    """Warn of each ``SIMBRIDGE_*`` variable no option reads (only when there are variables)."""
+    if not any(k.startswith("SIMBRIDGE_") for k in os.environ):
+        return
+    from simbridge.app.settings import unknown_variables
+
+    for line in unknown_variables(os.environ):
+        print(f"simbridge: warning: {line}", file=sys.stderr)
+
+
 def _environment() -> dict[str, Any]:
     """Return the validated ``SIMBRIDGE_*`` variables by option name.
 
@@ -388,6 +398,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
         return 2
     args = _run_parser(env).parse_args(argv)
     setup_logging(args.log_level)
+    _say_unknown_variables()
     try:
         _check_foxglove(args)
         settings = server_settings(**_server_values(args))
@@ -433,6 +444,7 @@ def _cmd_check_config(argv: Sequence[str]) -> int:
         return 2
     _add_options(parser, env, {"world", "params", "tasks"})
     args = parser.parse_args(argv)
+    _say_unknown_variables()
     try:
         world = load_world(args.world)
         params = load_params(args.params)

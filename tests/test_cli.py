@@ -388,3 +388,23 @@ def test_the_server_raises_its_soft_limit_on_open_files_to_the_hard_one() -> Non
         assert resource.getrlimit(resource.RLIMIT_NOFILE) == (want, hard)
     finally:
         resource.setrlimit(resource.RLIMIT_NOFILE, (soft, hard))
+
+
+@pytest.mark.parametrize("command", [[], ["check-config"]])
+def test_a_variable_no_option_reads_is_said_with_the_closest_one(
+    command: list[str], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """A typo in a SIMBRIDGE_* name is a warning naming the variable meant, not silence."""
+    from simbridge.cli import main
+
+    monkeypatch.setenv("SIMBRIDGE_MAX_CLIENT", "3")
+    monkeypatch.setenv("SIMBRIDGE_URL", "ws://127.0.0.1:9090")  # the tools' variable
+    # a bad value stops `simbridge` before it serves: the warning is said before that
+    monkeypatch.setenv("SIMBRIDGE_WORLD", "/nonexistent/world.yaml")
+    assert main(command) == 2
+    err = capsys.readouterr().err
+    assert (
+        "simbridge: warning: SIMBRIDGE_MAX_CLIENT is not a setting "
+        "(did you mean SIMBRIDGE_MAX_CLIENTS?): ignored"
+    ) in err
+    assert "SIMBRIDGE_URL" not in err

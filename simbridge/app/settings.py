@@ -66,6 +66,7 @@ __all__ = [
     "environment",
     "options",
     "server_settings",
+    "unknown_variables",
 ]
 
 
@@ -939,6 +940,43 @@ def check(declared: Declared, text: str) -> Any:
         return adapter.validate_python(text)
     except pydantic.ValidationError as err:
         raise SettingsError.of(err) from None
+
+
+#: ``SIMBRIDGE_*`` variables that are not the server's options: the command-line tools' (the
+#: server to reach, a grader's robot, token and goal), the benchmarks' (the checkouts compared)
+#: and the test suite's ``SIMBRIDGE_TEST_*``.
+OTHER_VARIABLES = (
+    "SIMBRIDGE_URL",
+    "SIMBRIDGE_TOKEN",
+    "SIMBRIDGE_ROBOT",
+    "SIMBRIDGE_GOAL",
+    "SIMBRIDGE_BASELINE",
+    "SIMBRIDGE_TREE",
+)
+OTHER_PREFIX = "SIMBRIDGE_TEST_"
+
+
+def unknown_variables(environ: Mapping[str, str] | None = None) -> list[str]:
+    """Say which ``SIMBRIDGE_*`` variables of ``environ`` no option reads (a typo, most often).
+
+    One line each, with the closest option's variable when there is one, e.g.
+    ``SIMBRIDGE_MAX_CLIENT is not a setting (did you mean SIMBRIDGE_MAX_CLIENTS?): ignored``.
+    """
+    import difflib
+
+    source = os.environ if environ is None else environ
+    known = [d.variable for d in options(ServerSettings, RunOptions)]
+    lines = []
+    for name in sorted(source):
+        if not name.startswith("SIMBRIDGE_") or name.startswith(OTHER_PREFIX):
+            continue
+        if name in known or name in OTHER_VARIABLES:
+            continue
+        # compared without the prefix they share, which would make any two names look alike
+        close = difflib.get_close_matches(name[10:], [k[10:] for k in known], n=1, cutoff=0.75)
+        hint = f" (did you mean SIMBRIDGE_{close[0]}?)" if close else ""
+        lines.append(f"{name} is not a setting{hint}: ignored")
+    return lines
 
 
 def environment(environ: Mapping[str, str] | None = None) -> dict[str, Any]:
