@@ -391,6 +391,7 @@ def _cmd_run(argv: Sequence[str]) -> int:
     from simbridge.app.config import load_params, load_world
     from simbridge.app.settings import server_settings
 
+    _say_unknown_variables()  # first: a typo may be why another variable reads as it does
     try:
         env = _environment()
     except ConfigError as err:
@@ -398,7 +399,6 @@ def _cmd_run(argv: Sequence[str]) -> int:
         return 2
     args = _run_parser(env).parse_args(argv)
     setup_logging(args.log_level)
-    _say_unknown_variables()
     try:
         _check_foxglove(args)
         settings = server_settings(**_server_values(args))
@@ -437,6 +437,7 @@ def _cmd_check_config(argv: Sequence[str]) -> int:
         prog="simbridge check-config",
         description="Validate a world and a parameter file, as the server does at startup.",
     )
+    _say_unknown_variables()
     try:
         env = _environment()
     except ConfigError as err:
@@ -444,7 +445,6 @@ def _cmd_check_config(argv: Sequence[str]) -> int:
         return 2
     _add_options(parser, env, {"world", "params", "tasks"})
     args = parser.parse_args(argv)
-    _say_unknown_variables()
     try:
         world = load_world(args.world)
         params = load_params(args.params)

@@ -391,20 +391,34 @@ def test_the_server_raises_its_soft_limit_on_open_files_to_the_hard_one() -> Non
 
 
 @pytest.mark.parametrize("command", [[], ["check-config"]])
+@pytest.mark.parametrize(
+    ("variable", "value"),
+    [("SIMBRIDGE_WORLD", "/nonexistent/world.yaml"), ("SIMBRIDGE_STALL_TIMEOUT", "-5")],
+)
 def test_a_variable_no_option_reads_is_said_with_the_closest_one(
-    command: list[str], monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+    command: list[str],
+    variable: str,
+    value: str,
+    monkeypatch: pytest.MonkeyPatch,
+    capsys: pytest.CaptureFixture[str],
 ) -> None:
-    """A typo in a SIMBRIDGE_* name is a warning naming the variable meant, not silence."""
+    """A typo in a SIMBRIDGE_* name is a warning naming the variable meant, not silence.
+
+    Said first, also when another variable (a bad value, a file that is not there) stops the
+    command; not for the tools' own variables, nor for a blank one.
+    """
     from simbridge.cli import main
 
     monkeypatch.setenv("SIMBRIDGE_MAX_CLIENT", "3")
     monkeypatch.setenv("SIMBRIDGE_URL", "ws://127.0.0.1:9090")  # the tools' variable
-    # a bad value stops `simbridge` before it serves: the warning is said before that
-    monkeypatch.setenv("SIMBRIDGE_WORLD", "/nonexistent/world.yaml")
+    monkeypatch.setenv("SIMBRIDGE_EXTRAS", "dds")  # the image's build argument
+    monkeypatch.setenv("SIMBRIDGE_NOTHING", " ")  # blank: unset
+    monkeypatch.setenv(variable, value)
     assert main(command) == 2
-    err = capsys.readouterr().err
-    assert (
+    first, *rest = capsys.readouterr().err.splitlines()
+    assert first == (
         "simbridge: warning: SIMBRIDGE_MAX_CLIENT is not a setting "
         "(did you mean SIMBRIDGE_MAX_CLIENTS?): ignored"
-    ) in err
-    assert "SIMBRIDGE_URL" not in err
+    )
+    assert rest and rest[0].startswith("simbridge: ") and "warning" not in rest[0]
+    assert not any(n in "\n".join(rest) for n in ("_URL", "_EXTRAS", "_NOTHING"))

@@ -943,13 +943,16 @@ def check(declared: Declared, text: str) -> Any:
 
 
 #: ``SIMBRIDGE_*`` variables that are not the server's options: the command-line tools' (the
-#: server to reach, a grader's robot, token and goal), the benchmarks' (the checkouts compared)
-#: and the test suite's ``SIMBRIDGE_TEST_*``.
+#: server to reach, a grader's robot, token and goal; ``simbridge healthcheck``'s URL), the
+#: image's build argument (Docker gives it to the build's ``check-config``), the benchmarks'
+#: (the checkouts compared) and the test suite's ``SIMBRIDGE_TEST_*``.
 OTHER_VARIABLES = (
     "SIMBRIDGE_URL",
     "SIMBRIDGE_TOKEN",
     "SIMBRIDGE_ROBOT",
     "SIMBRIDGE_GOAL",
+    "SIMBRIDGE_HEALTHCHECK_URL",
+    "SIMBRIDGE_EXTRAS",
     "SIMBRIDGE_BASELINE",
     "SIMBRIDGE_TREE",
 )
@@ -967,9 +970,11 @@ def unknown_variables(environ: Mapping[str, str] | None = None) -> list[str]:
     source = os.environ if environ is None else environ
     known = [d.variable for d in options(ServerSettings, RunOptions)]
     lines = []
-    for name in sorted(source):
+    for name, value in sorted(source.items()):
         if not name.startswith("SIMBRIDGE_") or name.startswith(OTHER_PREFIX):
             continue
+        if not value.strip():
+            continue  # blank: unset, as for the options
         if name in known or name in OTHER_VARIABLES:
             continue
         # compared without the prefix they share, which would make any two names look alike

@@ -459,6 +459,7 @@ class DdsLink:
             self._read_discovery()
         except Exception as err:  # a discovery sample Cyclone or we cannot read
             self._log("discovery", f"DDS: discovery not read: {err}")
+            self._discovered = True  # what was not read: again at the next period
         if self._refused_samples:
             self._say_refused()
         self._import_remote()
@@ -473,7 +474,10 @@ class DdsLink:
         core = importlib.import_module("cyclonedds.core")
         alive_state = core.InstanceState.Alive
         for kind, reader in self._builtin:
-            for sample in reader.take(DISCOVERY_BATCH):
+            samples = reader.take(DISCOVERY_BATCH)
+            if len(samples) == DISCOVERY_BATCH:
+                self._discovered = True  # more wait: Cyclone says so only of new ones
+            for sample in samples:
                 info = getattr(sample, "sample_info", None)
                 alive = info is None or info.instance_state == alive_state
                 if kind == "participant":
@@ -505,8 +509,10 @@ class DdsLink:
                     )
                     continue
                 table[key] = remote
-        for sample in _take_raw(self._discovery_reader, DISCOVERY_BATCH):
-            data, valid = sample
+        infos = _take_raw(self._discovery_reader, DISCOVERY_BATCH)
+        if len(infos) == DISCOVERY_BATCH:
+            self._discovered = True
+        for data, valid in infos:
             if not valid:
                 continue
             try:

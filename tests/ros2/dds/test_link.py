@@ -22,6 +22,7 @@ import pytest
 
 from simbridge.app.runner import App
 from simbridge.app.settings import ServerSettings
+from simbridge.ros2.dds import link as dds_link
 from simbridge.ros2.dds.link import RECONCILE_PERIOD
 from simbridge.ros2.dds.options import DdsOptions
 from tests.helpers import ROOT, TIMEOUT_FACTOR, wait_for, ws_url
@@ -127,7 +128,7 @@ async def test_a_cyclone_node_lists_reads_drives_and_calls_the_robot_that_rosbri
 
 
 async def test_an_idle_link_reconciles_only_when_the_graph_or_discovery_changes(
-    dds_app: App,
+    dds_app: App, monkeypatch: pytest.MonkeyPatch
 ) -> None:
     link = dds_app.dds
     assert link is not None
@@ -149,9 +150,12 @@ async def test_an_idle_link_reconciles_only_when_the_graph_or_discovery_changes(
     dds_app.graph.advertise("/idle_probe", "std_msgs/msg/String", "/sim")
     await wait_for(lambda: "/idle_probe" in link._writers, 2 * RECONCILE_PERIOD)
     await settled()
-    # another participant: discovery's readers say so, and its node and topic join the graph
-    peer = asyncio.create_task(_peer(link.options.domain, "--seconds", "2"))
+    # another participant: discovery's readers say so, and its node and topic join the graph,
+    # even read one sample at a time (Cyclone says only of new samples, not of those left)
+    monkeypatch.setattr(dds_link, "DISCOVERY_BATCH", 1)
+    peer = asyncio.create_task(_peer(link.options.domain, "--seconds", "4"))
     await wait_for(lambda: "/talker" in dds_app.graph.nodes, 10)
+    await wait_for(lambda: "/chatter" in dds_app.graph.topics.topics, 10)
     await peer
     # and it leaves: its node goes (its participant deleted, not waited out for 30 s)
     await wait_for(lambda: "/talker" not in dds_app.graph.nodes, 10)
