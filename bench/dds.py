@@ -1,8 +1,9 @@
 """ROS 2 over DDS (issue 25): the library's costs, outward publishing, /odom latency.
 
-``python -m bench dds [lib|outward|latency] [SECONDS]`` (default: all three, 10 s). The whole
-benchmark runs inside a network namespace of its own (it re-runs itself under ``unshare -n``,
-``lo`` up with multicast): DDS discovery is multicast and must not reach the machine's network.
+``python -m bench dds [lib|outward|latency|relay|stopped] [SECONDS]`` (default: all, 10 s).
+The whole benchmark runs inside a network namespace of its own (it re-runs itself under
+``unshare -n``, ``lo`` up with multicast): DDS discovery is multicast and must not reach the
+machine's network.
 
 * ``lib``: per DDS library, in a fresh process each: import time, resident memory of a process
   with one participant (idle), and CPU per Odometry written to one reader in another process:
@@ -18,6 +19,10 @@ benchmark runs inside a network namespace of its own (it re-runs itself under ``
   cores (``bench pi``'s budget: one Pi core is 0.194 of a core here, docs/deploy.md), against
   rosbridge_suite's published Pi 4B figures (57 % CPU and 59 MB for one Foxglove client,
   v-kiniv/rws README).
+* ``stopped``: 30 robots to one DDS subscriber that stops acknowledging after 3 s (``SIGSTOP``,
+  as a laptop that sleeps or a ``ros2 topic echo`` stopped with Ctrl-Z): the longest gap
+  between two /r1/odom at a rosbridge client of the same server, before and after. Target: no
+  gap over 150 ms after the stop (the writers keep the last samples, they do not wait for it).
 * ``latency``: one robot; /odom latency (arrival minus the header stamp, the wall clock when
   the server published it) of a rosbridge client and of a DDS subscriber of the same server,
   side by side. Target: DDS p99 <= 1.0x rosbridge's.
@@ -28,13 +33,17 @@ from __future__ import annotations
 import asyncio
 import json
 import os
+import signal
 import subprocess
 import sys
 import tempfile
 import textwrap
 import time
+from collections.abc import Callable
 from pathlib import Path
 from typing import Any
+
+from websockets.asyncio.client import connect
 
 from bench import ros2outward
 from bench.procs import ROOT, collect, cpu_seconds, load_average, percentile, start_loadgens
@@ -237,6 +246,65 @@ def latency(seconds: float) -> bool:
     return ok
 
 
+async def _odom_gaps(
+    port: int, topic: str, before: float, after: float, stop: Callable[[], None]
+) -> tuple[list[float], list[int]]:
+    """Return the longest /odom gaps (s) at a rosbridge client before and after ``stop()``."""
+    async with connect(f"ws://127.0.0.1:{port}", max_size=None) as ws:
+        await ws.send(json.dumps({"op": "subscribe", "topic": topic}))
+        await ws.recv()
+        worst = [0.0, 0.0]
+        counts = [0, 0]
+        last = t0 = time.monotonic()
+        phase = 0
+        while time.monotonic() - t0 < before + after:
+            await ws.recv()
+            now = time.monotonic()
+            worst[phase] = max(worst[phase], now - last)
+            counts[phase] += 1
+            last = now
+            if phase == 0 and now - t0 >= before:
+                stop()
+                phase = 1
+    return worst, counts
+
+
+def stopped(seconds: float) -> bool:
+    """30 robots to a DDS subscriber that stops acknowledging (SIGSTOP): does the loop stall?"""
+    n = 30
+    os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
+    topics = ros2outward.robot_topics(n)
+    with tempfile.TemporaryDirectory() as tmp:
+        world = _world(Path(tmp), "r", n, "outward")
+        with _simbridge("", "--world", str(world), "--dds", zenoh=False) as (proc, port):
+            time.sleep(2)
+            sub = _dds_subscriber(topics, 3 * seconds + 60)
+            assert sub.stdout is not None
+            sub.stdout.readline()  # matched and reading
+
+            def stop() -> None:
+                os.kill(sub.pid, signal.SIGSTOP)
+
+            try:
+                c0 = cpu_seconds(proc)
+                worst, counts = asyncio.run(_odom_gaps(port, "/r1/odom", 3, seconds, stop))
+                cpu = (cpu_seconds(proc) - c0) / (3 + seconds)
+            finally:
+                sub.kill()
+                sub.wait()
+    print(
+        f"dds stopped: 30 robots' /odom, /scan and /tf to a DDS subscriber stopped (SIGSTOP)"
+        f" after 3 s, then {seconds:g} s; {load_average()}"
+    )
+    print(f"{'':34}{'messages':>10}{'longest gap ms':>16}")
+    print(f"{'/r1/odom at a rosbridge client, before':34}{counts[0]:>10}{1000 * worst[0]:>16.0f}")
+    print(f"{'/r1/odom at a rosbridge client, after':34}{counts[1]:>10}{1000 * worst[1]:>16.0f}")
+    print(f"server CPU over both: {100 * cpu:.1f} % of a core")
+    ok = worst[1] <= 0.15
+    print(f"longest gap after the stop <= 150 ms (3 periods): {'met' if ok else 'NOT met'}")
+    return ok
+
+
 #: One Raspberry Pi 4B core in cores of this machine (bench pi's fixed budget).
 PI_CORE = 0.194
 
@@ -298,11 +366,17 @@ def main(argv: list[str] | None = None) -> int:
     if not os.environ.get("BENCH_DDS_NETNS"):
         return _in_netns(argv)
     seconds = next((float(a) for a in argv if a.replace(".", "", 1).isdigit()), 10.0)
-    every = ("lib", "outward", "latency", "relay")
+    every = ("lib", "outward", "latency", "relay", "stopped")
     names = [a for a in argv if a in every] or list(every)
     ok = True
     for name in names:
-        run = {"lib": lambda _s: lib(), "outward": outward, "latency": latency, "relay": relay}
+        run = {
+            "lib": lambda _s: lib(),
+            "outward": outward,
+            "latency": latency,
+            "relay": relay,
+            "stopped": stopped,
+        }
         ok = run[name](seconds) and ok
         print()
     return 0 if ok else 1
