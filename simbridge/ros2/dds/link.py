@@ -434,7 +434,7 @@ class DdsLink:
         """Reconcile when discovery or the graph changed (every 0.5 s at most), or every 30 s.
 
         An idle link costs a comparison a tick: a reconcile reads four discovery readers and
-        walks every topic and service (1-2.5 ms with the default world).
+        walks every topic and service (1.1-2.5 ms with 30 robots, measured).
         """
         if self.participant is None or now < self._next_reconcile:
             return
