@@ -212,6 +212,37 @@ async def test_a_fast_dds_node_sees_simbridge_as_a_ros_2_node_and_drives_its_rob
     )
 
 
+@pytest.mark.parametrize(
+    ("distro", "env"),
+    [
+        ("humble", {"ROS_LOCALHOST_ONLY": "1"}),
+        ("jazzy", {"ROS_AUTOMATIC_DISCOVERY_RANGE": "LOCALHOST"}),
+    ],
+)
+async def test_localhost_only_on_both_sides_finds_and_drives_a_fast_dds_node(
+    netns: NetNamespace, dds_domain: int, ddspeer: Any, distro: str, env: dict[str, str]
+) -> None:
+    """A student's laptop with discovery kept on the machine, as rmw_fastrtps keeps it."""
+    options = DdsOptions.from_env({"ROS_DOMAIN_ID": str(dds_domain), **env})
+    assert options.discovery == "LOCALHOST"
+    with netns.entered():
+        app = App(ServerSettings(host="127.0.0.1", port=0, http_port=0), dds=options)
+        await app.start()
+        try:
+            peer = await ddspeer(
+                "--localhost", distro, "--echo", "/odom", "--cmd-vel", "0.4,0",
+                node="student", distro=distro,
+            )  # fmt: skip
+            # each sees the other: the Fast DDS node reads /odom, its node joins the graph...
+            odom = await peer.sample("/odom")
+            assert odom["child_frame_id"] == "base_link"
+            await wait_for(lambda: "/student" in app.graph.nodes, 10)
+            # ... and its /cmd_vel drives the robot
+            await peer.sample("/odom", lambda o: o["pose"]["pose"]["position"]["x"] > 0.05)
+        finally:
+            await app.stop()
+
+
 async def test_no_sim_dds_is_a_rosbridge_in_front_of_a_humble_robot_on_fast_dds(
     netns: NetNamespace, dds_domain: int, ddspeer: Any, run_js: Any
 ) -> None:

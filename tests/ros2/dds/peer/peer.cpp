@@ -21,6 +21,9 @@
 #include <fastdds/dds/topic/Topic.hpp>
 #include <fastdds/dds/topic/TypeSupport.hpp>
 #include <fastdds/rtps/common/WriteParams.h>
+#include <fastdds/rtps/transport/UDPv4TransportDescriptor.h>
+#include <fastdds/rtps/transport/shared_mem/SharedMemTransportDescriptor.h>
+#include <fastrtps/utils/IPLocator.h>
 #include <fastdds/rtps/participant/ParticipantDiscoveryInfo.h>
 #include <fastdds/rtps/reader/ReaderDiscoveryInfo.h>
 #include <fastdds/rtps/writer/WriterDiscoveryInfo.h>
@@ -225,6 +228,7 @@ struct Options
     int gid_size = 24;
     std::string node = "ddspeer";
     std::string ns = "/";
+    std::string localhost;  // "", "humble" or "jazzy": rmw_fastrtps's localhost-only modes
     bool announce = true;
     std::vector<EchoSpec> echoes;
     bool cmd_vel = false;
@@ -246,6 +250,10 @@ const char* kUsage =
     "  --domain N            DDS domain (default: $ROS_DOMAIN_ID, else 0)\n"
     "  --distro humble|jazzy|kilted   Gid size on ros_discovery_info: 24 (humble), 16 (later)\n"
     "  --node NAME           this node's name, announced on ros_discovery_info (ddspeer)\n"
+    "  --localhost humble|jazzy   discover on this machine only, as rmw_fastrtps does with\n"
+    "                        ROS_LOCALHOST_ONLY=1 (humble: UDP on 127.0.0.1 only, multicast\n"
+    "                        discovery) or ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST (jazzy: no\n"
+    "                        multicast, 127.0.0.1 as the initial peer, 32 participant ports)\n"
     "  --namespace NS        the node's namespace (/); --robot's topics go under it\n"
     "  --no-announce         publish nothing on ros_discovery_info\n"
     "  --echo TOPIC[=pkg/msg/Type][@default|sensor|latched]   print each sample\n"
@@ -398,6 +406,11 @@ Options parse(int argc, char** argv)
             }
         } else if (a == "--node") {
             o.node = value(i);
+        } else if (a == "--localhost") {
+            o.localhost = value(i);
+            if (o.localhost != "humble" && o.localhost != "jazzy") {
+                fail("--localhost must be humble or jazzy");
+            }
         } else if (a == "--namespace") {
             o.ns = value(i);
         } else if (a == "--no-announce") {
@@ -595,6 +608,37 @@ private:
     }
 };
 
+// rmw_fastrtps_shared_cpp's participant.cpp: ROS_LOCALHOST_ONLY=1 in Humble (the builtin
+// transports replaced by UDPv4 on 127.0.0.1 only and shared memory; discovery stays multicast,
+// on the loopback interface), ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST from Jazzy on (no
+// multicast locator, 127.0.0.1 as the initial peer on 32 participants' ports, shared memory)
+void localhost_only(DomainParticipantQos& pq, const std::string& mode)
+{
+    namespace rtps_t = eprosima::fastdds::rtps;
+    if (mode.empty()) {
+        return;
+    }
+    pq.transport().use_builtin_transports = false;
+    auto udp = std::make_shared<rtps_t::UDPv4TransportDescriptor>();
+    if (mode == "humble") {
+        udp->interfaceWhiteList.emplace_back("127.0.0.1");
+        pq.transport().user_transports.push_back(udp);
+        pq.transport().user_transports.push_back(
+            std::make_shared<rtps_t::SharedMemTransportDescriptor>());
+        return;
+    }
+    auto& builtin = pq.wire_protocol().builtin;
+    builtin.metatrafficMulticastLocatorList.clear();
+    builtin.metatrafficUnicastLocatorList.push_back(eprosima::fastrtps::rtps::Locator_t());
+    pq.transport().user_transports.push_back(
+        std::make_shared<rtps_t::SharedMemTransportDescriptor>());
+    udp->maxInitialPeersRange = 32;
+    pq.transport().user_transports.push_back(udp);
+    eprosima::fastrtps::rtps::Locator_t peer;
+    eprosima::fastrtps::rtps::IPLocator::setIPv4(peer, "127.0.0.1");
+    builtin.initialPeersList.push_back(peer);
+}
+
 class Peer
 {
 public:
@@ -607,6 +651,7 @@ public:
         std::vector<rtps::octet> ud(enclave.begin(), enclave.end());
         ud.push_back(0);
         pq.user_data().data_vec(ud);
+        localhost_only(pq, o.localhost);
         // the participant listener hears discovery only: with DATA_ON_READERS in its mask the
         // readers' own on_data_available would never be called
         StatusMask mask = StatusMask::all();
