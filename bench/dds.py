@@ -31,6 +31,7 @@ machine's network.
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import json
 import os
 import signal
@@ -39,10 +40,11 @@ import sys
 import tempfile
 import textwrap
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from pathlib import Path
 from typing import Any
 
+import psutil
 from websockets.asyncio.client import connect
 
 from bench import ros2outward
@@ -210,19 +212,25 @@ def _dds_subscriber(names: list[tuple[str, str]], seconds: float, stamps: bool =
     )
 
 
-def outward(seconds: float) -> bool:
-    n = 30
-    rounds = int(os.environ.get("ROUNDS", "3"))
+@contextlib.contextmanager
+def _robots(n: int) -> Iterator[tuple[psutil.Process, int, list[tuple[str, str]]]]:
+    """A ``--dds`` server of ``n`` robots: its process, its port, every robot's topics."""
     os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
-    topics = ros2outward.robot_topics(n)
     with tempfile.TemporaryDirectory() as tmp:
         world = _world(Path(tmp), "r", n, "outward")
         with _simbridge("", "--world", str(world), "--dds", zenoh=False) as (proc, port):
-            time.sleep(3)
-            idle = ros2outward.cpu_share(proc, seconds)
-            results = ros2outward.compare_outward(
-                proc, port, topics, seconds, rounds, lambda: _dds_subscriber(topics, seconds)
-            )
+            yield proc, port, ros2outward.robot_topics(n)
+
+
+def outward(seconds: float) -> bool:
+    n = 30
+    rounds = int(os.environ.get("ROUNDS", "3"))
+    with _robots(n) as (proc, port, topics):
+        time.sleep(3)
+        idle = ros2outward.cpu_share(proc, seconds)
+        results = ros2outward.compare_outward(
+            proc, port, topics, seconds, rounds, lambda: _dds_subscriber(topics, seconds)
+        )
     title = f"dds outward: {n} robots' /odom, /scan and /tf, {rounds} alternating rounds of"
     title += f" {seconds:g} s"
     return ros2outward.report_outward(title, idle, results, label="DDS", target=1.0)
@@ -271,27 +279,22 @@ async def _odom_gaps(
 
 def stopped(seconds: float) -> bool:
     """30 robots to a DDS subscriber that stops acknowledging (SIGSTOP): does the loop stall?"""
-    n = 30
-    os.environ["ROS_DOMAIN_ID"] = str(DOMAIN)
-    topics = ros2outward.robot_topics(n)
-    with tempfile.TemporaryDirectory() as tmp:
-        world = _world(Path(tmp), "r", n, "outward")
-        with _simbridge("", "--world", str(world), "--dds", zenoh=False) as (proc, port):
-            time.sleep(2)
-            sub = _dds_subscriber(topics, 3 * seconds + 60)
-            assert sub.stdout is not None
-            sub.stdout.readline()  # matched and reading
+    with _robots(30) as (proc, port, topics):
+        time.sleep(2)
+        sub = _dds_subscriber(topics, 3 * seconds + 60)
+        assert sub.stdout is not None
+        sub.stdout.readline()  # matched and reading
 
-            def stop() -> None:
-                os.kill(sub.pid, signal.SIGSTOP)
+        def stop() -> None:
+            os.kill(sub.pid, signal.SIGSTOP)
 
-            try:
-                c0 = cpu_seconds(proc)
-                worst, counts = asyncio.run(_odom_gaps(port, "/r1/odom", 3, seconds, stop))
-                cpu = (cpu_seconds(proc) - c0) / (3 + seconds)
-            finally:
-                sub.kill()
-                sub.wait()
+        try:
+            c0 = cpu_seconds(proc)
+            worst, counts = asyncio.run(_odom_gaps(port, "/r1/odom", 3, seconds, stop))
+            cpu = (cpu_seconds(proc) - c0) / (3 + seconds)
+        finally:
+            sub.kill()
+            sub.wait()
     print(
         f"dds stopped: 30 robots' /odom, /scan and /tf to a DDS subscriber stopped (SIGSTOP)"
         f" after 3 s, then {seconds:g} s; {load_average()}"
