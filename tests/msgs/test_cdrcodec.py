@@ -38,6 +38,17 @@ def test_every_known_type_encodes_and_decodes_as_rosbags_does(
     assert compared > 250
 
 
+def _encodes_as_rosbags_does(
+    parts: tuple[TypeRegistry, Converter, CdrWriter, CdrReader], typename: str, payload: dict
+) -> None:
+    """The bytes are rosbags' for the same message, and they read back to the message."""
+    _registry, convert, writer, reader = parts
+    msg = convert.from_json(typename, payload)
+    data = writer.serialize(typename, msg)
+    assert data == writer.serialize_with_rosbags(typename, msg)
+    assert encode_json(reader.read(typename, data)) == encode_json(msg)
+
+
 @pytest.mark.parametrize(
     ("typename", "payload"),
     [
@@ -61,11 +72,7 @@ def test_every_known_type_encodes_and_decodes_as_rosbags_does(
 def test_messages_with_values_encode_and_decode_as_rosbags_does(
     parts: tuple[TypeRegistry, Converter, CdrWriter, CdrReader], typename: str, payload: dict
 ) -> None:
-    _registry, convert, writer, reader = parts
-    msg = convert.from_json(typename, payload)
-    data = writer.serialize(typename, msg)
-    assert data == writer.serialize_with_rosbags(typename, msg)
-    assert encode_json(reader.read(typename, data)) == encode_json(msg)
+    _encodes_as_rosbags_does(parts, typename, payload)
 
 
 def test_a_fixed_array_of_the_wrong_length_is_refused(
@@ -182,8 +189,4 @@ def test_sequences_of_messages_encode_as_rosbags_does(
     parts: tuple[TypeRegistry, Converter, CdrWriter, CdrReader], typename: str, payload: dict
 ) -> None:
     # elements that one pack writes are written in the sequence's loop; the others by a call
-    _registry, convert, writer, reader = parts
-    msg = convert.from_json(typename, payload)
-    data = writer.serialize(typename, msg)
-    assert data == writer.serialize_with_rosbags(typename, msg)
-    assert encode_json(reader.read(typename, data)) == encode_json(msg)
+    _encodes_as_rosbags_does(parts, typename, payload)
