@@ -45,7 +45,7 @@ from simbridge.robot.assembly import RobotGraph, build_robot_graph
 from simbridge.rosbridge.front import Rosbridge
 from simbridge.rosbridge.server import BridgeServer, Client
 from simbridge.sim import World
-from simbridge.web import WebApp
+from simbridge.web import WebApp, rosbridge_route
 from simbridge.web.admin import ClientView, admin_credentials, admin_routes
 from simbridge.web.grading import grading_routes
 
@@ -294,6 +294,7 @@ def build(
         )
     )
     web.routes.update(grading_routes(grader, settings))
+    web.routes["/api/rosbridge"] = rosbridge_route(lambda: server.port, tls=bool(settings.certfile))
     web.privileged = admin_credentials(settings)  # the instructor always finds room
     recorder = None
     if record is not None:

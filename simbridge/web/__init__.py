@@ -9,7 +9,23 @@ needs the graph and the simulation, which plain HTTP does not).
 
 from __future__ import annotations
 
-from simbridge.web.http import HttpRequest, HttpResponse, Route, WebApp, parse_target, serve_http
+from simbridge.web.http import (
+    HttpRequest,
+    HttpResponse,
+    Route,
+    WebApp,
+    parse_target,
+    rosbridge_route,
+    serve_http,
+)
 
 
-__all__ = ["HttpRequest", "HttpResponse", "Route", "WebApp", "parse_target", "serve_http"]
+__all__ = [
+    "HttpRequest",
+    "HttpResponse",
+    "Route",
+    "WebApp",
+    "parse_target",
+    "rosbridge_route",
+    "serve_http",
+]

@@ -64,6 +64,7 @@ __all__ = [
     "Route",
     "WebApp",
     "parse_target",
+    "rosbridge_route",
     "serve_http",
 ]
 
@@ -146,6 +147,26 @@ class HttpResponse:
 
 #: A route handler: request -> response.
 Route = Callable[[HttpRequest], HttpResponse]
+
+
+def rosbridge_route(port: Callable[[], int], *, tls: bool) -> Route:
+    """``GET /api/rosbridge``: the port this server's rosbridge listens on, for the page it serves.
+
+    The page connects to ``ws://<its own host>:<port>`` (``wss`` when ``tls``), so a server
+    started with ``--port 9190`` (9090 taken, by a real robot's rosbridge perhaps) needs no
+    ``?url=``. A proxy in front of simbridge answers this path itself with the path it forwards
+    to the WebSocket (``{"path": "/ws"}``, ``config/nginx.conf``). ``port()`` is read at each
+    request: the bound port, also with ``--port 0``.
+    """
+
+    def route(request: HttpRequest) -> HttpResponse:
+        if request.method not in ("GET", "HEAD"):
+            response = HttpResponse.json({"error": "use GET for /api/rosbridge"}, 405)
+            response.headers["Allow"] = "GET, HEAD"
+            return response
+        return HttpResponse.json({"server": "simbridge", "port": port(), "tls": tls})
+
+    return route
 
 
 class WebApp:

@@ -16,13 +16,57 @@ const BACKOFF_MAX_MS = 8000;
 const RATE_WINDOW_MS = 2000;
 const TOKEN_KEY = 'simbridge-token';
 
-/** Returns the rosbridge URL the page should use: ?url=, else ws://<page host>:9090. */
+const ENDPOINT_TIMEOUT_MS = 2000;
+
+const bracketed = (host) => (host.includes(':') ? `[${host}]` : host);
+
+/** Returns the rosbridge URL the page starts with: ?url=, else ws://<page host>:9090. */
 export function defaultUrl(loc = window.location) {
   const given = new URLSearchParams(loc.search).get('url');
   if (given) return given;
-  const host = loc.hostname || '127.0.0.1';
-  const bracketed = host.includes(':') ? `[${host}]` : host;
-  return `ws://${bracketed}:9090`;
+  return `ws://${bracketed(loc.hostname || '127.0.0.1')}:9090`;
+}
+
+/**
+ * The rosbridge URL an answer of GET api/rosbridge names, or null: simbridge answers the port
+ * it listens on ({port, tls}: ws://<page host>:<port>), a proxy in front of it the path it
+ * forwards to the WebSocket ({path: "/ws"}: on the page's own host and port).
+ */
+export function endpointUrl(answer, loc = window.location) {
+  if (!answer || typeof answer !== 'object') return null;
+  const secure = loc.protocol === 'https:';
+  const { port, path } = answer;
+  if (Number.isInteger(port) && port > 0 && port < 65536) {
+    const scheme = answer.tls === true || secure ? 'wss' : 'ws';
+    return `${scheme}://${bracketed(loc.hostname || '127.0.0.1')}:${port}`;
+  }
+  if (typeof path === 'string' && path.startsWith('/') && !path.startsWith('//')) {
+    return `${secure ? 'wss' : 'ws'}://${loc.host}${path}`;
+  }
+  return null;
+}
+
+/**
+ * The rosbridge URL the page should use: ?url= if given; else where the server that served the
+ * page says its rosbridge is (GET api/rosbridge beside the page, see endpointUrl), so a server
+ * on another port than 9090 or behind a proxy needs no ?url=; else ws://<page host>:9090 (a
+ * page served by another web server: a real robot's, say).
+ */
+export async function rosbridgeUrl(loc = window.location, fetchFn = (...args) => window.fetch(...args)) {
+  const fallback = defaultUrl(loc);
+  if (new URLSearchParams(loc.search).get('url')) return fallback;
+  const abort = new AbortController();
+  const timer = setTimeout(() => abort.abort(), ENDPOINT_TIMEOUT_MS);
+  try {
+    const reply = await fetchFn(new URL('api/rosbridge', loc.href).href,
+      { cache: 'no-store', signal: abort.signal });
+    if (!reply.ok) return fallback;
+    return endpointUrl(await reply.json(), loc) ?? fallback;
+  } catch (err) {
+    return fallback; // not simbridge, or it did not answer in time
+  } finally {
+    clearTimeout(timer);
+  }
 }
 
 /**

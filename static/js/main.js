@@ -1,5 +1,5 @@
 // The simbridge page: wires the connection, view, teleop, plots and PID lab together.
-import { Connection, defaultUrl, takeToken, storeToken } from './connection.js';
+import { Connection, defaultUrl, rosbridgeUrl, takeToken, storeToken } from './connection.js';
 import { View, scanToWorld, markerSegments, yawOf } from './view.js';
 import {
   TeleopDriver, installKeyboard, installJoystick, installGamepad, gamepadSettingsFromUrl,
@@ -488,7 +488,8 @@ function switchRobot(ns) {
   sel.value = ns;
   const params = new URLSearchParams(location.search);
   if (ns && state.access && state.access.robots.length > 1) params.set('robot', ns);
-  history.replaceState(null, '', `${location.pathname}?${params}`);
+  const query = params.toString();
+  history.replaceState(null, '', `${location.pathname}${query ? `?${query}` : ''}`);
   detectCmdVel();
   subscribeRobot();
   loadLimits();
@@ -684,4 +685,11 @@ plots.step.setVisible(false);
 
 // for tests and curious students: the page's parts
 window.simbridge = { conn, view, driver, lab, plots, state, cmdVel, download, liveTime, gap };
-conn.connect();
+// where the page's own server says its rosbridge is (unless ?url= said): then connect, unless
+// the Server form connected somewhere meanwhile
+rosbridgeUrl().then((url) => {
+  if (conn.state !== 'disconnected') return;
+  conn.connect(url);
+  $('url').value = conn.url;
+  $('linkUrl').textContent = conn.url;
+});

@@ -70,6 +70,21 @@ async def test_page_loads_without_errors_and_asks_only_its_server(
     assert await page.text_content("#statusText") == "connected"
 
 
+async def test_page_without_url_connects_to_the_port_its_server_names(
+    app: App, open_page: OpenPage
+) -> None:
+    """With no ?url=, the page connects where its server's /api/rosbridge says (not 9090).
+
+    The test's server listens on a free port, never 9090.
+    """
+    page, log = await open_page(app, "/")
+    await page.wait_for_function("window.simbridge && window.simbridge.conn.connected")
+    assert await page.evaluate("window.simbridge.conn.url") == ws_url(app)
+    assert await page.input_value("#url") == ws_url(app)
+    assert await page.text_content("#linkUrl") == ws_url(app)
+    assert log.errors == []
+
+
 async def test_canvas_draws_walls_robot_and_scan(app: App, open_page: OpenPage) -> None:
     """The view shows the world's walls, the robot footprint and the scan points."""
     page, _ = await open_connected(open_page, app)

@@ -189,15 +189,20 @@ async def test_nginx_answers_404_outside_static(nginx: Nginx) -> None:
     assert b"robot" not in body
 
 
-async def test_page_from_nginx_uses_port_9090_by_default_and_ws_when_told(nginx: Nginx) -> None:
-    """In chromium, the page nginx serves asks ws://HOST:9090 by default; ?url= its /ws works.
+async def test_page_from_nginx_connects_through_its_ws_by_default_and_where_told(
+    nginx: Nginx,
+) -> None:
+    """In chromium, the page nginx serves connects to nginx's /ws unasked; ?url= still wins.
 
-    Only the WebSocket traffic is checked (not the page's markup, which has its own tests).
+    nginx's /api/rosbridge names /ws. Only the WebSocket traffic is checked (not the page's
+    markup, which has its own tests).
     """
     from playwright.async_api import WebSocket, async_playwright
 
     from tests.browser.conftest import CHROMIUM, FLAGS
 
+    status, _, body = await asyncio.to_thread(get, f"{nginx.http}/api/rosbridge")
+    assert (status, json.loads(body)) == (200, {"path": "/ws"})
     assert shutil.which(CHROMIUM), "chromium is missing: run `make deps` (apt-get install chromium)"
     async with async_playwright() as pw:
         browser = await pw.chromium.launch(executable_path=CHROMIUM, args=FLAGS, headless=True)
@@ -213,18 +218,18 @@ async def test_page_from_nginx_uses_port_9090_by_default_and_ws_when_told(nginx:
             page.on("websocket", on_socket)
             await page.goto(f"{nginx.http}/")
             async with asyncio.timeout(10 * TIMEOUT_FACTOR):
-                while not sockets:
+                while not any('"/odom"' in f for f in frames):
                     await asyncio.sleep(0.05)
-            assert sockets[0].url.rstrip("/") == "ws://127.0.0.1:9090"
+            assert sockets[0].url == nginx.ws
             await page.close()
 
             sockets.clear()
             page = await browser.new_page()
             page.on("websocket", on_socket)
-            await page.goto(f"{nginx.http}/?url={nginx.ws}")
+            await page.goto(f"{nginx.http}/?url=ws://127.0.0.1:9")  # told: no guessing
             async with asyncio.timeout(10 * TIMEOUT_FACTOR):
-                while not any('"/odom"' in f for f in frames):
+                while not sockets:
                     await asyncio.sleep(0.05)
-            assert sockets[0].url == nginx.ws
+            assert sockets[0].url.rstrip("/") == "ws://127.0.0.1:9"
         finally:
             await browser.close()

@@ -54,6 +54,16 @@ async def test_healthz_reports_status_uptime_clients_and_loop_timing(app: App) -
     assert health["http"]["open"] >= 1 and health["http"]["refused"] == 0  # this request's
 
 
+async def test_api_rosbridge_names_the_bound_websocket_port_on_both_ports(app: App) -> None:
+    """/api/rosbridge: the port the page's rosbridge is on (the bound one: a free port here)."""
+    for base in (http_url(app), f"http://127.0.0.1:{app.ws_port}"):
+        status, headers, body = await fetch(base + "/api/rosbridge")
+        assert status == 200 and headers["Content-Type"] == "application/json"
+        assert json.loads(body) == {"server": "simbridge", "port": app.ws_port, "tls": False}
+    status, headers, _ = await fetch(http_url(app) + "/api/rosbridge", method="POST")
+    assert status == 405 and "GET" in headers["Allow"]
+
+
 @pytest.mark.parametrize(
     "path", ["/../pyproject.toml", "/%2e%2e/pyproject.toml", "/..%2fpyproject.toml", "/nope.js"]
 )
