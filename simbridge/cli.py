@@ -330,14 +330,15 @@ async def _serve(
     for sig in (signal.SIGINT, signal.SIGTERM):
         loop.add_signal_handler(sig, stop.set)
     everywhere = settings.host in ("0.0.0.0", "::", "")
-    shown = "127.0.0.1" if everywhere else settings.host
-    page = f"  page http://{shown}:{app.http_port}/" if app.http_port is not None else ""
+    shown = _bracketed("127.0.0.1" if everywhere else settings.host)
+    ws, http = ("wss", "https") if settings.certfile else ("ws", "http")  # both ports are TLS
+    page = f"  page {http}://{shown}:{app.http_port}/" if app.http_port is not None else ""
     fox = f"  foxglove ws://{shown}:{app.foxglove.port}" if app.foxglove is not None else ""
-    print(f"simbridge: rosbridge ws://{shown}:{app.ws_port}/{page}{fox}", flush=True)
+    print(f"simbridge: rosbridge {ws}://{shown}:{app.ws_port}/{page}{fox}", flush=True)
     lan = _network_address(_in_container()) if everywhere else None
     if lan is not None:  # what an instructor hands out (the first line is for this machine)
-        page = f"  page http://{lan}:{app.http_port}/" if app.http_port is not None else ""
-        print(f"simbridge: from the network: ws://{lan}:{app.ws_port}/{page}", flush=True)
+        page = f"  page {http}://{lan}:{app.http_port}/" if app.http_port is not None else ""
+        print(f"simbridge: from the network: {ws}://{lan}:{app.ws_port}/{page}", flush=True)
     await stop.wait()
     print("simbridge: stopping", flush=True)
     await app.stop()
@@ -348,6 +349,11 @@ async def _serve(
 
 def _in_container() -> bool:
     return Path("/.dockerenv").exists() or Path("/run/.containerenv").exists()
+
+
+def _bracketed(host: str) -> str:
+    """Return ``host`` as a URL writes it (an IPv6 address in brackets)."""
+    return f"[{host}]" if ":" in host and not host.startswith("[") else host
 
 
 def _network_address(in_container: bool) -> str | None:

@@ -220,7 +220,8 @@ async def test_the_command_serves_wss_and_https_with_certfile(
     try:
         assert proc.stdout is not None
         line = (await asyncio.wait_for(proc.stdout.readline(), 30 * TIMEOUT_FACTOR)).decode()
-        ports = re.search(r"ws://127\.0\.0\.1:(\d+)/\s+page http://127\.0\.0\.1:(\d+)/", line)
+        # the printed URLs are the TLS ones (what a user copies)
+        ports = re.search(r"wss://127\.0\.0\.1:(\d+)/\s+page https://127\.0\.0\.1:(\d+)/", line)
         assert ports, line
         trust = ssl.create_default_context(cafile=str(certfile))
         async with connect(f"wss://127.0.0.1:{ports.group(1)}", ssl=trust) as ws:
