@@ -69,7 +69,7 @@ function showState(detail = { state: conn.state, url: conn.url, reason: conn.rea
   // a link that needs the user (a token, a URL) opens the server form
   if (kind === 'refused' || kind === 'badurl') $('server').open = true;
 }
-conn.addEventListener('state', (e) => { showState(e.detail); markStale(); });
+conn.addEventListener('state', (e) => { showState(e.detail); markStale(); showExample(); });
 $('urlForm').addEventListener('submit', (e) => {
   e.preventDefault();
   const url = $('url').value.trim();
@@ -494,6 +494,7 @@ function switchRobot(ns) {
   subscribeRobot();
   loadLimits();
   showRobotInfo();
+  showExample();
 }
 
 /** The robot to open on: ?robot= if this connection may drive it, else its own. */
@@ -612,7 +613,8 @@ const pidInputs = () => ({
 });
 function showExample() {
   const { mode, gains, setpoint } = pidInputs();
-  $('example').textContent = exampleCode(mode, gains, setpoint, cmdVel.type);
+  const link = { url: conn.url, ns: state.ns, token: Boolean(conn.token) };
+  $('example').textContent = exampleCode(mode, gains, setpoint, cmdVel.type, link);
 }
 $('pidMode').addEventListener('change', () => {
   const heading = $('pidMode').value === 'heading';

@@ -138,9 +138,12 @@ export class PidLab {
 
 /**
  * The copyable example: the PID class above plus a 10 Hz loop with roslib, current gains;
- * cmdVelType is the type the page sends (Twist, or TwistStamped with a header).
+ * cmdVelType is the type the page sends (Twist, or TwistStamped with a header). link is where
+ * the page drives: {url} its rosbridge (never with a token), {ns} the robot's namespace ('' for
+ * the single robot), {token} whether the connection has one (the example then has a placeholder
+ * for it, never the token itself). Without a url, the page's host on port 9090.
  */
-export function exampleCode(mode, gains, setpoint, cmdVelType = 'geometry_msgs/msg/Twist') {
+export function exampleCode(mode, gains, setpoint, cmdVelType = 'geometry_msgs/msg/Twist', link = {}) {
   const loop = mode === 'heading'
     ? `const target = ${setpoint.theta.toFixed(3)};                 // rad
 const pid = new PID(${gains.kp}, ${gains.ki}, ${gains.kd}, 2.5);   // limit: max angular velocity
@@ -171,10 +174,17 @@ setInterval(() => {
     : `function command(v, w) {
   return { linear: { x: v, y: 0, z: 0 }, angular: { x: 0, y: 0, z: w } };
 }`;
+  const topic = (name) => (link.ns ? `/${link.ns}/${name}` : `/${name}`);
+  const address = link.url ? JSON.stringify(link.url) : "'ws://' + location.hostname + ':9090'";
+  const sep = link.url && link.url.includes('?') ? '&' : '?';
+  const url = link.token
+    ? `const TOKEN = 'YOUR_TOKEN';                       // the one your instructor gave you
+const ros = new ROSLIB.Ros({ url: ${address} + '${sep}token=' + encodeURIComponent(TOKEN) });`
+    : `const ros = new ROSLIB.Ros({ url: ${address} });`;
   return `// ${mode} control at 10 Hz with roslib (browser: <script src="roslib.min.js">)
-const ros = new ROSLIB.Ros({ url: 'ws://' + location.hostname + ':9090' });
-const cmdVel = new ROSLIB.Topic({ ros, name: '/cmd_vel', messageType: '${cmdVelType}' });
-const odom = new ROSLIB.Topic({ ros, name: '/odom', messageType: 'nav_msgs/msg/Odometry' });
+${url}
+const cmdVel = new ROSLIB.Topic({ ros, name: '${topic('cmd_vel')}', messageType: '${cmdVelType}' });
+const odom = new ROSLIB.Topic({ ros, name: '${topic('odom')}', messageType: 'nav_msgs/msg/Odometry' });
 let pose = null;
 odom.subscribe((m) => {
   const p = m.pose.pose, q = p.orientation;

@@ -91,8 +91,8 @@ async def open_page(
 async def student(
     app: App, browser: Browser, contexts: list[BrowserContext], robot: str, **options: Any
 ) -> tuple[Page, PageLog]:
-    """A student's page, opened as the instructor hands it out (token in the link)."""
-    url = f"{http_url(app)}/?url={ws_url(app)}&token={STUDENTS[robot]}"
+    """A student's page, opened as the instructor hands it out (token in the link, no ?url=)."""
+    url = f"{http_url(app)}/?token={STUDENTS[robot]}"
     page, log = await open_page(browser, contexts, url, **options)
     await page.wait_for_function(
         "(r) => window.simbridge && window.simbridge.state.ns === r"
@@ -146,6 +146,12 @@ async def test_each_student_lands_on_their_own_robot_without_admin_controls_or_t
         assert token not in await page.input_value("#url")
         assert await page.get_attribute("#token", "type") == "password"
         assert await page.text_content("#statusText") == "connected"
+        assert await page.evaluate("window.simbridge.conn.url") == ws_url(app)  # asked, not 9090
+        # the PID lab's example to copy drives their robot on this server, token left for them
+        example = await page.text_content("#example") or ""
+        assert f"name: '/{robot}/cmd_vel'" in example and f"name: '/{robot}/odom'" in example
+        assert f"url: \"{ws_url(app)}\" + '?token=' + encodeURIComponent(TOKEN)" in example
+        assert "const TOKEN = 'YOUR_TOKEN';" in example and token not in example
         await screenshot(page, f"class-student-{robot}")
         assert log.errors == []
     # nothing moves: the view is not redrawn (the plots are not shown); it was 20 times a
@@ -203,6 +209,36 @@ async def test_a_students_estop_stops_only_their_robot_and_they_release_it(
         await alice.wait_for_selector("#estopBanner", state="hidden")
         assert not app.world.halted("r1")
     assert alice_log.errors == []
+
+
+async def test_a_students_copied_pid_example_with_their_token_drives_their_robot(
+    app: App, browser: Browser, contexts: list[BrowserContext]
+) -> None:
+    """The PID lab's example, copied with the student's token filled in, drives their robot.
+
+    Run in a page of their own, it connects to this server and takes r2 to the goal; r1 stays.
+    """
+    bob, _ = await student(app, browser, contexts, "r2")
+    await bob.click("button[data-tab=pid]")
+    await bob.select_option("#pidMode", "position")  # goal (1.0, 0.0) from r2's (2.0, -1.0)
+    example = await bob.text_content("#example") or ""
+    code = example.replace("'YOUR_TOKEN'", repr(STUDENTS["r2"]))
+    theirs, log = await open_page(browser, contexts, f"{http_url(app)}/healthz")
+    await theirs.set_content(f'<script src="{http_url(app)}/vendor/roslib.min.js"></script>')
+    await theirs.wait_for_function("typeof ROSLIB !== 'undefined'")
+    await theirs.evaluate("(code) => new Function(code)()", code)
+    robots = app.world.robots
+    r1 = (robots["r1"].state.x, robots["r1"].state.y)
+    try:
+        await wait_for(
+            lambda: math.hypot(robots["r2"].state.x - 1.0, robots["r2"].state.y) < 0.07,
+            timeout=20 * TIMEOUT_FACTOR,
+        )
+        assert (robots["r1"].state.x, robots["r1"].state.y) == r1
+    finally:
+        await theirs.context.close()
+        await release_everything(app)
+    assert [e for e in log.errors if not network_noise(e)] == []  # its /favicon.ico is a 404
 
 
 async def test_contacts_are_drawn_and_put_my_robot_back_teleports_to_the_start(
