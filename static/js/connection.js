@@ -16,7 +16,9 @@ const BACKOFF_MAX_MS = 8000;
 const RATE_WINDOW_MS = 2000;
 const TOKEN_KEY = 'simbridge-token';
 
-const ENDPOINT_TIMEOUT_MS = 2000;
+// generous: on a loaded machine or a slow phone the answer may take seconds, and giving up
+// means guessing port 9090
+const ENDPOINT_TIMEOUT_MS = 10000;
 
 const bracketed = (host) => (host.includes(':') ? `[${host}]` : host);
 
