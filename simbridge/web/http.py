@@ -107,6 +107,13 @@ SLOW_REQUEST = 1.0
 #: Seconds a connection in the pool's reserve (no room: it may be the instructor's) has to send
 #: its first request's head; then it gets the 503 it was spared.
 _RESERVE_TIMEOUT = 2.0
+#: Seconds between two looks for a place of a queued request (besides the wake-ups).
+_QUEUE_STEP = 0.25
+#: Said with a per-address refusal in the log: what an instructor can do about it.
+_NAT_HINT = (
+    " (a class behind one address, a school's NAT? a browser opens up to 6 connections: raise"
+    " --max-http-connections-per-address to 6 per student)"
+)
 #: Seconds a refused connection is drained before it closes (see ``_Exchange.linger``).
 _LINGER = 1.0
 
@@ -382,9 +389,13 @@ class _Exchange:
         self.parsed = _Parsed()
 
     def close(self, status: int, text: str) -> None:
-        """Answer ``status`` with ``text`` (unless 0) and close at once (the pool's eviction)."""
-        if status:
-            self.writer.write(_encode(HttpResponse.text(text, status), False, False))
+        """Answer ``status`` with ``text`` (unless 0) and close at once (the pool's eviction).
+
+        A connection already refused and lingering (its write side shut) is only closed.
+        """
+        if status and not self.writer.is_closing():
+            with contextlib.suppress(RuntimeError, ConnectionError):  # after write_eof
+                self.writer.write(_encode(HttpResponse.text(text, status), False, False))
         self.writer.close()
 
     async def refuse(self, status: int, text: str, headers: dict[str, str] | None = None) -> None:
@@ -428,6 +439,30 @@ class _Exchange:
         while wait > 0:  # the address's other connections may spend it meanwhile
             await asyncio.sleep(wait)
             wait = share.owed(loop.time())
+
+    async def queue(self, pool: Pool, slot: Slot) -> bool:
+        """Wait, unread, for the pool to give a queued request a place; False: none in time.
+
+        Its connection is then out of the pool's books (:meth:`Pool.give_up`), to be refused.
+        """
+        loop = asyncio.get_running_loop()
+        placed = asyncio.Event()
+        slot.wake = placed.set
+        deadline = loop.time() + pool.queue_for
+        try:
+            while slot.queued and not slot.evicted:
+                step = min(_QUEUE_STEP, deadline - loop.time())
+                if step <= 0:
+                    pool.give_up(slot)
+                    return False
+                with contextlib.suppress(TimeoutError):
+                    async with asyncio.timeout(step):  # a place freed: woken at once
+                        await placed.wait()
+                if slot.queued:  # a connection may give way by now (idle or slow long enough)
+                    pool.retry(slot, loop.time())
+        finally:
+            slot.wake = None
+        return not slot.evicted
 
     async def serve(self, pool: Pool, slot: Slot) -> None:
         """Answer requests until the client closes, idles out, or sends what is refused."""
@@ -497,10 +532,18 @@ class _Exchange:
                 admin = self.app.privileged(parsed.headers)
                 if slot.reserved:
                     refused = pool.claim(slot, admin, now)
+                    if refused is not None and await self.queue(pool, slot):
+                        refused, now = None, loop.time()  # placed: its deadlines start now
+                    if slot.evicted:
+                        return
                     if refused is not None:
                         if pool.refused == 1 or pool.refused % 100 == 0:
+                            hint = _NAT_HINT if "per_address" in refused else ""
                             logger.warning(
-                                "HTTP: %d requests refused so far: %s", pool.refused, refused
+                                "HTTP: %d requests refused so far: %s%s",
+                                pool.refused,
+                                refused.strip(),
+                                hint,
                             )
                         await self.refuse(503, refused, {"Retry-After": "1"})
                         return
@@ -543,6 +586,7 @@ async def serve_http(
     head_timeout: float = HEAD_TIMEOUT,
     body_timeout: float = BODY_TIMEOUT,
     slow_request: float = SLOW_REQUEST,
+    queue_for: float = 5.0,
     pool: Pool | None = None,
 ) -> asyncio.Server:
     """Start the HTTP server (HTTPS with ``ssl``); return it (``sockets`` tells the port).
@@ -552,18 +596,21 @@ async def serve_http(
         host: address to listen on.
         port: port (0: a free one).
         ssl: serve HTTPS with this context.
-        max_connections: open connections at most; when all are busy a new one gets 503 naming
-            the budget, else the longest-idle keep-alive connection is closed to make room.
+        max_connections: open connections at most; when all are busy a new one queues for a
+            place (``queue_for``), then gets 503 naming the budget; an idle keep-alive
+            connection (the longest idle) is closed to make room.
         max_per_address: open connections from one client address at most (the same rule).
         head_timeout: seconds a request's head may take to arrive after its first byte (408).
         body_timeout: seconds a request's body may take to arrive after its head (then 408).
         slow_request: when the pool is full, a request arriving for longer than this (seconds)
             is closed (408) to make room for a newcomer.
+        queue_for: seconds a request with no place waits for one before its 503.
         pool: the connections' books, made by the caller (who reads them: ``/healthz``);
-            then ``max_connections``, ``max_per_address`` and ``slow_request`` are its own.
+            then ``max_connections``, ``max_per_address``, ``slow_request`` and ``queue_for``
+            are its own.
     """
     if pool is None:
-        pool = Pool(max_connections, max_per_address, slow=slow_request)
+        pool = Pool(max_connections, max_per_address, slow=slow_request, queue_for=queue_for)
 
     connections = pool  # (narrowed for the closure)
 

@@ -10,14 +10,25 @@ keeps the instructor's console usable whatever they do (``docs/security.md``, "H
   has been connected for longer than ``slow`` seconds without a request (closed) or whose
   request has been arriving for that long (408): a browser sends a request's head in one go.
   Within the per-address budget only that address's own connections give way.
-- When no place can be made, the newcomer is not refused at once: it waits in a small
-  **reserve** (``reserve`` connections, ``reserve_per_address`` from one address, a few seconds
-  each) until its request's head shows whether it carries the admin token. The instructor's
-  request is then admitted, making room if it must (any client's idle or unfinished request
-  gives way); anyone else's gets the 503 naming the budget. So an admin request is never refused
-  because students or outsiders filled the pool. The reserve is bounded per address (one
-  machine flooding it pushes out only its own waiters) and in all: when it is full, the oldest
-  waiter of the address with the most gives way, and a newcomer always gets to show its head.
+- When no place can be made, the newcomer is not refused at once: it waits in the **reserve**
+  (``reserve`` connections, ``reserve_per_address`` from one address) until its request's head
+  shows whether it carries the admin token. The instructor's request is then admitted, making
+  room if it must (any client's idle or unfinished request gives way); so an admin request is
+  never refused because students or outsiders filled the pool. Anyone else's **queues** for up
+  to ``queue_for`` seconds: a place that frees (a connection of its address, or any when the
+  pool is full, closes) goes to the oldest waiter it can serve (:attr:`Slot.wake`), and the
+  server looks again every quarter second (:meth:`Pool.retry`: a connection may have been idle
+  or slow long enough to give way by then); only a request still without a place then gets the
+  503 naming the budget. A page is a burst of requests on up to six connections a browser, and
+  a class behind one address (a school's NAT) is thirty browsers: they wait their turn instead
+  of losing the page's scripts to 503s. An idle keep-alive connection gives way only after
+  ``idle_grace`` seconds idle: a page's requests follow each other on the same connections, and
+  one closed between two of them (the browser's next request already on its way) fails that
+  request. Measured with 30 Chromium pages from one address (docs/security.md, "A class behind
+  one address"): the default budget loads only some of them; 6 per browser loads them all. The
+  reserve is bounded per address (one machine flooding it pushes out only its own waiters) and
+  in all: when it is full, the oldest waiter of the address with the most gives way, and a
+  newcomer always gets to show its head.
 
 :class:`Pool` only keeps the books and decides; the server (:mod:`simbridge.web.http`) reads,
 answers and closes. Each decision costs at most one pass over the open connections.
@@ -94,9 +105,14 @@ class Slot:
     since: float = 0.0
     #: One of its requests carried the admin token: it gives way last.
     admin: bool = False
-    #: It waits in the reserve: admitted only if its first request is the instructor's.
+    #: It waits in the reserve: admitted only if its first request is the instructor's, or
+    #: when a place frees while it queues.
     reserved: bool = False
-    #: The refusal a reserved connection gets if its request is not the instructor's.
+    #: Its head is in and is not the instructor's: it waits for a place (:meth:`Pool.claim`).
+    queued: bool = False
+    #: Called when it is given a place, or closed, while it queues (the server's wake-up).
+    wake: Callable[[], None] | None = None
+    #: The refusal a reserved connection gets if no place is found for it.
     refusal: str = ""
     #: It was closed to make room (the server stops serving it).
     evicted: bool = False
@@ -109,9 +125,14 @@ class Pool:
     #: Connections at most (``max_http_connections``), and from one address.
     limit: int
     per_address: int
-    #: Connections waiting to show an admin token when there is no room, in all and per address.
-    reserve: int = 16
-    reserve_per_address: int = 4
+    #: Connections waiting (to show an admin token, then for a place) when there is no room, in
+    #: all and per address: a class of 30 browsers behind one address opens up to 180 at once.
+    reserve: int = 256
+    reserve_per_address: int = 128
+    #: Seconds a request without a place queues for one before its 503.
+    queue_for: float = 5.0
+    #: Seconds a keep-alive connection must have been idle before it gives way to a newcomer.
+    idle_grace: float = 1.0
     #: Seconds a request may have been arriving before it gives way to a newcomer when full.
     slow: float = 1.0
     #: Each address's share of the loop's time (:class:`Share`), and its burst (seconds).
@@ -153,16 +174,23 @@ class Pool:
         self.waiting[slot] = None
 
     def claim(self, slot: Slot, admin: bool, now: float) -> str | None:
-        """A reserved connection's first head is here: admit it if ``admin``, else refuse it.
+        """A reserved connection's first head is here: admit it if ``admin`` or there is room.
 
         The instructor's request takes a member's place if it must: the longest idle, else the
         oldest unfinished request of anyone without the admin token (over the budget, within
-        the reserve's bound, when every member is busy or the instructor's).
+        the reserve's bound, when every member is busy or the instructor's). Anyone else's
+        without room queues (``slot.queued``; the refusal it would get is returned): the server
+        waits ``queue_for`` seconds for :attr:`Slot.wake`, then calls :meth:`give_up`.
         """
-        self._unwait(slot)
         if not admin:
-            self.refused += 1
-            return slot.refusal
+            refusal = self._room(slot.address, now)
+            if refusal is None:
+                self._unwait(slot)
+                self._join(slot)
+                return None
+            slot.queued, slot.refusal = True, refusal
+            return refusal
+        self._unwait(slot)
         if self._room(slot.address, now) is not None:
             victim = self._victim(self.members, now, any_request=True)
             if victim is not None:
@@ -170,6 +198,13 @@ class Pool:
         slot.admin = True
         self._join(slot)
         return None
+
+    def give_up(self, slot: Slot) -> str:
+        """A queued connection found no place in time: it leaves the reserve; its 503's text."""
+        self._unwait(slot)
+        slot.queued = False
+        self.refused += 1
+        return slot.refusal
 
     def stats(self) -> dict[str, int]:
         """Return the books in numbers (``/healthz``)."""
@@ -194,8 +229,26 @@ class Pool:
         if slot.phase != phase:
             slot.phase, slot.since = phase, now
 
+    def retry(self, slot: Slot, now: float) -> bool:
+        """Look again for a place for a queued request (a connection may give way by now)."""
+        if not slot.queued or self._room(slot.address, now) is not None:
+            return False
+        self._unwait(slot)
+        slot.queued = False
+        self._join(slot)
+        return True
+
     def leave(self, slot: Slot, now: float | None = None) -> None:
-        """The connection closed: free its place (and its address's share, if paid up)."""
+        """The connection closed: free its place (and its address's share, if paid up).
+
+        The place goes to a queued request, if one can have it (:meth:`_promote`).
+        """
+        member = slot in self.members
+        self._drop(slot, now)
+        if member and self.waiting and now is not None:
+            self._promote(slot.address, now)
+
+    def _drop(self, slot: Slot, now: float | None) -> None:
         if slot in self.members:
             del self.members[slot]
             self.per[slot.address] -= 1
@@ -213,6 +266,24 @@ class Pool:
             del self.shares[slot.address]
 
     # -- the decisions ------------------------------------------------------------------
+
+    def _promote(self, address: str, now: float) -> None:
+        """Give a place to the oldest queued request of ``address``, then the oldest of any.
+
+        Called when a member of ``address`` left: that freed a place of the address's budget,
+        or of the pool's. At most two tries, each one pass.
+        """
+        for mine in (True, False):
+            waiter = next(
+                (s for s in self.waiting if s.queued and (s.address == address or not mine)),
+                None,
+            )
+            if waiter is not None and self._room(waiter.address, now) is None:
+                self._unwait(waiter)
+                waiter.queued = False
+                self._join(waiter)
+                if waiter.wake is not None:
+                    waiter.wake()
 
     def _room(self, address: str, now: float) -> str | None:
         """Make room for a newcomer from ``address``; return the refusal if none can be made."""
@@ -242,11 +313,11 @@ class Pool:
     def _victim(self, slots: Iterable[Slot], now: float, any_request: bool = False) -> Slot | None:
         """The connection to close for a newcomer: the longest idle, else the slowest request.
 
-        An idle keep-alive connection (served, waiting for its next request) gives way at once;
-        a new connection that has not begun its first request, or a request on its way, only
-        after ``slow`` seconds (a browser sends its request at once; a newcomer must have the
-        time to), unless ``any_request`` (for the instructor). Connections being answered, and
-        the instructor's, never give way.
+        An idle keep-alive connection (served, waiting for its next request) gives way after
+        ``idle_grace`` seconds idle; a new connection that has not begun its first request, or
+        a request on its way, after ``slow`` seconds (a browser sends its request at once; a
+        newcomer must have the time to); either at once for the instructor (``any_request``).
+        Connections being answered, and the instructor's, never give way.
         """
         idle: Slot | None = None
         slowest: Slot | None = None
@@ -254,7 +325,8 @@ class Pool:
             if s.admin:
                 continue
             if s.phase == "idle":
-                if idle is None or s.since < idle.since:
+                ripe = any_request or now - s.since >= self.idle_grace
+                if ripe and (idle is None or s.since < idle.since):
                     idle = s
             elif (
                 s.phase != "busy"
@@ -273,7 +345,9 @@ class Pool:
         self.waiting.pop(slot, None)
 
     def _evict(self, slot: Slot, status: int, text: str) -> None:
-        self.leave(slot)
-        slot.evicted = True
+        self._drop(slot, None)  # its place is for whoever this eviction is for
+        slot.evicted, slot.queued = True, False
         self.evicted += 1
         slot.close(status, text)
+        if slot.wake is not None:  # it was queueing: its server stops waiting
+            slot.wake()

@@ -17,7 +17,7 @@ class Closed:
         return Slot(address, lambda status, text: self.log.append((name, status, text)))
 
 
-def test_a_newcomer_over_its_address_budget_waits_for_its_head_then_gets_the_503_by_name() -> None:
+def test_a_newcomer_over_its_address_budget_queues_then_gets_the_503_by_name() -> None:
     pool, closed = Pool(limit=10, per_address=2), Closed()
     for _ in range(2):
         slot = closed.slot("10.0.0.1")
@@ -28,10 +28,12 @@ def test_a_newcomer_over_its_address_budget_waits_for_its_head_then_gets_the_503
     assert newcomer.reserved and newcomer not in pool.members
     refusal = pool.claim(newcomer, admin=False, now=0.5)
     assert refusal is not None and "max_http_connections_per_address" in refusal
+    assert newcomer.queued and newcomer in pool.waiting and pool.refused == 0
     other = closed.slot("10.0.0.2")
     pool.admit(other, 0.5)
     assert other in pool.members and not other.reserved  # another address still gets in
-    assert not closed.log and pool.refused == 1
+    assert pool.give_up(newcomer) == refusal  # no place freed in time: its 503
+    assert not closed.log and pool.refused == 1 and not pool.waiting
 
 
 def test_at_its_address_budget_a_newcomer_takes_the_place_of_its_own_idle_connection() -> None:
@@ -105,7 +107,7 @@ def test_the_instructor_gets_in_from_the_reserve_and_anyone_else_gets_the_503() 
     assert pool.claim(instructor, admin=True, now=0.6) is None  # young requests give way to it
     assert instructor in pool.members and instructor.admin and not instructor.reserved
     assert [(name, status) for name, status, _ in closed.log] == [("student0", 408)]
-    assert len(pool.members) == 2 and not pool.waiting
+    assert len(pool.members) == 2 and list(pool.waiting) == [student]  # it queues on
 
 
 def test_the_instructor_gets_in_even_over_the_budget_when_everyone_is_busy() -> None:
@@ -139,6 +141,65 @@ def test_one_address_flooding_the_reserve_pushes_out_only_its_own_waiters() -> N
     # the reserve's 6 places; then the oldest waiter of the address with the most gives way
     assert closed.log[-1][0] == "flood8" and len(pool.waiting) == 6
     assert instructor in pool.waiting and all(slot in pool.waiting for slot in others)
+
+
+class Woken:
+    """Counts a queued slot's wake-ups."""
+
+    def __init__(self, slot: Slot) -> None:
+        self.count = 0
+        slot.wake = self
+
+    def __call__(self) -> None:
+        self.count += 1
+
+
+def test_a_queued_request_gets_the_place_a_member_of_its_address_frees() -> None:
+    pool, closed = Pool(limit=10, per_address=2), Closed()
+    members = [closed.slot("10.0.0.1", f"m{n}") for n in range(2)]
+    for slot in members:
+        pool.admit(slot, 0.0)
+        pool.mark(slot, "busy", 0.0)
+    first, second = closed.slot("10.0.0.1", "q1"), closed.slot("10.0.0.1", "q2")
+    for slot in (first, second):
+        pool.admit(slot, 0.1)
+        assert pool.claim(slot, admin=False, now=0.1) is not None and slot.queued
+    woken = [Woken(first), Woken(second)]
+    pool.leave(members[0], 0.2)  # answered and closed: its place goes to the oldest waiter
+    assert first in pool.members and not first.queued and [w.count for w in woken] == [1, 0]
+    pool.mark(members[1], "idle", 0.3)  # answered, kept alive: the page may still use it
+    assert not pool.retry(second, 1.0) and second.queued
+    assert pool.retry(second, 1.3)  # idle for its grace second: it gives way to the waiter
+    assert second in pool.members and [w.count for w in woken] == [1, 0]
+    assert closed.log == [("m1", 0, "")] and not pool.waiting and pool.refused == 0
+    assert dict(pool.per) == {"10.0.0.1": 2}
+
+
+def test_a_place_in_the_full_pool_goes_to_the_oldest_waiter_of_any_address() -> None:
+    pool, closed = Pool(limit=2, per_address=2), Closed()
+    members = [closed.slot(f"10.0.0.{n}", f"m{n}") for n in (1, 2)]
+    for slot in members:
+        pool.admit(slot, 0.0)
+        pool.mark(slot, "busy", 0.0)
+    waiter = closed.slot("10.0.0.3", "w")
+    pool.admit(waiter, 0.1)
+    pool.claim(waiter, admin=False, now=0.1)
+    woken = Woken(waiter)
+    pool.leave(members[0], 0.2)  # another address's place: the pool's budget freed one
+    assert waiter in pool.members and woken.count == 1 and not closed.log
+
+
+def test_a_queued_request_pushed_out_of_the_reserve_is_told_and_woken() -> None:
+    pool, closed = Pool(limit=1, per_address=1, reserve=4, reserve_per_address=1), Closed()
+    member = closed.slot("10.0.0.1")
+    pool.admit(member, 0.0)
+    pool.mark(member, "busy", 0.0)
+    waiter = closed.slot("10.0.0.2", "w")
+    pool.admit(waiter, 0.1)
+    pool.claim(waiter, admin=False, now=0.1)
+    woken = Woken(waiter)
+    pool.admit(closed.slot("10.0.0.2", "newer"), 0.2)  # its address's reserve holds one
+    assert waiter.evicted and woken.count == 1 and closed.log[0][:2] == ("w", 503)
 
 
 def test_leaving_frees_the_place() -> None:
