@@ -185,8 +185,7 @@ class Pool:
         if not admin:
             refusal = self._room(slot.address, now)
             if refusal is None:
-                self._unwait(slot)
-                self._join(slot)
+                self._place(slot)
                 return None
             slot.queued, slot.refusal = True, refusal
             return refusal
@@ -233,9 +232,7 @@ class Pool:
         """Look again for a place for a queued request (a connection may give way by now)."""
         if not slot.queued or self._room(slot.address, now) is not None:
             return False
-        self._unwait(slot)
-        slot.queued = False
-        self._join(slot)
+        self._place(slot)
         return True
 
     def leave(self, slot: Slot, now: float | None = None) -> None:
@@ -279,9 +276,7 @@ class Pool:
                 None,
             )
             if waiter is not None and self._room(waiter.address, now) is None:
-                self._unwait(waiter)
-                waiter.queued = False
-                self._join(waiter)
+                self._place(waiter)
                 if waiter.wake is not None:
                     waiter.wake()
 
@@ -335,6 +330,12 @@ class Pool:
             ):
                 slowest = s
         return idle or slowest
+
+    def _place(self, slot: Slot) -> None:
+        """A waiter of the reserve (queued or not) becomes a member."""
+        self._unwait(slot)
+        slot.queued = False
+        self._join(slot)
 
     def _join(self, slot: Slot) -> None:
         slot.reserved = False

@@ -691,7 +691,6 @@ window.simbridge = { conn, view, driver, lab, plots, state, cmdVel, download, li
 // the Server form connected somewhere meanwhile
 rosbridgeUrl().then((url) => {
   if (conn.state !== 'disconnected') return;
-  conn.connect(url);
+  conn.connect(url); // its 'state' event shows the URL on the Link tab
   $('url').value = conn.url;
-  $('linkUrl').textContent = conn.url;
 });
